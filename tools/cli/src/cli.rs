@@ -1,0 +1,462 @@
+//! Command-line interface: argument definitions and dispatch.
+
+use crate::gdalio::{self, GridSpec, Resampling};
+use crate::prep::prep;
+use crate::region::{parse_nodata, DemSection, FillSection, GridSection, ImageSection, Region};
+use crate::stitch::{stitch, StitchOptions};
+use anyhow::{bail, Result};
+use clap::{Args, Parser, Subcommand};
+use gdal::raster::GdalDataType;
+use relevo_core::bundle::{validate, Bundle};
+use relevo_core::grid::{HeightGrid, Squaring};
+use relevo_core::raster::encoding::Encoding;
+use relevo_core::raster::fill::fill_holes;
+use relevo_core::raster::mosaic::Overlap;
+use relevo_core::raster::Raster;
+use std::path::{Path, PathBuf};
+
+#[derive(Parser, Debug)]
+#[command(name = "relevo", version, about = "Terrain data preparation: tiles and imagery in, a self-describing bundle out.")]
+#[command(after_help = "Examples:
+  relevo prep data/olinda/REGION.toml --out olinda.relevo
+  relevo prep --dem n45e005.tif --image ortho.jpg --out alps.relevo
+  relevo stitch a.tif b.tif --overlap blend --out mosaic.tif
+  relevo validate olinda.relevo")]
+pub struct Cli {
+    /// More log output (-v info, -vv debug); RUST_LOG overrides.
+    #[arg(short, long, global = true, action = clap::ArgAction::Count)]
+    pub verbose: u8,
+    /// Only errors.
+    #[arg(short, long, global = true)]
+    pub quiet: bool,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Mosaic georeferenced tiles (any GDAL raster, world files, Terrain-RGB) into one GeoTIFF.
+    #[command(after_help = "Examples:
+  relevo stitch LC08_*_B4.TIF --src-nodata 0 --out red.tif
+  relevo stitch n45e005.tif n45e006.tif --t-srs EPSG:32631 --tr 30 -r bilinear --out dem.tif
+  relevo stitch fuji.png --encoding terrain-rgb --out fuji.tif
+  relevo stitch a.tif b.tif --te 500000 4980000 520000 5000000 --overlap first --out crop.tif")]
+    Stitch(StitchArgs),
+    /// Fill no-data holes by natural-neighbour interpolation.
+    #[command(after_help = "Examples:
+  relevo fill dem.tif --max-hole 5000 --out dem_filled.tif")]
+    Fill(FillArgs),
+    /// Pad (or resample) a heightfield to (2^n+1)² and write its data mask.
+    #[command(after_help = "Examples:
+  relevo pad dem.tif --out dem_1025.tif            # also writes dem_1025_mask.tif
+  relevo pad dem.tif --resample --out dem_sq.tif --mask-out mask.tif")]
+    Pad(PadArgs),
+    /// Build a bundle from a REGION.toml, or straight from rasters.
+    #[command(after_help = "Examples:
+  relevo prep data/olinda/REGION.toml --out olinda.relevo
+  relevo prep --dem srtm_ref.tif --out turkey.relevo --json
+  relevo prep --dem t1.tif t2.tif --image ortho.tif --bands 3,2,1 --crs EPSG:32633 --out r.relevo --force")]
+    Prep(PrepArgs),
+    /// Describe a bundle.
+    #[command(after_help = "Examples:
+  relevo info olinda.relevo
+  relevo info olinda.relevo --json")]
+    Info {
+        bundle: PathBuf,
+        /// Print the whole manifest as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Check a bundle's files, hashes, shapes and invariants; exit 1 on any problem.
+    #[command(after_help = "Examples:
+  relevo validate olinda.relevo")]
+    Validate { bundle: PathBuf },
+}
+
+#[derive(Args, Debug)]
+pub struct StitchArgs {
+    /// Input tiles, in priority order for --overlap first/last.
+    #[arg(required = true)]
+    pub tiles: Vec<PathBuf>,
+    /// Output GeoTIFF.
+    #[arg(long, short)]
+    pub out: PathBuf,
+    /// Target CRS (EPSG:n, WKT, PROJ); default: the first tile's.
+    #[arg(long = "t-srs")]
+    pub t_srs: Option<String>,
+    /// Target cell size: one value for square cells, or X,Y.
+    #[arg(long, value_delimiter = ',', num_args = 1..=2)]
+    pub tr: Option<Vec<f64>>,
+    /// Target extent in target CRS units.
+    #[arg(long, num_args = 4, value_names = ["XMIN", "YMIN", "XMAX", "YMAX"], allow_negative_numbers = true)]
+    pub te: Option<Vec<f64>>,
+    #[command(flatten)]
+    pub common: TileArgs,
+    /// No-data value written to the output.
+    #[arg(long, value_parser = parse_nodata, allow_negative_numbers = true)]
+    pub dst_nodata: Option<f64>,
+    /// Bands to keep, 1-based (e.g. 3,2,1).
+    #[arg(long, value_delimiter = ',')]
+    pub bands: Option<Vec<usize>>,
+    /// Replace an existing output.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Options shared by every command that reads tiles.
+#[derive(Args, Debug, Clone)]
+pub struct TileArgs {
+    /// Resampling kernel when tiles are warped.
+    #[arg(long, short = 'r', value_enum, default_value_t = Resampling::Nearest)]
+    pub resampling: Resampling,
+    /// Source no-data value (a number or nan), overriding the files'.
+    #[arg(long, value_parser = parse_nodata, allow_negative_numbers = true)]
+    pub src_nodata: Option<f64>,
+    /// How overlapping tiles combine.
+    #[arg(long, value_enum, default_value_t = OverlapArg::Blend)]
+    pub overlap: OverlapArg,
+    /// How tiles encode heights.
+    #[arg(long, value_enum, default_value_t = EncodingArg::Plain)]
+    pub encoding: EncodingArg,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum OverlapArg {
+    First,
+    Last,
+    Blend,
+}
+
+impl From<OverlapArg> for Overlap {
+    fn from(o: OverlapArg) -> Overlap {
+        match o {
+            OverlapArg::First => Overlap::First,
+            OverlapArg::Last => Overlap::Last,
+            OverlapArg::Blend => Overlap::Blend,
+        }
+    }
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum EncodingArg {
+    Plain,
+    TerrainRgb,
+    Terrarium,
+}
+
+impl From<EncodingArg> for Encoding {
+    fn from(e: EncodingArg) -> Encoding {
+        match e {
+            EncodingArg::Plain => Encoding::Plain,
+            EncodingArg::TerrainRgb => Encoding::TerrainRgb,
+            EncodingArg::Terrarium => Encoding::Terrarium,
+        }
+    }
+}
+
+#[derive(Args, Debug)]
+pub struct FillArgs {
+    pub input: PathBuf,
+    #[arg(long, short)]
+    pub out: PathBuf,
+    /// Largest hole filled, in cells; larger holes stay no-data.
+    #[arg(long, default_value_t = FillSection::default().max_hole_cells)]
+    pub max_hole: usize,
+    /// Source no-data value (a number or nan), overriding the file's.
+    #[arg(long, value_parser = parse_nodata, allow_negative_numbers = true)]
+    pub src_nodata: Option<f64>,
+    #[arg(long)]
+    pub force: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct PadArgs {
+    pub input: PathBuf,
+    /// Output heights, (2^n+1)², Float32.
+    #[arg(long, short)]
+    pub out: PathBuf,
+    /// Output mask (1 = data, 0 = padding or no-data); default: OUT with _mask before the extension.
+    #[arg(long)]
+    pub mask_out: Option<PathBuf>,
+    /// Resample to the nearest 2^n+1 instead of padding.
+    #[arg(long)]
+    pub resample: bool,
+    /// Source no-data value (a number or nan), overriding the file's.
+    #[arg(long, value_parser = parse_nodata, allow_negative_numbers = true)]
+    pub src_nodata: Option<f64>,
+    #[arg(long)]
+    pub force: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct PrepArgs {
+    /// REGION.toml describing the inputs (or give --dem instead).
+    #[arg(required_unless_present = "dem", conflicts_with_all = ["dem", "image"])]
+    pub region: Option<PathBuf>,
+    /// Output bundle directory, conventionally NAME.relevo.
+    #[arg(long, short)]
+    pub out: PathBuf,
+    /// DEM tiles (quick form, without a REGION.toml).
+    #[arg(long, num_args = 1..)]
+    pub dem: Vec<PathBuf>,
+    /// Imagery tiles to drape (quick form).
+    #[arg(long, num_args = 1..)]
+    pub image: Vec<PathBuf>,
+    /// Image bands shown as red, green, blue (quick form), e.g. 3,2,1.
+    #[arg(long, value_delimiter = ',', num_args = 3)]
+    pub bands: Option<Vec<usize>>,
+    /// DEM encoding (quick form).
+    #[arg(long, value_enum, default_value_t = EncodingArg::Plain)]
+    pub encoding: EncodingArg,
+    /// Bundle CRS (quick form).
+    #[arg(long)]
+    pub crs: Option<String>,
+    /// Grid spacing in metres (quick form).
+    #[arg(long)]
+    pub cell_size: Option<f64>,
+    /// Factor from the DEM's vertical unit to metres (quick form).
+    #[arg(long, default_value_t = 1.0)]
+    pub z_scale: f64,
+    /// DEM no-data value, a number or nan (quick form).
+    #[arg(long, value_parser = parse_nodata, allow_negative_numbers = true)]
+    pub src_nodata: Option<f64>,
+    /// Replace an existing bundle.
+    #[arg(long)]
+    pub force: bool,
+    /// Print a JSON summary on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Set up tracing on stderr.
+pub fn init_logging(verbose: u8, quiet: bool) {
+    let level = match (quiet, verbose) {
+        (true, _) => "error",
+        (false, 0) => "warn",
+        (false, 1) => "info",
+        _ => "debug",
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+}
+
+pub fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Stitch(a) => run_stitch(a),
+        Command::Fill(a) => run_fill(a),
+        Command::Pad(a) => run_pad(a),
+        Command::Prep(a) => run_prep(a),
+        Command::Info { bundle, json } => run_info(&bundle, json),
+        Command::Validate { bundle } => run_validate(&bundle),
+    }
+}
+
+/// Refuse to overwrite `out` without `force`, and name an unwritable folder early.
+fn check_output(out: &Path, force: bool) -> Result<()> {
+    if out.exists() && !force {
+        bail!("{}: already exists (pass --force to replace it)", out.display());
+    }
+    let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    if !parent.is_dir() {
+        bail!("{}: cannot write, folder {} does not exist", out.display(), parent.display());
+    }
+    Ok(())
+}
+
+fn run_stitch(a: StitchArgs) -> Result<()> {
+    check_output(&a.out, a.force)?;
+    let resolution = a.tr.map(|v| (v[0], *v.get(1).unwrap_or(&v[0])));
+    let opts = StitchOptions {
+        target_crs: a.t_srs,
+        resolution,
+        extent: a.te.map(|v| [v[0], v[1], v[2], v[3]]),
+        resampling: a.common.resampling,
+        src_nodata: a.common.src_nodata,
+        dst_nodata: a.dst_nodata,
+        overlap: a.common.overlap.into(),
+        encoding: a.common.encoding.into(),
+        bands: a.bands,
+    };
+    let m = stitch(&a.tiles, &opts)?;
+    gdalio::write_geotiff(&a.out, &m.raster, &m.grid, m.band_type, Some(m.nodata))?;
+    eprintln!(
+        "{}: {}×{} cells, {} band(s), {} of {} cells with data",
+        a.out.display(),
+        m.grid.width,
+        m.grid.height,
+        m.raster.bands,
+        m.raster.valid_count(),
+        m.raster.cells()
+    );
+    Ok(())
+}
+
+/// Read a one-band raster with its grid.
+fn read_single(path: &Path, src_nodata: Option<f64>) -> Result<(Raster, GridSpec, GdalDataType, Option<f64>)> {
+    let source = gdalio::open(path)?;
+    let nodata = src_nodata.or(source.nodata);
+    let mut raster = source.read(nodata)?;
+    if raster.bands > 1 {
+        tracing::warn!("{}: using band 1 of {}", path.display(), raster.bands);
+        raster = Raster::from_data(raster.width, raster.height, 1, raster.band(0).to_vec());
+    }
+    let grid = GridSpec {
+        crs_wkt: source.srs.as_ref().map(crate::crs::to_wkt).transpose()?.unwrap_or_default(),
+        geotransform: source.geotransform.unwrap_or(relevo_core::geo::GeoTransform::IDENTITY),
+        width: source.width,
+        height: source.height,
+    };
+    if raster.valid_count() == 0 {
+        bail!("{}: no valid data (every cell is no-data)", path.display());
+    }
+    Ok((raster, grid, source.band_type, nodata))
+}
+
+fn run_fill(a: FillArgs) -> Result<()> {
+    check_output(&a.out, a.force)?;
+    let (mut raster, grid, band_type, nodata) = read_single(&a.input, a.src_nodata)?;
+    let (w, h) = (raster.width, raster.height);
+    let report = fill_holes(raster.band_mut(0), w, h, a.max_hole);
+    let band_type = if gdalio::is_float(band_type) { band_type } else { GdalDataType::Float32 };
+    let nodata = nodata.unwrap_or_else(|| gdalio::default_nodata(band_type));
+    gdalio::write_geotiff(&a.out, &raster, &grid, band_type, Some(nodata))?;
+    eprintln!(
+        "{}: filled {} hole(s), {} cells; left {} hole(s), {} cells (larger than {} cells or open to the edge)",
+        a.out.display(),
+        report.holes_filled,
+        report.cells_filled,
+        report.holes_left,
+        report.cells_left,
+        a.max_hole
+    );
+    Ok(())
+}
+
+fn run_pad(a: PadArgs) -> Result<()> {
+    let mask_out = a.mask_out.clone().unwrap_or_else(|| {
+        let stem = a.out.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
+        a.out.with_file_name(format!("{stem}_mask.tif"))
+    });
+    check_output(&a.out, a.force)?;
+    check_output(&mask_out, a.force)?;
+    let (raster, grid, _, _) = read_single(&a.input, a.src_nodata)?;
+    if raster.width < 2 || raster.height < 2 {
+        bail!("{}: {}×{} cells; a heightfield needs at least 2×2", a.input.display(), raster.width, raster.height);
+    }
+    let squaring = if a.resample { Squaring::Resample } else { Squaring::Pad };
+    let g = HeightGrid::square(raster.band(0), raster.width, raster.height, grid.geotransform, squaring);
+    let spec = GridSpec { geotransform: g.geotransform, width: g.side, height: g.side, ..grid };
+    let heights = Raster::from_data(g.side, g.side, 1, g.heights.iter().map(|&h| h as f64).collect());
+    let mask = Raster::from_data(g.side, g.side, 1, g.mask.iter().map(|&m| m as f64).collect());
+    gdalio::write_geotiff(&a.out, &heights, &spec, GdalDataType::Float32, None)?;
+    gdalio::write_geotiff(&mask_out, &mask, &spec, GdalDataType::UInt8, None)?;
+    eprintln!(
+        "{}: {}×{} ({} of {} vertices with data); mask in {}",
+        a.out.display(),
+        g.side,
+        g.side,
+        g.valid_count(),
+        g.side * g.side,
+        mask_out.display()
+    );
+    Ok(())
+}
+
+fn run_prep(a: PrepArgs) -> Result<()> {
+    let region = match &a.region {
+        Some(path) => Region::load(path)?,
+        None => {
+            let region = Region {
+                name: None,
+                crs: a.crs,
+                cell_size_m: a.cell_size,
+                z_scale: a.z_scale,
+                dem: DemSection {
+                    files: a.dem,
+                    encoding: a.encoding.into(),
+                    src_nodata: a.src_nodata.map(crate::region::NoData::Value),
+                    overlap: Overlap::Blend,
+                    resampling: Resampling::Bilinear,
+                },
+                fill: FillSection::default(),
+                grid: GridSection::default(),
+                image: (!a.image.is_empty()).then(|| ImageSection {
+                    files: a.image,
+                    bands: a.bands.map(|b| [b[0], b[1], b[2]]),
+                    src_nodata: None,
+                    overlap: Overlap::Blend,
+                    resampling: Resampling::Bilinear,
+                    stretch: None,
+                }),
+            };
+            region.check()?;
+            region
+        }
+    };
+    let parent = a.out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    if !parent.is_dir() {
+        bail!("{}: cannot write, folder {} does not exist", a.out.display(), parent.display());
+    }
+    let summary = prep(&region, &a.out, a.force)?;
+    if a.json {
+        println!("{}", serde_json::to_string(&summary)?);
+    } else {
+        let total: f64 = summary.timings.iter().map(|t| t.ms).sum();
+        println!(
+            "{}: {}×{} grid, {:.2} m cells, {} vertices with data, heights {:.1}..{:.1} m, {:.0} ms",
+            summary.bundle.display(),
+            summary.side,
+            summary.side,
+            summary.cell_size_m,
+            summary.valid_vertices,
+            summary.height_range_m[0],
+            summary.height_range_m[1],
+            total
+        );
+    }
+    Ok(())
+}
+
+fn run_info(path: &Path, json: bool) -> Result<()> {
+    let bundle = Bundle::open(path)?;
+    let m = &bundle.manifest;
+    if json {
+        println!("{}", serde_json::to_string_pretty(m)?);
+        return Ok(());
+    }
+    println!("{} — region {:?}, format {} v{}", path.display(), m.region, m.format, m.format_version);
+    match m.crs.epsg {
+        Some(code) => println!("  CRS          EPSG:{code}"),
+        None if m.crs.wkt.is_empty() => println!("  CRS          none (grid units)"),
+        None => println!("  CRS          custom (WKT in manifest)"),
+    }
+    let g = &m.grid;
+    println!("  grid         {0}×{0} vertices, {1:.3} m cells, z scale {2}", g.side, g.cell_size_m, g.z_scale);
+    println!("  data         {} vertices, heights {:.2}..{:.2} m", g.valid_vertices, g.height_range_m[0], g.height_range_m[1]);
+    println!("  extent       {:?}", g.valid_extent);
+    if let Some(c) = &m.color {
+        println!("  colour       {}×{} pixels, bands {:?}", c.width, c.height, c.bands);
+    }
+    for (name, a) in m.artifacts.iter().chain(&m.exports) {
+        println!("  {name:<12} {} {:?} {:?} {} bytes", a.file, a.dtype, a.shape, a.bytes);
+    }
+    for t in &m.timings {
+        println!("  stage {:<6} {:.1} ms", t.stage, t.ms);
+    }
+    Ok(())
+}
+
+fn run_validate(path: &Path) -> Result<()> {
+    let bundle = Bundle::open(path)?;
+    let problems = validate(&bundle);
+    if problems.is_empty() {
+        println!("{}: valid", path.display());
+        Ok(())
+    } else {
+        for p in &problems {
+            eprintln!("{}: {p}", path.display());
+        }
+        bail!("{}: {} problem(s)", path.display(), problems.len())
+    }
+}

@@ -1,0 +1,388 @@
+//! Everything that talks to GDAL: opening rasters with clear errors, reading
+//! them into [`Raster`]s, warping onto a target grid, and writing GeoTIFFs.
+
+use anyhow::{anyhow, bail, Context, Result};
+use gdal::raster::{Buffer, GdalDataType, GdalType, RasterCreationOptions};
+use gdal::spatial_ref::SpatialRef;
+use gdal::{Dataset, DriverManager};
+use relevo_core::geo::GeoTransform;
+use relevo_core::raster::Raster;
+use std::ffi::{c_char, c_int, CString};
+use std::path::{Path, PathBuf};
+use std::ptr::null_mut;
+
+/// A north-up target grid in a CRS (empty WKT: not georeferenced).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GridSpec {
+    pub crs_wkt: String,
+    pub geotransform: GeoTransform,
+    pub width: usize,
+    pub height: usize,
+}
+
+/// Route GDAL's own messages into our log instead of stderr; failures are
+/// reported through return values with the file named.
+pub fn init() {
+    gdal::config::set_error_handler(|class, number, message| {
+        tracing::debug!(target: "gdal", "{class:?} {number}: {message}");
+    });
+}
+
+/// GDAL's last error message, or `fallback`.
+fn last_error(fallback: &str) -> String {
+    // SAFETY: CPLGetLastErrorMsg returns a pointer to a thread-local string.
+    let message = unsafe { std::ffi::CStr::from_ptr(gdal_sys::CPLGetLastErrorMsg()) }
+        .to_string_lossy()
+        .trim()
+        .to_string();
+    if message.is_empty() {
+        fallback.to_string()
+    } else {
+        message
+    }
+}
+
+/// What ingest needs to know of one input raster.
+pub struct Source {
+    pub path: PathBuf,
+    pub dataset: Dataset,
+    pub width: usize,
+    pub height: usize,
+    pub bands: usize,
+    pub band_type: GdalDataType,
+    pub nodata: Option<f64>,
+    /// `None` when the file (and any world file beside it) gives no georeferencing.
+    pub geotransform: Option<GeoTransform>,
+    /// `None` when no CRS is known.
+    pub srs: Option<SpatialRef>,
+}
+
+/// Open a raster and read its header, with errors that name the file.
+pub fn open(path: &Path) -> Result<Source> {
+    if !path.exists() {
+        bail!("{}: no such file", path.display());
+    }
+    if path.is_dir() && !path.join("manifest.json").exists() {
+        // GDAL opens some directories; a plain one is a user mistake.
+        bail!("{}: is a directory, not a raster", path.display());
+    }
+    let dataset = Dataset::open(path).map_err(|_| {
+        anyhow!(
+            "{}: not a raster GDAL can read ({})",
+            path.display(),
+            last_error("unrecognised format")
+        )
+    })?;
+    let (width, height) = dataset.raster_size();
+    let bands = dataset.raster_count();
+    if bands == 0 {
+        bail!("{}: has no raster bands", path.display());
+    }
+    let band = dataset.rasterband(1)?;
+    let band_type = band.band_type();
+    let nodata = band.no_data_value();
+    let geotransform = dataset
+        .geo_transform()
+        .ok()
+        .map(GeoTransform)
+        .filter(|g| *g != GeoTransform::IDENTITY);
+    let srs = dataset.spatial_ref().ok().map(|mut s| {
+        s.set_axis_mapping_strategy(gdal::spatial_ref::AxisMappingStrategy::TraditionalGisOrder);
+        s
+    });
+    Ok(Source {
+        path: path.to_path_buf(),
+        dataset,
+        width,
+        height,
+        bands,
+        band_type,
+        nodata,
+        geotransform,
+        srs,
+    })
+}
+
+impl Source {
+    /// Read every band into memory as f64, turning `nodata` into NaN.
+    /// Reads the whole file, so a truncated or corrupt file fails here.
+    pub fn read(&self, nodata: Option<f64>) -> Result<Raster> {
+        let mut data = Vec::with_capacity(self.width * self.height * self.bands);
+        for b in 1..=self.bands {
+            let band = self.dataset.rasterband(b)?;
+            let buffer: Buffer<f64> = band
+                .read_as((0, 0), (self.width, self.height), (self.width, self.height), None)
+                .map_err(|_| {
+                    anyhow!(
+                        "{}: cannot read band {b} ({})",
+                        self.path.display(),
+                        last_error("read failed")
+                    )
+                })?;
+            data.extend(buffer.data().iter().map(|&v| match nodata {
+                Some(nd) if v == nd || (nd.is_nan() && v.is_nan()) => f64::NAN,
+                _ => v,
+            }));
+        }
+        Ok(Raster::from_data(self.width, self.height, self.bands, data))
+    }
+}
+
+/// Resampling kernels, by gdalwarp's names.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Resampling {
+    #[default]
+    Nearest,
+    Bilinear,
+    Cubic,
+    Cubicspline,
+    Lanczos,
+    Average,
+    Mode,
+}
+
+impl Resampling {
+    fn gdal_name(self) -> &'static str {
+        match self {
+            Resampling::Nearest => "near",
+            Resampling::Bilinear => "bilinear",
+            Resampling::Cubic => "cubic",
+            Resampling::Cubicspline => "cubicspline",
+            Resampling::Lanczos => "lanczos",
+            Resampling::Average => "average",
+            Resampling::Mode => "mode",
+        }
+    }
+}
+
+/// An in-memory GDAL dataset (Float64) holding `raster`, for warping data
+/// that was decoded or computed rather than read.
+pub fn mem_dataset(raster: &Raster, geotransform: &GeoTransform, srs: Option<&SpatialRef>) -> Result<Dataset> {
+    let driver = DriverManager::get_driver_by_name("MEM")?;
+    let mut ds = driver.create_with_band_type::<f64, _>("", raster.width, raster.height, raster.bands)?;
+    ds.set_geo_transform(&geotransform.0)?;
+    if let Some(srs) = srs {
+        ds.set_spatial_ref(srs)?;
+    }
+    for b in 0..raster.bands {
+        let mut band = ds.rasterband(b + 1)?;
+        band.set_no_data_value(Some(f64::NAN))?;
+        let mut buffer = Buffer::new((raster.width, raster.height), raster.band(b).to_vec());
+        band.write((0, 0), (raster.width, raster.height), &mut buffer)?;
+    }
+    Ok(ds)
+}
+
+/// Warp `source` onto `grid` with GDAL's warper (gdalwarp's engine), returning
+/// every band as f64 with NaN where the source has no data or does not reach.
+/// `src_nodata` overrides the file's own no-data value.
+pub fn warp(
+    source: &Dataset,
+    name: &Path,
+    grid: &GridSpec,
+    resampling: Resampling,
+    src_nodata: Option<f64>,
+) -> Result<Raster> {
+    let [xmin, ymin, xmax, ymax] = grid.geotransform.bounds(grid.width, grid.height);
+    let mut args: Vec<String> = vec![
+        "-of".into(),
+        "MEM".into(),
+        "-ot".into(),
+        "Float64".into(),
+        "-te".into(),
+        format!("{xmin:.17}"),
+        format!("{ymin:.17}"),
+        format!("{xmax:.17}"),
+        format!("{ymax:.17}"),
+        "-ts".into(),
+        grid.width.to_string(),
+        grid.height.to_string(),
+        "-r".into(),
+        resampling.gdal_name().into(),
+        "-dstnodata".into(),
+        "nan".into(),
+        "-wo".into(),
+        "NUM_THREADS=ALL_CPUS".into(),
+    ];
+    if !grid.crs_wkt.is_empty() {
+        args.extend(["-t_srs".into(), grid.crs_wkt.clone()]);
+    }
+    if let Some(nd) = src_nodata {
+        args.extend(["-srcnodata".into(), format_nodata(nd)]);
+    }
+    let out = gdal_warp(source, &args)
+        .with_context(|| format!("{}: cannot warp onto the target grid", name.display()))?;
+    let mut data = Vec::with_capacity(grid.width * grid.height * out.raster_count());
+    for b in 1..=out.raster_count() {
+        let buffer: Buffer<f64> =
+            out.rasterband(b)?
+                .read_as((0, 0), (grid.width, grid.height), (grid.width, grid.height), None)?;
+        data.extend_from_slice(buffer.data());
+    }
+    let mut raster = Raster::from_data(grid.width, grid.height, out.raster_count(), data);
+    raster.unify_validity();
+    Ok(raster)
+}
+
+fn format_nodata(v: f64) -> String {
+    if v.is_nan() {
+        "nan".into()
+    } else {
+        format!("{v}")
+    }
+}
+
+/// `GDALWarp` (the library form of gdalwarp) on one source, returning the
+/// output dataset. The gdal crate does not wrap it.
+fn gdal_warp(source: &Dataset, args: &[String]) -> Result<Dataset> {
+    let c_args: Vec<CString> = args.iter().map(|a| CString::new(a.as_str())).collect::<Result<_, _>>()?;
+    let mut c_ptrs: Vec<*mut c_char> = c_args
+        .iter()
+        .map(|a| a.as_ptr() as *mut c_char)
+        .chain(std::iter::once(null_mut()))
+        .collect();
+    let empty = CString::default();
+    // SAFETY: the argument strings outlive the options object, which is freed
+    // before returning; the source handle stays valid for the call.
+    unsafe {
+        let options = gdal_sys::GDALWarpAppOptionsNew(c_ptrs.as_mut_ptr(), null_mut());
+        if options.is_null() {
+            bail!("invalid warp options: {}", last_error("unknown"));
+        }
+        let mut sources = [source.c_dataset()];
+        let mut usage_error: c_int = 0;
+        let out = gdal_sys::GDALWarp(
+            empty.as_ptr(),
+            null_mut(),
+            1,
+            sources.as_mut_ptr(),
+            options,
+            &mut usage_error,
+        );
+        gdal_sys::GDALWarpAppOptionsFree(options);
+        if out.is_null() {
+            bail!("{}", last_error("GDALWarp failed"));
+        }
+        Ok(Dataset::from_c_dataset(out))
+    }
+}
+
+/// Write `raster` as a tiled, deflate-compressed GeoTIFF of `band_type`,
+/// NaN cells becoming `nodata`. Written beside `path` and renamed into place,
+/// so an interrupted write leaves nothing at `path`.
+pub fn write_geotiff(
+    path: &Path,
+    raster: &Raster,
+    grid: &GridSpec,
+    band_type: GdalDataType,
+    nodata: Option<f64>,
+) -> Result<()> {
+    let partial = partial_path(path);
+    let result = write_geotiff_at(&partial, raster, grid, band_type, nodata).and_then(|()| {
+        std::fs::rename(&partial, path).with_context(|| format!("{}: cannot move into place", path.display()))
+    });
+    if result.is_err() {
+        let _ = std::fs::remove_file(&partial);
+    }
+    result
+}
+
+/// `DIR/.NAME.partial` beside `path`.
+pub fn partial_path(path: &Path) -> PathBuf {
+    let name = path.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
+    path.with_file_name(format!(".{name}.partial"))
+}
+
+fn write_geotiff_at(
+    path: &Path,
+    raster: &Raster,
+    grid: &GridSpec,
+    band_type: GdalDataType,
+    nodata: Option<f64>,
+) -> Result<()> {
+    macro_rules! typed {
+        ($t:ty) => {
+            write_typed::<$t>(path, raster, grid, nodata)
+        };
+    }
+    match band_type {
+        GdalDataType::UInt8 => typed!(u8),
+        GdalDataType::UInt16 => typed!(u16),
+        GdalDataType::Int16 => typed!(i16),
+        GdalDataType::UInt32 => typed!(u32),
+        GdalDataType::Int32 => typed!(i32),
+        GdalDataType::Float32 => typed!(f32),
+        _ => typed!(f64),
+    }
+}
+
+/// Conversion of a computed f64 to a band's type: integers round half away
+/// from zero and saturate.
+trait FromF64: GdalType + Copy {
+    fn from_f64(v: f64) -> Self;
+}
+macro_rules! from_f64_int {
+    ($($t:ty),*) => {$(impl FromF64 for $t { fn from_f64(v: f64) -> Self { v.round() as $t } })*};
+}
+from_f64_int!(u8, u16, i16, u32, i32);
+impl FromF64 for f32 {
+    fn from_f64(v: f64) -> Self {
+        v as f32
+    }
+}
+impl FromF64 for f64 {
+    fn from_f64(v: f64) -> Self {
+        v
+    }
+}
+
+fn write_typed<T: FromF64>(path: &Path, raster: &Raster, grid: &GridSpec, nodata: Option<f64>) -> Result<()> {
+    let driver = DriverManager::get_driver_by_name("GTiff")?;
+    let mut options = RasterCreationOptions::new();
+    for (k, v) in [("COMPRESS", "DEFLATE"), ("TILED", "YES"), ("BIGTIFF", "IF_SAFER")] {
+        options.set_name_value(k, v)?;
+    }
+    let mut ds = driver
+        .create_with_band_type_with_options::<T, _>(path, raster.width, raster.height, raster.bands, &options)
+        .map_err(|_| anyhow!("{}: cannot create ({})", path.display(), last_error("create failed")))?;
+    if grid.geotransform != GeoTransform::IDENTITY {
+        ds.set_geo_transform(&grid.geotransform.0)?;
+    }
+    if !grid.crs_wkt.is_empty() {
+        ds.set_projection(&grid.crs_wkt)?;
+    }
+    let fill = nodata.unwrap_or(f64::NAN);
+    for b in 0..raster.bands {
+        let mut band = ds.rasterband(b + 1)?;
+        if let Some(nd) = nodata {
+            band.set_no_data_value(Some(nd))?;
+        }
+        let data: Vec<T> = raster
+            .band(b)
+            .iter()
+            .map(|&v| T::from_f64(if v.is_nan() { fill } else { v }))
+            .collect();
+        let mut buffer = Buffer::new((raster.width, raster.height), data);
+        band.write((0, 0), (raster.width, raster.height), &mut buffer)
+            .map_err(|_| anyhow!("{}: cannot write ({})", path.display(), last_error("write failed")))?;
+    }
+    ds.flush_cache()?;
+    ds.close().map_err(|_| anyhow!("{}: cannot finish writing ({})", path.display(), last_error("close failed")))?;
+    Ok(())
+}
+
+/// The no-data value to write for `band_type` when none is given.
+pub fn default_nodata(band_type: GdalDataType) -> f64 {
+    match band_type {
+        GdalDataType::UInt8 | GdalDataType::UInt16 | GdalDataType::UInt32 => 0.0,
+        GdalDataType::Int16 => i16::MIN as f64,
+        GdalDataType::Int32 => i32::MIN as f64,
+        _ => f64::NAN,
+    }
+}
+
+/// True for band types that hold floating-point values.
+pub fn is_float(band_type: GdalDataType) -> bool {
+    matches!(band_type, GdalDataType::Float32 | GdalDataType::Float64)
+}

@@ -1,0 +1,338 @@
+//! `relevo prep`: the whole chain from raw rasters to a bundle.
+//!
+//! The chain is the list [`STAGES`]; each stage is a function that reads what
+//! earlier stages left in [`Build`] and adds its own results. Adding a stage is
+//! writing one such function and listing it.
+
+use crate::crs;
+use crate::gdalio::{self, GridSpec};
+use crate::region::Region;
+use crate::stitch::{stitch, Mosaic, StitchOptions};
+use anyhow::{bail, Context, Result};
+use gdal::raster::GdalDataType;
+use gdal::spatial_ref::SpatialRef;
+use relevo_core::bundle::{
+    sha256_file, Artifact, BundleWriter, ColorInfo, Crs, Dtype, GridInfo, InputFile, Manifest, StageTiming,
+    FORMAT, FORMAT_VERSION,
+};
+use relevo_core::geo::GeoTransform;
+use relevo_core::grid::HeightGrid;
+use relevo_core::raster::fill::{fill_holes, FillReport};
+use relevo_core::raster::Raster;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// The stages of `prep`, in order.
+const STAGES: &[(&str, fn(&mut Build) -> Result<()>)] = &[
+    ("dem", stage_dem),
+    ("fill", stage_fill),
+    ("grid", stage_grid),
+    ("drape", stage_drape),
+    ("write", stage_write),
+];
+
+/// What `prep` reports when it is done (`--json` prints it).
+#[derive(Debug, Serialize)]
+pub struct Summary {
+    pub bundle: PathBuf,
+    pub region: String,
+    pub side: usize,
+    pub cell_size_m: f64,
+    pub valid_vertices: usize,
+    pub height_range_m: [f32; 2],
+    pub fill: FillReport,
+    pub color: Option<[usize; 2]>,
+    pub timings: Vec<StageTiming>,
+}
+
+/// State carried from stage to stage.
+struct Build<'a> {
+    region: &'a Region,
+    name: String,
+    writer: BundleWriter,
+    /// The DEM stitched onto the bundle's metric grid (heights in metres).
+    dem: Option<Mosaic>,
+    cell_size_m: f64,
+    fill: FillReport,
+    grid: Option<HeightGrid>,
+    color: Option<(Mosaic, [usize; 3])>,
+    artifacts: BTreeMap<String, Artifact>,
+    exports: BTreeMap<String, Artifact>,
+}
+
+/// Run every stage and move the finished bundle to `out`.
+pub fn prep(region: &Region, out: &Path, force: bool) -> Result<Summary> {
+    let name = region.name.clone().unwrap_or_else(|| {
+        out.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "region".into())
+    });
+    let writer = BundleWriter::create(out, force)?;
+    let mut build = Build {
+        region,
+        name,
+        writer,
+        dem: None,
+        cell_size_m: 1.0,
+        fill: FillReport::default(),
+        grid: None,
+        color: None,
+        artifacts: BTreeMap::new(),
+        exports: BTreeMap::new(),
+    };
+    let mut timings = Vec::new();
+    let bar = crate::progress::bar(STAGES.len() as u64, "prep");
+    for (stage, run) in STAGES {
+        bar.set_message(*stage);
+        let start = Instant::now();
+        run(&mut build).with_context(|| format!("stage {stage}"))?;
+        let ms = start.elapsed().as_secs_f64() * 1e3;
+        tracing::info!(stage, ms, "stage done");
+        timings.push(StageTiming { stage: stage.to_string(), ms });
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    finish(build, timings)
+}
+
+/// Stitch the DEM tiles onto the bundle's metric grid.
+fn stage_dem(b: &mut Build) -> Result<()> {
+    let r = b.region;
+    let first = gdalio::open(&r.dem.files[0])?;
+    let target: Option<SpatialRef> = match (&r.crs, &first.srs) {
+        (Some(def), _) => Some(crs::parse(def)?),
+        (None, Some(srs)) if srs.is_geographic() => {
+            let geo = first.geotransform.unwrap_or(GeoTransform::IDENTITY);
+            let (lon, lat) = geo.apply(first.width as f64 / 2.0, first.height as f64 / 2.0);
+            let (mut xs, mut ys) = ([lon], [lat]);
+            crs::transform_points(srs, &crs::wgs84()?, &mut xs, &mut ys)?;
+            let utm = crs::utm_for(xs[0], ys[0])?;
+            tracing::info!(epsg = crs::epsg(&utm), "geographic DEM: reprojecting to UTM");
+            Some(utm)
+        }
+        (None, srs) => srs.clone(),
+    };
+    if let Some(t) = &target {
+        if t.is_geographic() {
+            bail!("the bundle CRS must be projected (metric), not geographic");
+        }
+    }
+    let mut opts = StitchOptions {
+        target_crs: target.as_ref().map(crs::to_wkt).transpose()?,
+        resolution: r.cell_size_m.map(|c| (c, c)),
+        resampling: r.dem.resampling,
+        src_nodata: r.dem.src_nodata.map(|n| n.value()),
+        overlap: r.dem.overlap,
+        encoding: r.dem.encoding,
+        bands: Some(vec![1]),
+        ..Default::default()
+    };
+    let mut dem = stitch(&r.dem.files, &opts)?;
+    let (cx, cy) = dem.grid.geotransform.cell_size();
+    if cx != cy {
+        // The LP hierarchy needs square cells: stitch again at the finer spacing.
+        opts.resolution = Some((cx.min(cy), cx.min(cy)));
+        dem = stitch(&r.dem.files, &opts)?;
+    }
+    let (w, h) = (dem.grid.width, dem.grid.height);
+    if w < 2 || h < 2 {
+        bail!("{}: the DEM grid is {w}×{h} cells; a heightfield needs at least 2×2", r.dem.files[0].display());
+    }
+    let metres_per_unit = target.as_ref().map_or(1.0, |t| t.linear_units());
+    b.cell_size_m = dem.grid.geotransform.cell_size().0 * metres_per_unit;
+    if r.z_scale != 1.0 {
+        dem.raster.data.iter_mut().for_each(|v| *v *= r.z_scale);
+    }
+    b.dem = Some(dem);
+    Ok(())
+}
+
+/// Fill small no-data holes by natural-neighbour interpolation.
+fn stage_fill(b: &mut Build) -> Result<()> {
+    let dem = b.dem.as_mut().context("dem stage did not run")?;
+    let (w, h) = (dem.raster.width, dem.raster.height);
+    b.fill = fill_holes(dem.raster.band_mut(0), w, h, b.region.fill.max_hole_cells);
+    tracing::info!(?b.fill, "filled holes");
+    Ok(())
+}
+
+/// Square the DEM to (2^n+1)² with its mask.
+fn stage_grid(b: &mut Build) -> Result<()> {
+    let dem = b.dem.as_ref().context("dem stage did not run")?;
+    let grid = HeightGrid::square(
+        dem.raster.band(0),
+        dem.raster.width,
+        dem.raster.height,
+        dem.grid.geotransform,
+        b.region.grid.squaring,
+    );
+    b.grid = Some(grid);
+    Ok(())
+}
+
+/// Bring the imagery onto the bundle CRS at its own resolution, cropped to the DEM.
+fn stage_drape(b: &mut Build) -> Result<()> {
+    let Some(image) = &b.region.image else {
+        return Ok(());
+    };
+    let dem = b.dem.as_ref().context("dem stage did not run")?;
+    let bands = image.bands.unwrap_or([1, 2, 3]);
+    let opts = StitchOptions {
+        target_crs: (!dem.grid.crs_wkt.is_empty()).then(|| dem.grid.crs_wkt.clone()),
+        extent: Some(dem.grid.geotransform.bounds(dem.grid.width, dem.grid.height)),
+        resampling: image.resampling,
+        src_nodata: image.src_nodata.map(|n| n.value()),
+        overlap: image.overlap,
+        bands: Some(bands.to_vec()),
+        ..Default::default()
+    };
+    // With an extent but no resolution, stitch keeps the imagery's own cell size.
+    let mosaic = stitch(&image.files, &opts)?;
+    b.color = Some((mosaic, bands));
+    Ok(())
+}
+
+/// Write the arrays and the GeoTIFF exports into the staging directory.
+fn stage_write(b: &mut Build) -> Result<()> {
+    let grid = b.grid.as_ref().context("grid stage did not run")?;
+    let dem = b.dem.as_ref().context("dem stage did not run")?;
+    let side = grid.side;
+    b.artifacts.insert("height".into(), b.writer.write_array("height.f32", Dtype::F32, &[side, side], &grid.heights)?);
+    b.artifacts.insert("mask".into(), b.writer.write_array("mask.u8", Dtype::U8, &[side, side], &grid.mask)?);
+    std::fs::create_dir_all(b.writer.dir().join("exports")).context("cannot create exports/")?;
+
+    let spec = GridSpec {
+        crs_wkt: dem.grid.crs_wkt.clone(),
+        geotransform: grid.geotransform,
+        width: side,
+        height: side,
+    };
+    let heights: Vec<f64> = grid
+        .heights
+        .iter()
+        .zip(&grid.mask)
+        .map(|(&h, &m)| if m == 1 { h as f64 } else { f64::NAN })
+        .collect();
+    let raster = Raster::from_data(side, side, 1, heights);
+    gdalio::write_geotiff(&b.writer.dir().join("exports/height.tif"), &raster, &spec, GdalDataType::Float32, Some(-9999.0))?;
+    b.exports.insert("height_geotiff".into(), b.writer.record_file("exports/height.tif")?);
+
+    if let Some((mosaic, _)) = &b.color {
+        let stretch = b.region.image.as_ref().and_then(|i| i.stretch).or(match mosaic.band_type {
+            GdalDataType::UInt8 => None,
+            _ => Some([2.0, 98.0]),
+        });
+        let rgba = to_rgba8(&mosaic.raster, stretch);
+        let (w, h) = (mosaic.grid.width, mosaic.grid.height);
+        b.artifacts.insert("color".into(), b.writer.write_array("color.rgba8", Dtype::U8, &[h, w, 4], &rgba)?);
+        let bands: Vec<f64> = (0..4)
+            .flat_map(|c| rgba.iter().skip(c).step_by(4).map(|&v| v as f64))
+            .collect();
+        let raster = Raster::from_data(w, h, 4, bands);
+        gdalio::write_geotiff(&b.writer.dir().join("exports/color.tif"), &raster, &mosaic.grid, GdalDataType::UInt8, None)?;
+        b.exports.insert("color_geotiff".into(), b.writer.record_file("exports/color.tif")?);
+    }
+    Ok(())
+}
+
+/// Map three bands to RGBA8: each band's `[low, high]` percentiles (of its
+/// valid cells) stretch linearly to 0..255, or values are clamped to 0..255
+/// when `stretch` is `None`. Alpha is 255 where the image has data.
+pub fn to_rgba8(raster: &Raster, stretch: Option<[f64; 2]>) -> Vec<u8> {
+    let n = raster.cells();
+    let ranges: Vec<(f64, f64)> = (0..3)
+        .map(|b| match stretch {
+            None => (0.0, 255.0),
+            Some([lo, hi]) => {
+                let mut values: Vec<f64> = raster.band(b).iter().copied().filter(|v| !v.is_nan()).collect();
+                values.sort_unstable_by(f64::total_cmp);
+                let at = |p: f64| values[((p / 100.0) * (values.len() - 1) as f64).round() as usize];
+                if values.is_empty() {
+                    (0.0, 255.0)
+                } else {
+                    (at(lo), at(hi).max(at(lo) + f64::EPSILON))
+                }
+            }
+        })
+        .collect();
+    let mut out = vec![0u8; n * 4];
+    for i in 0..n {
+        if !raster.is_valid(i) {
+            continue;
+        }
+        for (b, &(lo, hi)) in ranges.iter().enumerate() {
+            let v = (raster.band(b)[i] - lo) / (hi - lo) * 255.0;
+            out[i * 4 + b] = v.round().clamp(0.0, 255.0) as u8;
+        }
+        out[i * 4 + 3] = 255;
+    }
+    out
+}
+
+/// Write the manifest and move the bundle into place.
+fn finish(b: Build, timings: Vec<StageTiming>) -> Result<Summary> {
+    let grid = b.grid.context("grid stage did not run")?;
+    let dem = b.dem.context("dem stage did not run")?;
+    let valid_extent = grid.valid_extent().context("the DEM has no valid data")?;
+    let height_range_m = grid.height_range().context("the DEM has no valid data")?;
+    let mut inputs = Vec::new();
+    let mut record = |role: &str, paths: &[PathBuf]| -> Result<()> {
+        for p in paths {
+            let (bytes, sha256) = sha256_file(p)?;
+            inputs.push(InputFile { role: role.into(), path: p.display().to_string(), bytes, sha256 });
+        }
+        Ok(())
+    };
+    record("dem", &b.region.dem.files)?;
+    if let Some(image) = &b.region.image {
+        record("image", &image.files)?;
+    }
+    let parameters: BTreeMap<String, serde_json::Value> = match serde_json::to_value(b.region)? {
+        serde_json::Value::Object(map) => map.into_iter().collect(),
+        _ => BTreeMap::new(),
+    };
+    let crs = Crs {
+        wkt: dem.grid.crs_wkt.clone(),
+        epsg: dem.srs.as_ref().and_then(crs::epsg),
+    };
+    let color = b.color.as_ref().map(|(m, bands)| ColorInfo {
+        width: m.grid.width,
+        height: m.grid.height,
+        geotransform: m.grid.geotransform,
+        bands: *bands,
+    });
+    let manifest = Manifest {
+        format: FORMAT.into(),
+        format_version: FORMAT_VERSION,
+        region: b.name.clone(),
+        tool_version: env!("CARGO_PKG_VERSION").into(),
+        crs,
+        grid: GridInfo {
+            side: grid.side,
+            geotransform: grid.geotransform,
+            cell_size_m: b.cell_size_m,
+            z_scale: b.region.z_scale,
+            valid_extent,
+            height_range_m,
+            valid_vertices: grid.valid_count(),
+        },
+        color: color.clone(),
+        inputs,
+        parameters,
+        artifacts: b.artifacts,
+        exports: b.exports,
+        timings: timings.clone(),
+    };
+    let bundle = b.writer.commit(&manifest)?;
+    Ok(Summary {
+        bundle,
+        region: b.name,
+        side: grid.side,
+        cell_size_m: b.cell_size_m,
+        valid_vertices: grid.valid_count(),
+        height_range_m,
+        fill: b.fill,
+        color: color.map(|c| [c.width, c.height]),
+        timings,
+    })
+}

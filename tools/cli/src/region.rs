@@ -1,0 +1,170 @@
+//! REGION.toml: what `relevo prep` builds a bundle from.
+//!
+//! Relative paths are relative to the REGION.toml file. See docs/guide.md for
+//! the reference.
+
+use crate::gdalio::Resampling;
+use anyhow::{anyhow, bail, Context, Result};
+use relevo_core::grid::Squaring;
+use relevo_core::raster::encoding::Encoding;
+use relevo_core::raster::mosaic::Overlap;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Region {
+    /// Region name; default: the output's file stem.
+    pub name: Option<String>,
+    /// Target CRS of the bundle (anything GDAL accepts). Default: the DEM's
+    /// own when it is projected, else the UTM zone of the region's centre.
+    pub crs: Option<String>,
+    /// Grid spacing in metres; default: the DEM's, or after reprojection the
+    /// finest spacing that keeps every source cell.
+    pub cell_size_m: Option<f64>,
+    /// Factor from the DEM's vertical unit to metres.
+    #[serde(default = "one")]
+    pub z_scale: f64,
+    pub dem: DemSection,
+    #[serde(default)]
+    pub fill: FillSection,
+    #[serde(default)]
+    pub grid: GridSection,
+    pub image: Option<ImageSection>,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DemSection {
+    pub files: Vec<PathBuf>,
+    #[serde(default)]
+    pub encoding: Encoding,
+    /// No-data value overriding the files' own: a number or "nan".
+    pub src_nodata: Option<NoData>,
+    #[serde(default)]
+    pub overlap: Overlap,
+    #[serde(default = "bilinear")]
+    pub resampling: Resampling,
+}
+
+fn bilinear() -> Resampling {
+    Resampling::Bilinear
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FillSection {
+    /// Holes of at most this many cells are interpolated; larger stay masked.
+    pub max_hole_cells: usize,
+}
+
+impl Default for FillSection {
+    fn default() -> Self {
+        FillSection { max_hole_cells: 10_000 }
+    }
+}
+
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GridSection {
+    #[serde(default)]
+    pub squaring: Squaring,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImageSection {
+    pub files: Vec<PathBuf>,
+    /// Source bands shown as red, green, blue (1-based); default 1, 2, 3.
+    pub bands: Option<[usize; 3]>,
+    pub src_nodata: Option<NoData>,
+    #[serde(default)]
+    pub overlap: Overlap,
+    #[serde(default = "bilinear")]
+    pub resampling: Resampling,
+    /// Percentiles `[low, high]` mapped to 0 and 255 per band. Default: none
+    /// for 8-bit images (values kept), `[2, 98]` for deeper ones.
+    pub stretch: Option<[f64; 2]>,
+}
+
+/// A no-data value as written in TOML: a number, or the string "nan".
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum NoData {
+    Value(f64),
+    Name(NanName),
+}
+
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum NanName {
+    Nan,
+}
+
+impl NoData {
+    pub fn value(self) -> f64 {
+        match self {
+            NoData::Value(v) => v,
+            NoData::Name(NanName::Nan) => f64::NAN,
+        }
+    }
+}
+
+/// Parse a no-data value from the command line: a number or `nan`.
+pub fn parse_nodata(text: &str) -> Result<f64, String> {
+    if text.eq_ignore_ascii_case("nan") {
+        return Ok(f64::NAN);
+    }
+    text.parse::<f64>().map_err(|_| format!("{text:?} is neither a number nor nan"))
+}
+
+impl Region {
+    /// Read and check a REGION.toml, resolving relative paths against its folder.
+    pub fn load(path: &Path) -> Result<Region> {
+        let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
+        let mut region: Region =
+            toml::from_str(&text).map_err(|e| anyhow!("{}: {}", path.display(), e.to_string().trim_end()))?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        let resolve = |p: &mut PathBuf| {
+            if p.is_relative() {
+                *p = base.join(&*p);
+            }
+        };
+        region.dem.files.iter_mut().for_each(resolve);
+        if let Some(image) = &mut region.image {
+            image.files.iter_mut().for_each(resolve);
+        }
+        region.check().with_context(|| path.display().to_string())?;
+        Ok(region)
+    }
+
+    /// Reject values no stage could use.
+    pub fn check(&self) -> Result<()> {
+        if self.dem.files.is_empty() {
+            bail!("dem.files is empty: give at least one elevation raster");
+        }
+        if !(self.z_scale.is_finite() && self.z_scale != 0.0) {
+            bail!("z_scale must be a finite, non-zero number, got {}", self.z_scale);
+        }
+        if let Some(c) = self.cell_size_m {
+            if !(c.is_finite() && c > 0.0) {
+                bail!("cell_size_m must be positive, got {c}");
+            }
+        }
+        if let Some(image) = &self.image {
+            if image.files.is_empty() {
+                bail!("image.files is empty: remove [image] or list the imagery");
+            }
+            if let Some([lo, hi]) = image.stretch {
+                if !(0.0..100.0).contains(&lo) || !(lo < hi && hi <= 100.0) {
+                    bail!("image.stretch must be [low, high] percentiles with 0 <= low < high <= 100");
+                }
+            }
+        }
+        Ok(())
+    }
+}

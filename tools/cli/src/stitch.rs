@@ -1,0 +1,317 @@
+//! Stitching georeferenced tiles into one grid.
+//!
+//! Every tile is warped by GDAL onto its window of a common north-up target
+//! grid, then relevo-core's mosaic combines the windows (first, last, or a
+//! distance-weighted feather across overlaps).
+
+use crate::crs;
+use crate::gdalio::{self, GridSpec, Resampling, Source};
+use crate::progress;
+use anyhow::{bail, Context, Result};
+use gdal::raster::GdalDataType;
+use gdal::spatial_ref::SpatialRef;
+use relevo_core::geo::GeoTransform;
+use relevo_core::raster::encoding::Encoding;
+use relevo_core::raster::mosaic::{mosaic, Overlap, PlacedTile};
+use relevo_core::raster::Raster;
+use std::path::{Path, PathBuf};
+
+/// How to build the target grid and combine tiles (gdalwarp's options in spirit).
+#[derive(Debug, Clone, Default)]
+pub struct StitchOptions {
+    /// Target CRS; default: the first tile's.
+    pub target_crs: Option<String>,
+    /// Cell size (x, y) in target CRS units; default: the finest tile's,
+    /// or its detail-preserving size after reprojection.
+    pub resolution: Option<(f64, f64)>,
+    /// `[xmin, ymin, xmax, ymax]` in target CRS units; default: all tiles.
+    pub extent: Option<[f64; 4]>,
+    pub resampling: Resampling,
+    /// Source no-data value, overriding what the files declare.
+    pub src_nodata: Option<f64>,
+    /// No-data value written to the output; default: the sources'.
+    pub dst_nodata: Option<f64>,
+    pub overlap: Overlap,
+    pub encoding: Encoding,
+    /// Bands to keep, 1-based, in output order; default: all.
+    pub bands: Option<Vec<usize>>,
+}
+
+/// A stitched raster and the grid it lies on.
+pub struct Mosaic {
+    pub raster: Raster,
+    pub grid: GridSpec,
+    /// Band type to write: the sources' common type (Float32 for decoded tiles).
+    pub band_type: GdalDataType,
+    pub nodata: f64,
+    pub srs: Option<SpatialRef>,
+}
+
+/// Open, check, warp and combine `paths`.
+pub fn stitch(paths: &[PathBuf], opts: &StitchOptions) -> Result<Mosaic> {
+    if paths.is_empty() {
+        bail!("no input tiles given");
+    }
+    let sources: Vec<Source> = paths.iter().map(|p| gdalio::open(p)).collect::<Result<_>>()?;
+    check_sources(&sources, opts)?;
+    let first = &sources[0];
+
+    let georeferenced = sources.iter().all(|s| s.geotransform.is_some());
+    let (tiles, grid, srs) = if georeferenced {
+        warp_all(&sources, opts)?
+    } else {
+        let lacking = sources.iter().find(|s| s.geotransform.is_none()).map(|s| s.path.display());
+        if sources.len() > 1 || opts.target_crs.is_some() || opts.extent.is_some() || opts.resolution.is_some() {
+            bail!(
+                "{}: has no georeferencing (no geotransform and no world file); \
+                 only a single such tile can be used, in pixel coordinates",
+                lacking.unwrap_or_else(|| first.path.display())
+            );
+        }
+        let raster = select_bands(decode(first, opts)?, opts);
+        let grid = GridSpec {
+            crs_wkt: String::new(),
+            geotransform: GeoTransform::IDENTITY,
+            width: first.width,
+            height: first.height,
+        };
+        (vec![PlacedTile { col: 0, row: 0, raster }], grid, None)
+    };
+
+    let bands = tiles.first().map_or(1, |t| t.raster.bands);
+    let raster = mosaic(grid.width, grid.height, bands, &tiles, opts.overlap);
+    if raster.valid_count() == 0 {
+        let names: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
+        bail!("{}: no valid data (every cell is no-data)", names.join(", "));
+    }
+
+    let band_type = if opts.encoding != Encoding::Plain {
+        GdalDataType::Float32
+    } else if sources.iter().all(|s| s.band_type == first.band_type) {
+        first.band_type
+    } else {
+        GdalDataType::Float64
+    };
+    let nodata = opts
+        .dst_nodata
+        .or(opts.src_nodata)
+        .or(first.nodata)
+        .unwrap_or_else(|| gdalio::default_nodata(band_type));
+    Ok(Mosaic {
+        raster,
+        grid,
+        band_type,
+        nodata,
+        srs,
+    })
+}
+
+/// Refuse inputs that cannot be combined, naming the file.
+fn check_sources(sources: &[Source], opts: &StitchOptions) -> Result<()> {
+    let first = &sources[0];
+    for s in &sources[1..] {
+        if s.bands != first.bands {
+            bail!(
+                "{}: has {} band(s) but {} has {}; tiles must have the same bands",
+                s.path.display(),
+                s.bands,
+                first.path.display(),
+                first.bands
+            );
+        }
+        if s.srs.is_some() != first.srs.is_some() {
+            bail!(
+                "{}: {} a CRS but {} {}",
+                s.path.display(),
+                if s.srs.is_some() { "has" } else { "lacks" },
+                first.path.display(),
+                if first.srs.is_some() { "has one" } else { "does not" }
+            );
+        }
+    }
+    let needed = opts.encoding.bands_needed();
+    if first.bands < needed {
+        bail!(
+            "{}: has {} band(s); the {:?} encoding needs {needed}",
+            first.path.display(),
+            first.bands,
+            opts.encoding
+        );
+    }
+    let available = if opts.encoding == Encoding::Plain { first.bands } else { 1 };
+    if let Some(bands) = &opts.bands {
+        if let Some(b) = bands.iter().find(|&&b| b == 0 || b > available) {
+            bail!("{}: has no band {b} (bands are 1..={available})", first.path.display());
+        }
+    }
+    for s in sources {
+        let nodata = opts.src_nodata.or(s.nodata);
+        if gdalio::is_float(s.band_type) && !nodata.is_some_and(f64::is_nan) {
+            let raster = s.read(None)?;
+            let nans = raster.data.iter().filter(|v| v.is_nan()).count();
+            if nans > 0 {
+                bail!(
+                    "{}: {nans} value(s) are NaN but the file does not declare NaN as no-data; \
+                     pass --src-nodata nan to treat them as holes",
+                    s.path.display()
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The tile's values with its encoding decoded and no-data as NaN.
+fn decode(source: &Source, opts: &StitchOptions) -> Result<Raster> {
+    let raw = source.read(opts.src_nodata.or(source.nodata))?;
+    if opts.encoding == Encoding::Plain {
+        return Ok(raw);
+    }
+    let (r, g, b) = (raw.band(0), raw.band(1), raw.band(2));
+    let heights = (0..raw.cells())
+        .map(|i| opts.encoding.decode(r[i], g[i], b[i]))
+        .collect();
+    Ok(Raster::from_data(raw.width, raw.height, 1, heights))
+}
+
+fn select_bands(raster: Raster, opts: &StitchOptions) -> Raster {
+    let Some(bands) = &opts.bands else {
+        return raster;
+    };
+    let data = bands.iter().flat_map(|&b| raster.band(b - 1).iter().copied()).collect();
+    let mut out = Raster::from_data(raster.width, raster.height, bands.len(), data);
+    out.unify_validity();
+    out
+}
+
+/// Plan the target grid and warp every tile onto its window of it.
+fn warp_all(sources: &[Source], opts: &StitchOptions) -> Result<(Vec<PlacedTile>, GridSpec, Option<SpatialRef>)> {
+    let first = &sources[0];
+    let target = match &opts.target_crs {
+        Some(def) => Some(crs::parse(def)?),
+        None => first.srs.clone(),
+    };
+    let same_crs = |s: &Source| match (&s.srs, &target) {
+        (Some(a), Some(b)) => a == b,
+        _ => true,
+    };
+
+    // Resolution: explicit, else the finest tile's in the target CRS.
+    let (rx, ry) = match opts.resolution {
+        Some(r) => r,
+        None => {
+            let mut best = (f64::INFINITY, f64::INFINITY);
+            for s in sources {
+                let geo = s.geotransform.expect("checked georeferenced");
+                let (cx, cy) = if same_crs(s) {
+                    geo.cell_size()
+                } else {
+                    let (from, to) = (s.srs.as_ref().expect("has CRS"), target.as_ref().expect("has CRS"));
+                    let cell = crs::detail_preserving_cell(&geo, s.width, s.height, from, to)
+                        .with_context(|| s.path.display().to_string())?;
+                    (cell, cell)
+                };
+                best = (best.0.min(cx), best.1.min(cy));
+            }
+            best
+        }
+    };
+    if !(rx > 0.0 && ry > 0.0) {
+        bail!("target resolution must be positive, got {rx} × {ry}");
+    }
+
+    let footprints: Vec<[f64; 4]> = sources
+        .iter()
+        .map(|s| {
+            let geo = s.geotransform.expect("checked georeferenced");
+            crs::footprint(&geo, s.width, s.height, s.srs.as_ref(), target.as_ref())
+                .with_context(|| s.path.display().to_string())
+        })
+        .collect::<Result<_>>()?;
+
+    let (origin_x, origin_y, width, height) = match opts.extent {
+        Some([xmin, ymin, xmax, ymax]) => {
+            if !(xmax > xmin && ymax > ymin) {
+                bail!("extent must have xmin < xmax and ymin < ymax");
+            }
+            let w = ((xmax - xmin) / rx).round().max(1.0) as usize;
+            let h = ((ymax - ymin) / ry).round().max(1.0) as usize;
+            (xmin, ymax, w, h)
+        }
+        None => {
+            let union = footprints.iter().fold(
+                [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY],
+                |b, f| [b[0].min(f[0]), b[1].min(f[1]), b[2].max(f[2]), b[3].max(f[3])],
+            );
+            // Align to the first tile's cell lines when it already lies on the
+            // target grid, so aligned tiles are copied without resampling;
+            // otherwise to multiples of the resolution.
+            let geo = first.geotransform.expect("checked georeferenced");
+            let (anchor_x, anchor_y) = if same_crs(first) && geo.is_north_up() && geo.cell_size() == (rx, ry) {
+                (geo.0[0], geo.0[3])
+            } else {
+                (0.0, 0.0)
+            };
+            let ox = anchor_x + ((union[0] - anchor_x) / rx + 1e-6).floor() * rx;
+            let oy = anchor_y + ((union[3] - anchor_y) / ry - 1e-6).ceil() * ry;
+            let w = ((union[2] - ox) / rx - 1e-6).ceil().max(1.0) as usize;
+            let h = ((oy - union[1]) / ry - 1e-6).ceil().max(1.0) as usize;
+            (ox, oy, w, h)
+        }
+    };
+    let crs_wkt = match &target {
+        Some(t) => crs::to_wkt(t)?,
+        None => String::new(),
+    };
+    let grid = GridSpec {
+        crs_wkt,
+        geotransform: GeoTransform::north_up(origin_x, origin_y, rx, ry),
+        width,
+        height,
+    };
+    tracing::info!(width, height, cell_x = rx, cell_y = ry, "target grid");
+
+    let bar = progress::bar(sources.len() as u64, "warping tiles");
+    let mut tiles = Vec::new();
+    for (s, f) in sources.iter().zip(&footprints) {
+        bar.set_message(file_name(&s.path));
+        let c0 = (((f[0] - origin_x) / rx + 1e-6).floor().max(0.0) as usize).min(width);
+        let c1 = (((f[2] - origin_x) / rx - 1e-6).ceil().max(0.0) as usize).min(width);
+        let r0 = (((origin_y - f[3]) / ry + 1e-6).floor().max(0.0) as usize).min(height);
+        let r1 = (((origin_y - f[1]) / ry - 1e-6).ceil().max(0.0) as usize).min(height);
+        if c1 <= c0 || r1 <= r0 {
+            tracing::warn!("{}: outside the target extent, skipped", s.path.display());
+            bar.inc(1);
+            continue;
+        }
+        let window = GridSpec {
+            crs_wkt: grid.crs_wkt.clone(),
+            geotransform: GeoTransform::north_up(origin_x + c0 as f64 * rx, origin_y - r0 as f64 * ry, rx, ry),
+            width: c1 - c0,
+            height: r1 - r0,
+        };
+        let raster = if opts.encoding == Encoding::Plain {
+            gdalio::warp(&s.dataset, &s.path, &window, opts.resampling, opts.src_nodata)?
+        } else {
+            let decoded = decode(s, opts)?;
+            let geo = s.geotransform.expect("checked georeferenced");
+            let mem = gdalio::mem_dataset(&decoded, &geo, s.srs.as_ref())?;
+            gdalio::warp(&mem, &s.path, &window, opts.resampling, None)?
+        };
+        tiles.push(PlacedTile {
+            col: c0,
+            row: r0,
+            raster: select_bands(raster, opts),
+        });
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    if tiles.is_empty() {
+        bail!("no input tile reaches the target extent");
+    }
+    Ok((tiles, grid, target))
+}
+
+fn file_name(path: &Path) -> String {
+    path.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default()
+}

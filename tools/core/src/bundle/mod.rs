@@ -1,0 +1,25 @@
+//! The bundle: a directory `NAME.relevo/` holding `manifest.json` and the
+//! artifacts it lists. See `docs/formats.md` for the specification.
+//!
+//! Writing goes through [`BundleWriter`], which builds everything in a
+//! sibling staging directory and renames it into place only when complete,
+//! so a reader never sees half a bundle. Reading maps arrays into memory
+//! without copying.
+
+mod hash;
+mod manifest;
+mod reader;
+mod validate;
+mod writer;
+
+pub use hash::{sha256_bytes, sha256_file};
+pub use manifest::{
+    Artifact, ColorInfo, Crs, Dtype, GridInfo, InputFile, Manifest, StageTiming, FORMAT,
+    FORMAT_VERSION,
+};
+pub use reader::{Array, Bundle};
+pub use validate::validate;
+pub use writer::BundleWriter;
+
+/// File name of the manifest inside a bundle.
+pub const MANIFEST_FILE: &str = "manifest.json";

@@ -1,0 +1,81 @@
+use super::{sha256_file, Bundle};
+use crate::grid::pow2_plus_1_at_least;
+
+/// Check a bundle against its manifest: every file present with the recorded
+/// size and SHA-256, array shapes consistent with their byte length, and the
+/// grid invariants (side 2^n+1, mask of 0/1 agreeing with the manifest,
+/// finite heights within the recorded range). Returns one line per problem;
+/// empty means valid.
+pub fn validate(bundle: &Bundle) -> Vec<String> {
+    let mut problems = Vec::new();
+    let m = &bundle.manifest;
+    for (name, a) in m.artifacts.iter().chain(&m.exports) {
+        let path = bundle.dir.join(&a.file);
+        match sha256_file(&path) {
+            Err(e) => problems.push(format!("{name}: {e}")),
+            Ok((bytes, sha)) => {
+                if bytes != a.bytes {
+                    problems.push(format!("{name}: {} is {bytes} bytes, manifest says {}", a.file, a.bytes));
+                }
+                if sha != a.sha256 {
+                    problems.push(format!("{name}: {} has sha256 {sha}, manifest says {}", a.file, a.sha256));
+                }
+                if let Some(size) = a.dtype.size() {
+                    let expected = a.shape.iter().product::<usize>() * size;
+                    if expected as u64 != bytes {
+                        problems.push(format!("{name}: shape {:?} needs {expected} bytes, file has {bytes}", a.shape));
+                    }
+                }
+            }
+        }
+    }
+    if !problems.is_empty() {
+        return problems;
+    }
+
+    let side = m.grid.side;
+    if side < 3 || pow2_plus_1_at_least(side) != side {
+        problems.push(format!("grid side {side} is not 2^n+1"));
+    }
+    for name in ["height", "mask"] {
+        match m.artifacts.get(name) {
+            None => problems.push(format!("missing artifact {name:?}")),
+            Some(a) if a.shape != [side, side] => {
+                problems.push(format!("{name}: shape {:?}, expected [{side}, {side}]", a.shape))
+            }
+            Some(_) => {}
+        }
+    }
+    if !problems.is_empty() {
+        return problems;
+    }
+    let (heights, mask) = match (bundle.array::<f32>("height"), bundle.array::<u8>("mask")) {
+        (Ok(h), Ok(k)) => (h, k),
+        (Err(e), _) | (_, Err(e)) => return vec![e.to_string()],
+    };
+    if let Some(bad) = mask.iter().position(|&v| v > 1) {
+        problems.push(format!("mask: value {} at vertex {bad}; only 0 and 1 are allowed", mask[bad]));
+    }
+    let valid = mask.iter().filter(|&&v| v == 1).count();
+    if valid != m.grid.valid_vertices {
+        problems.push(format!("mask: {valid} valid vertices, manifest says {}", m.grid.valid_vertices));
+    }
+    if let Some(bad) = heights.iter().position(|h| !h.is_finite()) {
+        problems.push(format!("height: non-finite value at vertex {bad}"));
+    }
+    let [lo, hi] = m.grid.height_range_m;
+    if let Some(bad) = heights.iter().zip(mask.iter()).position(|(&h, &k)| k == 1 && !(lo..=hi).contains(&h)) {
+        problems.push(format!("height: {} at vertex {bad} is outside the recorded range [{lo}, {hi}]", heights[bad]));
+    }
+    if let Some(color) = &m.color {
+        match m.artifacts.get("color") {
+            None => problems.push("manifest describes a colour image but has no \"color\" artifact".into()),
+            Some(a) if a.shape != [color.height, color.width, 4] => problems.push(format!(
+                "color: shape {:?}, expected [{}, {}, 4]",
+                a.shape, color.height, color.width
+            )),
+            Some(_) => {}
+        }
+    }
+    problems
+}

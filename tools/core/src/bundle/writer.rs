@@ -1,0 +1,123 @@
+use super::{sha256_bytes, sha256_file, Artifact, Dtype, Manifest, MANIFEST_FILE};
+use crate::{Error, Result};
+use std::fs;
+use std::path::{Path, PathBuf};
+
+/// Builds a bundle in `TARGET.tmp/` and moves it to `TARGET` on [`commit`].
+/// Dropped without committing, it removes the staging directory; a process
+/// killed mid-way leaves only the staging directory, which the next writer
+/// for the same target clears.
+///
+/// [`commit`]: BundleWriter::commit
+pub struct BundleWriter {
+    target: PathBuf,
+    staging: PathBuf,
+    committed: bool,
+}
+
+impl BundleWriter {
+    /// Start a bundle at `target`. Fails if `target` exists, unless `force`.
+    pub fn create(target: &Path, force: bool) -> Result<Self> {
+        if target.exists() && !force {
+            return Err(Error::invalid(
+                target,
+                "already exists (pass --force to replace it)",
+            ));
+        }
+        let staging = staging_path(target);
+        if staging.exists() {
+            fs::remove_dir_all(&staging).map_err(|e| Error::io(&staging, e))?;
+        }
+        fs::create_dir_all(&staging).map_err(|e| Error::io(&staging, e))?;
+        Ok(BundleWriter {
+            target: target.to_path_buf(),
+            staging,
+            committed: false,
+        })
+    }
+
+    /// The staging directory, for writers that produce files themselves.
+    pub fn dir(&self) -> &Path {
+        &self.staging
+    }
+
+    /// Write a little-endian array and describe it.
+    pub fn write_array<T: bytemuck::Pod>(
+        &self,
+        file: &str,
+        dtype: Dtype,
+        shape: &[usize],
+        data: &[T],
+    ) -> Result<Artifact> {
+        let elements: usize = shape.iter().product();
+        assert_eq!(elements, data.len(), "{file}: shape does not match data");
+        assert_eq!(dtype.size(), Some(std::mem::size_of::<T>()), "{file}: dtype");
+        // Every target Relevo builds for is little-endian; refuse others.
+        const { assert!(cfg!(target_endian = "little")) };
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        let path = self.staging.join(file);
+        if let Some(parent) = path.parent() {
+            fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+        }
+        fs::write(&path, bytes).map_err(|e| Error::io(&path, e))?;
+        Ok(Artifact {
+            file: file.to_string(),
+            dtype,
+            shape: shape.to_vec(),
+            bytes: bytes.len() as u64,
+            sha256: sha256_bytes(bytes),
+        })
+    }
+
+    /// Describe a file already written inside the staging directory.
+    pub fn record_file(&self, file: &str) -> Result<Artifact> {
+        let (bytes, sha256) = sha256_file(&self.staging.join(file))?;
+        Ok(Artifact {
+            file: file.to_string(),
+            dtype: Dtype::File,
+            shape: Vec::new(),
+            bytes,
+            sha256,
+        })
+    }
+
+    /// Write the manifest and move the bundle into place, replacing an older
+    /// one only after the new one is complete.
+    pub fn commit(mut self, manifest: &Manifest) -> Result<PathBuf> {
+        let path = self.staging.join(MANIFEST_FILE);
+        let mut json = serde_json::to_string_pretty(manifest).map_err(|e| Error::Manifest {
+            path: path.clone(),
+            source: e,
+        })?;
+        json.push('\n');
+        fs::write(&path, json).map_err(|e| Error::io(&path, e))?;
+        if self.target.exists() {
+            let old = self.target.with_extension("relevo.old");
+            if old.exists() {
+                fs::remove_dir_all(&old).map_err(|e| Error::io(&old, e))?;
+            }
+            fs::rename(&self.target, &old).map_err(|e| Error::io(&self.target, e))?;
+            fs::rename(&self.staging, &self.target).map_err(|e| Error::io(&self.target, e))?;
+            fs::remove_dir_all(&old).map_err(|e| Error::io(&old, e))?;
+        } else {
+            fs::rename(&self.staging, &self.target).map_err(|e| Error::io(&self.target, e))?;
+        }
+        self.committed = true;
+        Ok(self.target.clone())
+    }
+}
+
+impl Drop for BundleWriter {
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = fs::remove_dir_all(&self.staging);
+        }
+    }
+}
+
+/// `TARGET.tmp` beside the target.
+pub(crate) fn staging_path(target: &Path) -> PathBuf {
+    let mut name = target.file_name().unwrap_or_default().to_os_string();
+    name.push(".tmp");
+    target.with_file_name(name)
+}

@@ -1,0 +1,222 @@
+//! The square height grid a bundle is built on: (2^n+1)² vertices, so that
+//! longest-edge bisection hierarchies (Lindstrom–Pascucci) cover it exactly,
+//! with a mask telling real data from padding and unfilled voids.
+
+use crate::geo::GeoTransform;
+use std::collections::VecDeque;
+
+/// Heights in metres on a `side`×`side` grid, row-major, top row first.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HeightGrid {
+    pub side: usize,
+    pub heights: Vec<f32>,
+    /// 1 = real data, 0 = padding or no-data.
+    pub mask: Vec<u8>,
+    /// Georeferencing of the grid's cells (sample `(c, r)` sits at the centre
+    /// of cell `(c, r)`).
+    pub geotransform: GeoTransform,
+}
+
+/// How a raster becomes (2^n+1)².
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Squaring {
+    /// Keep every sample; extend right and down to the smallest 2^n+1 that fits.
+    #[default]
+    Pad,
+    /// Resample (bilinear) to the 2^n+1 nearest the longer side, stretching the cells.
+    Resample,
+}
+
+/// Smallest `2^n + 1` (n ≥ 1) that is at least `len`.
+pub fn pow2_plus_1_at_least(len: usize) -> usize {
+    let mut side = 3;
+    while side < len {
+        side = (side - 1) * 2 + 1;
+    }
+    side
+}
+
+/// The `2^n + 1` (n ≥ 1) closest to `len`; ties go to the larger.
+pub fn pow2_plus_1_nearest(len: usize) -> usize {
+    let up = pow2_plus_1_at_least(len);
+    let down = (up - 1) / 2 + 1;
+    if up > 3 && len - down < up - len {
+        down
+    } else {
+        up
+    }
+}
+
+impl HeightGrid {
+    /// Build the square grid from `width`×`height` heights (NaN = no-data).
+    ///
+    /// No-data cells take the height of the nearest valid cell (breadth-first,
+    /// so the result is deterministic) and padding replicates the last row and
+    /// column: neither adds relief, so neither forces refinement. Both are
+    /// masked 0.
+    pub fn square(
+        values: &[f64],
+        width: usize,
+        height: usize,
+        geotransform: GeoTransform,
+        squaring: Squaring,
+    ) -> HeightGrid {
+        assert_eq!(values.len(), width * height);
+        let valid: Vec<bool> = values.iter().map(|v| !v.is_nan()).collect();
+        let dense = nearest_fill(values, width, height);
+        match squaring {
+            Squaring::Pad => {
+                let side = pow2_plus_1_at_least(width.max(height));
+                let mut heights = vec![0.0f32; side * side];
+                let mut mask = vec![0u8; side * side];
+                for r in 0..side {
+                    let sr = r.min(height - 1);
+                    for c in 0..side {
+                        let sc = c.min(width - 1);
+                        heights[r * side + c] = dense[sr * width + sc] as f32;
+                        mask[r * side + c] = (r < height && c < width && valid[sr * width + sc]) as u8;
+                    }
+                }
+                HeightGrid {
+                    side,
+                    heights,
+                    mask,
+                    geotransform,
+                }
+            }
+            Squaring::Resample => {
+                let side = pow2_plus_1_nearest(width.max(height));
+                let t = geotransform.0;
+                let (sx, sy) = (width as f64 / side as f64, height as f64 / side as f64);
+                let geo = GeoTransform([t[0], t[1] * sx, t[2] * sy, t[3], t[4] * sx, t[5] * sy]);
+                let mut heights = vec![0.0f32; side * side];
+                let mut mask = vec![0u8; side * side];
+                for r in 0..side {
+                    // Source position of this sample's centre, in source cell units.
+                    let y = ((r as f64 + 0.5) * sy - 0.5).clamp(0.0, (height - 1) as f64);
+                    for c in 0..side {
+                        let x = ((c as f64 + 0.5) * sx - 0.5).clamp(0.0, (width - 1) as f64);
+                        heights[r * side + c] = bilinear(&dense, width, height, x, y) as f32;
+                        let nearest = (y.round() as usize) * width + x.round() as usize;
+                        mask[r * side + c] = valid[nearest] as u8;
+                    }
+                }
+                HeightGrid {
+                    side,
+                    heights,
+                    mask,
+                    geotransform: geo,
+                }
+            }
+        }
+    }
+
+    /// Number of vertices with real data.
+    pub fn valid_count(&self) -> usize {
+        self.mask.iter().filter(|&&m| m == 1).count()
+    }
+
+    /// World bounding box `[xmin, ymin, xmax, ymax]` of the cells with real data.
+    pub fn valid_extent(&self) -> Option<[f64; 4]> {
+        let (mut c0, mut r0, mut c1, mut r1) = (usize::MAX, usize::MAX, 0, 0);
+        for (i, &m) in self.mask.iter().enumerate() {
+            if m == 1 {
+                let (c, r) = (i % self.side, i / self.side);
+                c0 = c0.min(c);
+                r0 = r0.min(r);
+                c1 = c1.max(c + 1);
+                r1 = r1.max(r + 1);
+            }
+        }
+        if c0 == usize::MAX {
+            return None;
+        }
+        let a = self.geotransform.apply(c0 as f64, r0 as f64);
+        let b = self.geotransform.apply(c1 as f64, r1 as f64);
+        Some([a.0.min(b.0), a.1.min(b.1), a.0.max(b.0), a.1.max(b.1)])
+    }
+
+    /// Lowest and highest height among real data, metres.
+    pub fn height_range(&self) -> Option<[f32; 2]> {
+        let mut range: Option<[f32; 2]> = None;
+        for (&h, &m) in self.heights.iter().zip(&self.mask) {
+            if m == 1 {
+                let r = range.get_or_insert([h, h]);
+                r[0] = r[0].min(h);
+                r[1] = r[1].max(h);
+            }
+        }
+        range
+    }
+}
+
+/// Copy of `values` where each NaN takes the value of the nearest valid cell
+/// (4-connected breadth-first order from all valid cells at once).
+fn nearest_fill(values: &[f64], width: usize, height: usize) -> Vec<f64> {
+    let mut out = values.to_vec();
+    let mut queue: VecDeque<usize> = (0..values.len()).filter(|&i| !values[i].is_nan()).collect();
+    while let Some(i) = queue.pop_front() {
+        let (c, r) = (i % width, i / width);
+        let neighbours = [
+            (c > 0).then(|| i - 1),
+            (c + 1 < width).then(|| i + 1),
+            (r > 0).then(|| i - width),
+            (r + 1 < height).then(|| i + width),
+        ];
+        for n in neighbours.into_iter().flatten() {
+            if out[n].is_nan() {
+                out[n] = out[i];
+                queue.push_back(n);
+            }
+        }
+    }
+    out
+}
+
+/// Bilinear sample at fractional cell position (x, y), both clamped inside.
+fn bilinear(values: &[f64], width: usize, height: usize, x: f64, y: f64) -> f64 {
+    let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+    let (x1, y1) = ((x0 + 1).min(width - 1), (y0 + 1).min(height - 1));
+    let (fx, fy) = (x - x0 as f64, y - y0 as f64);
+    let at = |c: usize, r: usize| values[r * width + c];
+    let top = at(x0, y0) * (1.0 - fx) + at(x1, y0) * fx;
+    let bottom = at(x0, y1) * (1.0 - fx) + at(x1, y1) * fx;
+    top * (1.0 - fy) + bottom * fy
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sides() {
+        assert_eq!(pow2_plus_1_at_least(2), 3);
+        assert_eq!(pow2_plus_1_at_least(111), 129);
+        assert_eq!(pow2_plus_1_at_least(129), 129);
+        assert_eq!(pow2_plus_1_at_least(130), 257);
+        assert_eq!(pow2_plus_1_nearest(1000), 1025);
+        assert_eq!(pow2_plus_1_nearest(600), 513);
+        assert_eq!(pow2_plus_1_nearest(800), 1025);
+    }
+
+    #[test]
+    fn pad_replicates_edges_and_masks_padding() {
+        let values: Vec<f64> = vec![1.0, 2.0, f64::NAN, 3.0, 4.0, 5.0];
+        let g = HeightGrid::square(&values, 3, 2, GeoTransform::IDENTITY, Squaring::Pad);
+        assert_eq!(g.side, 3);
+        assert_eq!(g.heights, vec![1.0, 2.0, 2.0, 3.0, 4.0, 5.0, 3.0, 4.0, 5.0]);
+        assert_eq!(g.mask, vec![1, 1, 0, 1, 1, 1, 0, 0, 0]);
+        assert_eq!(g.valid_extent(), Some([0.0, 0.0, 3.0, 2.0]));
+    }
+
+    #[test]
+    fn resample_keeps_extent() {
+        let values: Vec<f64> = (0..6 * 6).map(|i| i as f64).collect();
+        let geo = GeoTransform::north_up(0.0, 60.0, 10.0, 10.0);
+        let g = HeightGrid::square(&values, 6, 6, geo, Squaring::Resample);
+        assert_eq!(g.side, 5);
+        assert_eq!(g.geotransform.bounds(5, 5), [0.0, 0.0, 60.0, 60.0]);
+        assert_eq!(g.valid_count(), 25);
+    }
+}

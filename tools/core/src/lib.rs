@@ -1,0 +1,19 @@
+//! Relevo's algorithms and bundle format.
+//!
+//! This crate knows nothing of GDAL or the GPU: rasters arrive here already
+//! decoded into memory, and everything that touches files outside a bundle
+//! lives in the `relevo` command-line crate.
+//!
+//! - [`geo`]: affine geotransforms between grid cells and world coordinates.
+//! - [`raster`]: in-memory multiband rasters with no-data, mosaicking,
+//!   hole filling and elevation tile encodings.
+//! - [`grid`]: the square (2^n+1)² height grid with its data mask.
+//! - [`bundle`]: the `NAME.relevo/` directory: manifest, artifacts, validation.
+
+pub mod bundle;
+pub mod geo;
+pub mod grid;
+pub mod raster;
+
+mod error;
+pub use error::{Error, Result};

@@ -1,0 +1,84 @@
+//! In-memory multiband rasters and the algorithms that turn tiles into one
+//! clean grid: mosaicking with feathered overlaps, no-data filling, and the
+//! decoding of RGB-encoded elevation tiles.
+
+pub mod distance;
+pub mod encoding;
+pub mod fill;
+pub mod mosaic;
+
+/// A multiband raster held as `f64`, band-major (all of band 0, then band 1…),
+/// rows top to bottom. `NaN` marks no-data: a cell is valid when every band
+/// holds a number.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Raster {
+    pub width: usize,
+    pub height: usize,
+    pub bands: usize,
+    pub data: Vec<f64>,
+}
+
+impl Raster {
+    /// A raster where every cell is no-data.
+    pub fn empty(width: usize, height: usize, bands: usize) -> Self {
+        Raster {
+            width,
+            height,
+            bands,
+            data: vec![f64::NAN; width * height * bands],
+        }
+    }
+
+    /// Wrap band-major data; `data.len()` must be `width·height·bands`.
+    pub fn from_data(width: usize, height: usize, bands: usize, data: Vec<f64>) -> Self {
+        assert_eq!(data.len(), width * height * bands, "raster data size");
+        Raster {
+            width,
+            height,
+            bands,
+            data,
+        }
+    }
+
+    pub fn cells(&self) -> usize {
+        self.width * self.height
+    }
+
+    pub fn band(&self, b: usize) -> &[f64] {
+        let n = self.cells();
+        &self.data[b * n..(b + 1) * n]
+    }
+
+    pub fn band_mut(&mut self, b: usize) -> &mut [f64] {
+        let n = self.cells();
+        &mut self.data[b * n..(b + 1) * n]
+    }
+
+    /// Whether cell `i` (row-major index) holds data in every band.
+    pub fn is_valid(&self, i: usize) -> bool {
+        let n = self.cells();
+        (0..self.bands).all(|b| !self.data[b * n + i].is_nan())
+    }
+
+    /// One flag per cell, row-major: true where every band holds data.
+    pub fn valid_mask(&self) -> Vec<bool> {
+        (0..self.cells()).map(|i| self.is_valid(i)).collect()
+    }
+
+    pub fn valid_count(&self) -> usize {
+        (0..self.cells()).filter(|&i| self.is_valid(i)).count()
+    }
+
+    /// Marks a cell no-data in every band when any band lacks data, so that
+    /// validity is one per-cell notion.
+    pub fn unify_validity(&mut self) {
+        let n = self.cells();
+        for i in 0..n {
+            if !self.is_valid(i) {
+                for b in 0..self.bands {
+                    self.data[b * n + i] = f64::NAN;
+                }
+            }
+        }
+    }
+}
