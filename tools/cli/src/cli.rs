@@ -16,7 +16,11 @@ use relevo_core::raster::Raster;
 use std::path::{Path, PathBuf};
 
 #[derive(Parser, Debug)]
-#[command(name = "relevo", version, about = "Terrain data preparation: tiles and imagery in, a self-describing bundle out.")]
+#[command(
+    name = "relevo",
+    version,
+    about = "Terrain data preparation: tiles and imagery in, a self-describing bundle out."
+)]
 #[command(after_help = "Examples:
   relevo prep data/olinda/REGION.toml --out olinda.relevo
   relevo prep --dem n45e005.tif --image ortho.jpg --out alps.relevo
@@ -238,7 +242,10 @@ pub fn init_logging(verbose: u8, quiet: bool) {
     };
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
-    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
 }
 
 pub fn run(cli: Cli) -> Result<()> {
@@ -255,11 +262,21 @@ pub fn run(cli: Cli) -> Result<()> {
 /// Refuse to overwrite `out` without `force`, and name an unwritable folder early.
 fn check_output(out: &Path, force: bool) -> Result<()> {
     if out.exists() && !force {
-        bail!("{}: already exists (pass --force to replace it)", out.display());
+        bail!(
+            "{}: already exists (pass --force to replace it)",
+            out.display()
+        );
     }
-    let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let parent = out
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     if !parent.is_dir() {
-        bail!("{}: cannot write, folder {} does not exist", out.display(), parent.display());
+        bail!(
+            "{}: cannot write, folder {} does not exist",
+            out.display(),
+            parent.display()
+        );
     }
     Ok(())
 }
@@ -293,7 +310,10 @@ fn run_stitch(a: StitchArgs) -> Result<()> {
 }
 
 /// Read a one-band raster with its grid.
-fn read_single(path: &Path, src_nodata: Option<f64>) -> Result<(Raster, GridSpec, GdalDataType, Option<f64>)> {
+fn read_single(
+    path: &Path,
+    src_nodata: Option<f64>,
+) -> Result<(Raster, GridSpec, GdalDataType, Option<f64>)> {
     let source = gdalio::open(path)?;
     let nodata = src_nodata.or(source.nodata);
     let mut raster = source.read(nodata)?;
@@ -302,8 +322,15 @@ fn read_single(path: &Path, src_nodata: Option<f64>) -> Result<(Raster, GridSpec
         raster = Raster::from_data(raster.width, raster.height, 1, raster.band(0).to_vec());
     }
     let grid = GridSpec {
-        crs_wkt: source.srs.as_ref().map(crate::crs::to_wkt).transpose()?.unwrap_or_default(),
-        geotransform: source.geotransform.unwrap_or(relevo_core::geo::GeoTransform::IDENTITY),
+        crs_wkt: source
+            .srs
+            .as_ref()
+            .map(crate::crs::to_wkt)
+            .transpose()?
+            .unwrap_or_default(),
+        geotransform: source
+            .geotransform
+            .unwrap_or(relevo_core::geo::GeoTransform::IDENTITY),
         width: source.width,
         height: source.height,
     };
@@ -318,7 +345,11 @@ fn run_fill(a: FillArgs) -> Result<()> {
     let (mut raster, grid, band_type, nodata) = read_single(&a.input, a.src_nodata)?;
     let (w, h) = (raster.width, raster.height);
     let report = fill_holes(raster.band_mut(0), w, h, a.max_hole);
-    let band_type = if gdalio::is_float(band_type) { band_type } else { GdalDataType::Float32 };
+    let band_type = if gdalio::is_float(band_type) {
+        band_type
+    } else {
+        GdalDataType::Float32
+    };
     let nodata = nodata.unwrap_or_else(|| gdalio::default_nodata(band_type));
     gdalio::write_geotiff(&a.out, &raster, &grid, band_type, Some(nodata))?;
     eprintln!(
@@ -335,20 +366,54 @@ fn run_fill(a: FillArgs) -> Result<()> {
 
 fn run_pad(a: PadArgs) -> Result<()> {
     let mask_out = a.mask_out.clone().unwrap_or_else(|| {
-        let stem = a.out.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
+        let stem = a
+            .out
+            .file_stem()
+            .map(|s| s.to_string_lossy().to_string())
+            .unwrap_or_default();
         a.out.with_file_name(format!("{stem}_mask.tif"))
     });
     check_output(&a.out, a.force)?;
     check_output(&mask_out, a.force)?;
     let (raster, grid, _, _) = read_single(&a.input, a.src_nodata)?;
     if raster.width < 2 || raster.height < 2 {
-        bail!("{}: {}×{} cells; a heightfield needs at least 2×2", a.input.display(), raster.width, raster.height);
+        bail!(
+            "{}: {}×{} cells; a heightfield needs at least 2×2",
+            a.input.display(),
+            raster.width,
+            raster.height
+        );
     }
-    let squaring = if a.resample { Squaring::Resample } else { Squaring::Pad };
-    let g = HeightGrid::square(raster.band(0), raster.width, raster.height, grid.geotransform, squaring);
-    let spec = GridSpec { geotransform: g.geotransform, width: g.side, height: g.side, ..grid };
-    let heights = Raster::from_data(g.side, g.side, 1, g.heights.iter().map(|&h| h as f64).collect());
-    let mask = Raster::from_data(g.side, g.side, 1, g.mask.iter().map(|&m| m as f64).collect());
+    let squaring = if a.resample {
+        Squaring::Resample
+    } else {
+        Squaring::Pad
+    };
+    let g = HeightGrid::square(
+        raster.band(0),
+        raster.width,
+        raster.height,
+        grid.geotransform,
+        squaring,
+    );
+    let spec = GridSpec {
+        geotransform: g.geotransform,
+        width: g.side,
+        height: g.side,
+        ..grid
+    };
+    let heights = Raster::from_data(
+        g.side,
+        g.side,
+        1,
+        g.heights.iter().map(|&h| h as f64).collect(),
+    );
+    let mask = Raster::from_data(
+        g.side,
+        g.side,
+        1,
+        g.mask.iter().map(|&m| m as f64).collect(),
+    );
     gdalio::write_geotiff(&a.out, &heights, &spec, GdalDataType::Float32, None)?;
     gdalio::write_geotiff(&mask_out, &mask, &spec, GdalDataType::UInt8, None)?;
     eprintln!(
@@ -394,9 +459,17 @@ fn run_prep(a: PrepArgs) -> Result<()> {
             region
         }
     };
-    let parent = a.out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let parent = a
+        .out
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     if !parent.is_dir() {
-        bail!("{}: cannot write, folder {} does not exist", a.out.display(), parent.display());
+        bail!(
+            "{}: cannot write, folder {} does not exist",
+            a.out.display(),
+            parent.display()
+        );
     }
     let summary = prep(&region, &a.out, a.force)?;
     if a.json {
@@ -425,21 +498,39 @@ fn run_info(path: &Path, json: bool) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(m)?);
         return Ok(());
     }
-    println!("{} — region {:?}, format {} v{}", path.display(), m.region, m.format, m.format_version);
+    println!(
+        "{} — region {:?}, format {} v{}",
+        path.display(),
+        m.region,
+        m.format,
+        m.format_version
+    );
     match m.crs.epsg {
         Some(code) => println!("  CRS          EPSG:{code}"),
         None if m.crs.wkt.is_empty() => println!("  CRS          none (grid units)"),
         None => println!("  CRS          custom (WKT in manifest)"),
     }
     let g = &m.grid;
-    println!("  grid         {0}×{0} vertices, {1:.3} m cells, z scale {2}", g.side, g.cell_size_m, g.z_scale);
-    println!("  data         {} vertices, heights {:.2}..{:.2} m", g.valid_vertices, g.height_range_m[0], g.height_range_m[1]);
+    println!(
+        "  grid         {0}×{0} vertices, {1:.3} m cells, z scale {2}",
+        g.side, g.cell_size_m, g.z_scale
+    );
+    println!(
+        "  data         {} vertices, heights {:.2}..{:.2} m",
+        g.valid_vertices, g.height_range_m[0], g.height_range_m[1]
+    );
     println!("  extent       {:?}", g.valid_extent);
     if let Some(c) = &m.color {
-        println!("  colour       {}×{} pixels, bands {:?}", c.width, c.height, c.bands);
+        println!(
+            "  colour       {}×{} pixels, bands {:?}",
+            c.width, c.height, c.bands
+        );
     }
     for (name, a) in m.artifacts.iter().chain(&m.exports) {
-        println!("  {name:<12} {} {:?} {:?} {} bytes", a.file, a.dtype, a.shape, a.bytes);
+        println!(
+            "  {name:<12} {} {:?} {:?} {} bytes",
+            a.file, a.dtype, a.shape, a.bytes
+        );
     }
     for t in &m.timings {
         println!("  stage {:<6} {:.1} ms", t.stage, t.ms);

@@ -45,7 +45,12 @@ pub fn wgs84() -> Result<SpatialRef> {
 }
 
 /// Transform points from `from` to `to`; identity when the CRSs are the same.
-pub fn transform_points(from: &SpatialRef, to: &SpatialRef, xs: &mut [f64], ys: &mut [f64]) -> Result<()> {
+pub fn transform_points(
+    from: &SpatialRef,
+    to: &SpatialRef,
+    xs: &mut [f64],
+    ys: &mut [f64],
+) -> Result<()> {
     if from == to {
         return Ok(());
     }
@@ -85,7 +90,12 @@ pub fn footprint(
         }
     }
     transform_points(from, to, &mut xs, &mut ys)?;
-    let mut b = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+    let mut b = [
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NEG_INFINITY,
+    ];
     for (&x, &y) in xs.iter().zip(&ys) {
         if x.is_finite() && y.is_finite() {
             b = [b[0].min(x), b[1].min(y), b[2].max(x), b[3].max(y)];
@@ -109,7 +119,11 @@ pub fn detail_preserving_cell(
     to: &SpatialRef,
 ) -> Result<f64> {
     let (c, r) = ((width / 2) as f64, (height / 2) as f64);
-    let corners = [geo.apply(c, r), geo.apply(c + 1.0, r), geo.apply(c, r + 1.0)];
+    let corners = [
+        geo.apply(c, r),
+        geo.apply(c + 1.0, r),
+        geo.apply(c, r + 1.0),
+    ];
     let mut xs: Vec<f64> = corners.iter().map(|p| p.0).collect();
     let mut ys: Vec<f64> = corners.iter().map(|p| p.1).collect();
     transform_points(from, to, &mut xs, &mut ys)?;

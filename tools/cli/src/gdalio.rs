@@ -111,7 +111,12 @@ impl Source {
         for b in 1..=self.bands {
             let band = self.dataset.rasterband(b)?;
             let buffer: Buffer<f64> = band
-                .read_as((0, 0), (self.width, self.height), (self.width, self.height), None)
+                .read_as(
+                    (0, 0),
+                    (self.width, self.height),
+                    (self.width, self.height),
+                    None,
+                )
                 .map_err(|_| {
                     anyhow!(
                         "{}: cannot read band {b} ({})",
@@ -129,7 +134,17 @@ impl Source {
 }
 
 /// Resampling kernels, by gdalwarp's names.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    clap::ValueEnum,
+    serde::Serialize,
+    serde::Deserialize,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Resampling {
     #[default]
@@ -158,9 +173,14 @@ impl Resampling {
 
 /// An in-memory GDAL dataset (Float64) holding `raster`, for warping data
 /// that was decoded or computed rather than read.
-pub fn mem_dataset(raster: &Raster, geotransform: &GeoTransform, srs: Option<&SpatialRef>) -> Result<Dataset> {
+pub fn mem_dataset(
+    raster: &Raster,
+    geotransform: &GeoTransform,
+    srs: Option<&SpatialRef>,
+) -> Result<Dataset> {
     let driver = DriverManager::get_driver_by_name("MEM")?;
-    let mut ds = driver.create_with_band_type::<f64, _>("", raster.width, raster.height, raster.bands)?;
+    let mut ds =
+        driver.create_with_band_type::<f64, _>("", raster.width, raster.height, raster.bands)?;
     ds.set_geo_transform(&geotransform.0)?;
     if let Some(srs) = srs {
         ds.set_spatial_ref(srs)?;
@@ -215,9 +235,12 @@ pub fn warp(
         .with_context(|| format!("{}: cannot warp onto the target grid", name.display()))?;
     let mut data = Vec::with_capacity(grid.width * grid.height * out.raster_count());
     for b in 1..=out.raster_count() {
-        let buffer: Buffer<f64> =
-            out.rasterband(b)?
-                .read_as((0, 0), (grid.width, grid.height), (grid.width, grid.height), None)?;
+        let buffer: Buffer<f64> = out.rasterband(b)?.read_as(
+            (0, 0),
+            (grid.width, grid.height),
+            (grid.width, grid.height),
+            None,
+        )?;
         data.extend_from_slice(buffer.data());
     }
     let mut raster = Raster::from_data(grid.width, grid.height, out.raster_count(), data);
@@ -236,7 +259,10 @@ fn format_nodata(v: f64) -> String {
 /// `GDALWarp` (the library form of gdalwarp) on one source, returning the
 /// output dataset. The gdal crate does not wrap it.
 fn gdal_warp(source: &Dataset, args: &[String]) -> Result<Dataset> {
-    let c_args: Vec<CString> = args.iter().map(|a| CString::new(a.as_str())).collect::<Result<_, _>>()?;
+    let c_args: Vec<CString> = args
+        .iter()
+        .map(|a| CString::new(a.as_str()))
+        .collect::<Result<_, _>>()?;
     let mut c_ptrs: Vec<*mut c_char> = c_args
         .iter()
         .map(|a| a.as_ptr() as *mut c_char)
@@ -279,8 +305,12 @@ pub fn write_geotiff(
     nodata: Option<f64>,
 ) -> Result<()> {
     let partial = partial_path(path);
+    // Ask the OS first: its message says why a path cannot be written.
+    std::fs::File::create(&partial)
+        .map_err(|e| anyhow!("{}: cannot write ({e})", path.display()))?;
     let result = write_geotiff_at(&partial, raster, grid, band_type, nodata).and_then(|()| {
-        std::fs::rename(&partial, path).with_context(|| format!("{}: cannot move into place", path.display()))
+        std::fs::rename(&partial, path)
+            .with_context(|| format!("{}: cannot move into place", path.display()))
     });
     if result.is_err() {
         let _ = std::fs::remove_file(&partial);
@@ -290,7 +320,10 @@ pub fn write_geotiff(
 
 /// `DIR/.NAME.partial` beside `path`.
 pub fn partial_path(path: &Path) -> PathBuf {
-    let name = path.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_string())
+        .unwrap_or_default();
     path.with_file_name(format!(".{name}.partial"))
 }
 
@@ -337,15 +370,36 @@ impl FromF64 for f64 {
     }
 }
 
-fn write_typed<T: FromF64>(path: &Path, raster: &Raster, grid: &GridSpec, nodata: Option<f64>) -> Result<()> {
+fn write_typed<T: FromF64>(
+    path: &Path,
+    raster: &Raster,
+    grid: &GridSpec,
+    nodata: Option<f64>,
+) -> Result<()> {
     let driver = DriverManager::get_driver_by_name("GTiff")?;
     let mut options = RasterCreationOptions::new();
-    for (k, v) in [("COMPRESS", "DEFLATE"), ("TILED", "YES"), ("BIGTIFF", "IF_SAFER")] {
+    for (k, v) in [
+        ("COMPRESS", "DEFLATE"),
+        ("TILED", "YES"),
+        ("BIGTIFF", "IF_SAFER"),
+    ] {
         options.set_name_value(k, v)?;
     }
     let mut ds = driver
-        .create_with_band_type_with_options::<T, _>(path, raster.width, raster.height, raster.bands, &options)
-        .map_err(|_| anyhow!("{}: cannot create ({})", path.display(), last_error("create failed")))?;
+        .create_with_band_type_with_options::<T, _>(
+            path,
+            raster.width,
+            raster.height,
+            raster.bands,
+            &options,
+        )
+        .map_err(|_| {
+            anyhow!(
+                "{}: cannot create ({})",
+                path.display(),
+                last_error("create failed")
+            )
+        })?;
     if grid.geotransform != GeoTransform::IDENTITY {
         ds.set_geo_transform(&grid.geotransform.0)?;
     }
@@ -365,10 +419,22 @@ fn write_typed<T: FromF64>(path: &Path, raster: &Raster, grid: &GridSpec, nodata
             .collect();
         let mut buffer = Buffer::new((raster.width, raster.height), data);
         band.write((0, 0), (raster.width, raster.height), &mut buffer)
-            .map_err(|_| anyhow!("{}: cannot write ({})", path.display(), last_error("write failed")))?;
+            .map_err(|_| {
+                anyhow!(
+                    "{}: cannot write ({})",
+                    path.display(),
+                    last_error("write failed")
+                )
+            })?;
     }
     ds.flush_cache()?;
-    ds.close().map_err(|_| anyhow!("{}: cannot finish writing ({})", path.display(), last_error("close failed")))?;
+    ds.close().map_err(|_| {
+        anyhow!(
+            "{}: cannot finish writing ({})",
+            path.display(),
+            last_error("close failed")
+        )
+    })?;
     Ok(())
 }
 

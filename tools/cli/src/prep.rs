@@ -12,8 +12,8 @@ use anyhow::{bail, Context, Result};
 use gdal::raster::GdalDataType;
 use gdal::spatial_ref::SpatialRef;
 use relevo_core::bundle::{
-    sha256_file, Artifact, BundleWriter, ColorInfo, Crs, Dtype, GridInfo, InputFile, Manifest, StageTiming,
-    FORMAT, FORMAT_VERSION,
+    sha256_file, Artifact, BundleWriter, ColorInfo, Crs, Dtype, GridInfo, InputFile, Manifest,
+    StageTiming, FORMAT, FORMAT_VERSION,
 };
 use relevo_core::geo::GeoTransform;
 use relevo_core::grid::HeightGrid;
@@ -24,8 +24,11 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+/// One stage: reads what earlier stages left in [`Build`], adds its results.
+type Stage = fn(&mut Build) -> Result<()>;
+
 /// The stages of `prep`, in order.
-const STAGES: &[(&str, fn(&mut Build) -> Result<()>)] = &[
+const STAGES: &[(&str, Stage)] = &[
     ("dem", stage_dem),
     ("fill", stage_fill),
     ("grid", stage_grid),
@@ -65,7 +68,9 @@ struct Build<'a> {
 /// Run every stage and move the finished bundle to `out`.
 pub fn prep(region: &Region, out: &Path, force: bool) -> Result<Summary> {
     let name = region.name.clone().unwrap_or_else(|| {
-        out.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "region".into())
+        out.file_stem()
+            .map(|s| s.to_string_lossy().to_string())
+            .unwrap_or_else(|| "region".into())
     });
     let writer = BundleWriter::create(out, force)?;
     let mut build = Build {
@@ -88,7 +93,10 @@ pub fn prep(region: &Region, out: &Path, force: bool) -> Result<Summary> {
         run(&mut build).with_context(|| format!("stage {stage}"))?;
         let ms = start.elapsed().as_secs_f64() * 1e3;
         tracing::info!(stage, ms, "stage done");
-        timings.push(StageTiming { stage: stage.to_string(), ms });
+        timings.push(StageTiming {
+            stage: stage.to_string(),
+            ms,
+        });
         bar.inc(1);
     }
     bar.finish_and_clear();
@@ -107,7 +115,10 @@ fn stage_dem(b: &mut Build) -> Result<()> {
             let (mut xs, mut ys) = ([lon], [lat]);
             crs::transform_points(srs, &crs::wgs84()?, &mut xs, &mut ys)?;
             let utm = crs::utm_for(xs[0], ys[0])?;
-            tracing::info!(epsg = crs::epsg(&utm), "geographic DEM: reprojecting to UTM");
+            tracing::info!(
+                epsg = crs::epsg(&utm),
+                "geographic DEM: reprojecting to UTM"
+            );
             Some(utm)
         }
         (None, srs) => srs.clone(),
@@ -136,7 +147,10 @@ fn stage_dem(b: &mut Build) -> Result<()> {
     }
     let (w, h) = (dem.grid.width, dem.grid.height);
     if w < 2 || h < 2 {
-        bail!("{}: the DEM grid is {w}×{h} cells; a heightfield needs at least 2×2", r.dem.files[0].display());
+        bail!(
+            "{}: the DEM grid is {w}×{h} cells; a heightfield needs at least 2×2",
+            r.dem.files[0].display()
+        );
     }
     let metres_per_unit = target.as_ref().map_or(1.0, |t| t.linear_units());
     b.cell_size_m = dem.grid.geotransform.cell_size().0 * metres_per_unit;
@@ -179,7 +193,11 @@ fn stage_drape(b: &mut Build) -> Result<()> {
     let bands = image.bands.unwrap_or([1, 2, 3]);
     let opts = StitchOptions {
         target_crs: (!dem.grid.crs_wkt.is_empty()).then(|| dem.grid.crs_wkt.clone()),
-        extent: Some(dem.grid.geotransform.bounds(dem.grid.width, dem.grid.height)),
+        extent: Some(
+            dem.grid
+                .geotransform
+                .bounds(dem.grid.width, dem.grid.height),
+        ),
         resampling: image.resampling,
         src_nodata: image.src_nodata.map(|n| n.value()),
         overlap: image.overlap,
@@ -197,8 +215,16 @@ fn stage_write(b: &mut Build) -> Result<()> {
     let grid = b.grid.as_ref().context("grid stage did not run")?;
     let dem = b.dem.as_ref().context("dem stage did not run")?;
     let side = grid.side;
-    b.artifacts.insert("height".into(), b.writer.write_array("height.f32", Dtype::F32, &[side, side], &grid.heights)?);
-    b.artifacts.insert("mask".into(), b.writer.write_array("mask.u8", Dtype::U8, &[side, side], &grid.mask)?);
+    b.artifacts.insert(
+        "height".into(),
+        b.writer
+            .write_array("height.f32", Dtype::F32, &[side, side], &grid.heights)?,
+    );
+    b.artifacts.insert(
+        "mask".into(),
+        b.writer
+            .write_array("mask.u8", Dtype::U8, &[side, side], &grid.mask)?,
+    );
     std::fs::create_dir_all(b.writer.dir().join("exports")).context("cannot create exports/")?;
 
     let spec = GridSpec {
@@ -214,23 +240,50 @@ fn stage_write(b: &mut Build) -> Result<()> {
         .map(|(&h, &m)| if m == 1 { h as f64 } else { f64::NAN })
         .collect();
     let raster = Raster::from_data(side, side, 1, heights);
-    gdalio::write_geotiff(&b.writer.dir().join("exports/height.tif"), &raster, &spec, GdalDataType::Float32, Some(-9999.0))?;
-    b.exports.insert("height_geotiff".into(), b.writer.record_file("exports/height.tif")?);
+    gdalio::write_geotiff(
+        &b.writer.dir().join("exports/height.tif"),
+        &raster,
+        &spec,
+        GdalDataType::Float32,
+        Some(-9999.0),
+    )?;
+    b.exports.insert(
+        "height_geotiff".into(),
+        b.writer.record_file("exports/height.tif")?,
+    );
 
     if let Some((mosaic, _)) = &b.color {
-        let stretch = b.region.image.as_ref().and_then(|i| i.stretch).or(match mosaic.band_type {
-            GdalDataType::UInt8 => None,
-            _ => Some([2.0, 98.0]),
-        });
+        let stretch = b
+            .region
+            .image
+            .as_ref()
+            .and_then(|i| i.stretch)
+            .or(match mosaic.band_type {
+                GdalDataType::UInt8 => None,
+                _ => Some([2.0, 98.0]),
+            });
         let rgba = to_rgba8(&mosaic.raster, stretch);
         let (w, h) = (mosaic.grid.width, mosaic.grid.height);
-        b.artifacts.insert("color".into(), b.writer.write_array("color.rgba8", Dtype::U8, &[h, w, 4], &rgba)?);
+        b.artifacts.insert(
+            "color".into(),
+            b.writer
+                .write_array("color.rgba8", Dtype::U8, &[h, w, 4], &rgba)?,
+        );
         let bands: Vec<f64> = (0..4)
             .flat_map(|c| rgba.iter().skip(c).step_by(4).map(|&v| v as f64))
             .collect();
         let raster = Raster::from_data(w, h, 4, bands);
-        gdalio::write_geotiff(&b.writer.dir().join("exports/color.tif"), &raster, &mosaic.grid, GdalDataType::UInt8, None)?;
-        b.exports.insert("color_geotiff".into(), b.writer.record_file("exports/color.tif")?);
+        gdalio::write_geotiff(
+            &b.writer.dir().join("exports/color.tif"),
+            &raster,
+            &mosaic.grid,
+            GdalDataType::UInt8,
+            None,
+        )?;
+        b.exports.insert(
+            "color_geotiff".into(),
+            b.writer.record_file("exports/color.tif")?,
+        );
     }
     Ok(())
 }
@@ -244,9 +297,15 @@ pub fn to_rgba8(raster: &Raster, stretch: Option<[f64; 2]>) -> Vec<u8> {
         .map(|b| match stretch {
             None => (0.0, 255.0),
             Some([lo, hi]) => {
-                let mut values: Vec<f64> = raster.band(b).iter().copied().filter(|v| !v.is_nan()).collect();
+                let mut values: Vec<f64> = raster
+                    .band(b)
+                    .iter()
+                    .copied()
+                    .filter(|v| !v.is_nan())
+                    .collect();
                 values.sort_unstable_by(f64::total_cmp);
-                let at = |p: f64| values[((p / 100.0) * (values.len() - 1) as f64).round() as usize];
+                let at =
+                    |p: f64| values[((p / 100.0) * (values.len() - 1) as f64).round() as usize];
                 if values.is_empty() {
                     (0.0, 255.0)
                 } else {
@@ -279,7 +338,12 @@ fn finish(b: Build, timings: Vec<StageTiming>) -> Result<Summary> {
     let mut record = |role: &str, paths: &[PathBuf]| -> Result<()> {
         for p in paths {
             let (bytes, sha256) = sha256_file(p)?;
-            inputs.push(InputFile { role: role.into(), path: p.display().to_string(), bytes, sha256 });
+            inputs.push(InputFile {
+                role: role.into(),
+                path: p.display().to_string(),
+                bytes,
+                sha256,
+            });
         }
         Ok(())
     };

@@ -64,7 +64,9 @@ pub struct FillSection {
 
 impl Default for FillSection {
     fn default() -> Self {
-        FillSection { max_hole_cells: 10_000 }
+        FillSection {
+            max_hole_cells: 10_000,
+        }
     }
 }
 
@@ -119,15 +121,17 @@ pub fn parse_nodata(text: &str) -> Result<f64, String> {
     if text.eq_ignore_ascii_case("nan") {
         return Ok(f64::NAN);
     }
-    text.parse::<f64>().map_err(|_| format!("{text:?} is neither a number nor nan"))
+    text.parse::<f64>()
+        .map_err(|_| format!("{text:?} is neither a number nor nan"))
 }
 
 impl Region {
     /// Read and check a REGION.toml, resolving relative paths against its folder.
     pub fn load(path: &Path) -> Result<Region> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
-        let mut region: Region =
-            toml::from_str(&text).map_err(|e| anyhow!("{}: {}", path.display(), e.to_string().trim_end()))?;
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read", path.display()))?;
+        let mut region: Region = toml::from_str(&text)
+            .map_err(|e| anyhow!("{}: {}", path.display(), e.to_string().trim_end()))?;
         let base = path.parent().unwrap_or(Path::new("."));
         let resolve = |p: &mut PathBuf| {
             if p.is_relative() {
@@ -148,7 +152,10 @@ impl Region {
             bail!("dem.files is empty: give at least one elevation raster");
         }
         if !(self.z_scale.is_finite() && self.z_scale != 0.0) {
-            bail!("z_scale must be a finite, non-zero number, got {}", self.z_scale);
+            bail!(
+                "z_scale must be a finite, non-zero number, got {}",
+                self.z_scale
+            );
         }
         if let Some(c) = self.cell_size_m {
             if !(c.is_finite() && c > 0.0) {
@@ -160,8 +167,10 @@ impl Region {
                 bail!("image.files is empty: remove [image] or list the imagery");
             }
             if let Some([lo, hi]) = image.stretch {
-                if !(0.0..100.0).contains(&lo) || !(lo < hi && hi <= 100.0) {
-                    bail!("image.stretch must be [low, high] percentiles with 0 <= low < high <= 100");
+                if !((0.0..100.0).contains(&lo) && lo < hi && hi <= 100.0) {
+                    bail!(
+                        "image.stretch must be [low, high] percentiles with 0 <= low < high <= 100"
+                    );
                 }
             }
         }

@@ -47,12 +47,46 @@ pub struct Mosaic {
     pub srs: Option<SpatialRef>,
 }
 
+/// Tiles warped onto their windows of the target grid, not yet combined.
+pub struct Placement {
+    pub tiles: Vec<PlacedTile>,
+    pub grid: GridSpec,
+    /// Band type to write: the sources' common type (Float32 for decoded tiles).
+    pub band_type: GdalDataType,
+    pub nodata: f64,
+    pub srs: Option<SpatialRef>,
+}
+
 /// Open, check, warp and combine `paths`.
 pub fn stitch(paths: &[PathBuf], opts: &StitchOptions) -> Result<Mosaic> {
+    let p = place(paths, opts)?;
+    let bands = p.tiles.first().map_or(1, |t| t.raster.bands);
+    let raster = mosaic(p.grid.width, p.grid.height, bands, &p.tiles, opts.overlap);
+    if raster.valid_count() == 0 {
+        let names: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
+        bail!(
+            "{}: no valid data (every cell is no-data)",
+            names.join(", ")
+        );
+    }
+    Ok(Mosaic {
+        raster,
+        grid: p.grid,
+        band_type: p.band_type,
+        nodata: p.nodata,
+        srs: p.srs,
+    })
+}
+
+/// Open and check `paths`, plan the target grid and warp every tile onto it.
+pub fn place(paths: &[PathBuf], opts: &StitchOptions) -> Result<Placement> {
     if paths.is_empty() {
         bail!("no input tiles given");
     }
-    let sources: Vec<Source> = paths.iter().map(|p| gdalio::open(p)).collect::<Result<_>>()?;
+    let sources: Vec<Source> = paths
+        .iter()
+        .map(|p| gdalio::open(p))
+        .collect::<Result<_>>()?;
     check_sources(&sources, opts)?;
     let first = &sources[0];
 
@@ -60,8 +94,15 @@ pub fn stitch(paths: &[PathBuf], opts: &StitchOptions) -> Result<Mosaic> {
     let (tiles, grid, srs) = if georeferenced {
         warp_all(&sources, opts)?
     } else {
-        let lacking = sources.iter().find(|s| s.geotransform.is_none()).map(|s| s.path.display());
-        if sources.len() > 1 || opts.target_crs.is_some() || opts.extent.is_some() || opts.resolution.is_some() {
+        let lacking = sources
+            .iter()
+            .find(|s| s.geotransform.is_none())
+            .map(|s| s.path.display());
+        if sources.len() > 1
+            || opts.target_crs.is_some()
+            || opts.extent.is_some()
+            || opts.resolution.is_some()
+        {
             bail!(
                 "{}: has no georeferencing (no geotransform and no world file); \
                  only a single such tile can be used, in pixel coordinates",
@@ -75,15 +116,16 @@ pub fn stitch(paths: &[PathBuf], opts: &StitchOptions) -> Result<Mosaic> {
             width: first.width,
             height: first.height,
         };
-        (vec![PlacedTile { col: 0, row: 0, raster }], grid, None)
+        (
+            vec![PlacedTile {
+                col: 0,
+                row: 0,
+                raster,
+            }],
+            grid,
+            None,
+        )
     };
-
-    let bands = tiles.first().map_or(1, |t| t.raster.bands);
-    let raster = mosaic(grid.width, grid.height, bands, &tiles, opts.overlap);
-    if raster.valid_count() == 0 {
-        let names: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
-        bail!("{}: no valid data (every cell is no-data)", names.join(", "));
-    }
 
     let band_type = if opts.encoding != Encoding::Plain {
         GdalDataType::Float32
@@ -97,8 +139,8 @@ pub fn stitch(paths: &[PathBuf], opts: &StitchOptions) -> Result<Mosaic> {
         .or(opts.src_nodata)
         .or(first.nodata)
         .unwrap_or_else(|| gdalio::default_nodata(band_type));
-    Ok(Mosaic {
-        raster,
+    Ok(Placement {
+        tiles,
         grid,
         band_type,
         nodata,
@@ -125,7 +167,11 @@ fn check_sources(sources: &[Source], opts: &StitchOptions) -> Result<()> {
                 s.path.display(),
                 if s.srs.is_some() { "has" } else { "lacks" },
                 first.path.display(),
-                if first.srs.is_some() { "has one" } else { "does not" }
+                if first.srs.is_some() {
+                    "has one"
+                } else {
+                    "does not"
+                }
             );
         }
     }
@@ -138,10 +184,17 @@ fn check_sources(sources: &[Source], opts: &StitchOptions) -> Result<()> {
             opts.encoding
         );
     }
-    let available = if opts.encoding == Encoding::Plain { first.bands } else { 1 };
+    let available = if opts.encoding == Encoding::Plain {
+        first.bands
+    } else {
+        1
+    };
     if let Some(bands) = &opts.bands {
         if let Some(b) = bands.iter().find(|&&b| b == 0 || b > available) {
-            bail!("{}: has no band {b} (bands are 1..={available})", first.path.display());
+            bail!(
+                "{}: has no band {b} (bands are 1..={available})",
+                first.path.display()
+            );
         }
     }
     for s in sources {
@@ -178,14 +231,20 @@ fn select_bands(raster: Raster, opts: &StitchOptions) -> Raster {
     let Some(bands) = &opts.bands else {
         return raster;
     };
-    let data = bands.iter().flat_map(|&b| raster.band(b - 1).iter().copied()).collect();
+    let data = bands
+        .iter()
+        .flat_map(|&b| raster.band(b - 1).iter().copied())
+        .collect();
     let mut out = Raster::from_data(raster.width, raster.height, bands.len(), data);
     out.unify_validity();
     out
 }
 
 /// Plan the target grid and warp every tile onto its window of it.
-fn warp_all(sources: &[Source], opts: &StitchOptions) -> Result<(Vec<PlacedTile>, GridSpec, Option<SpatialRef>)> {
+fn warp_all(
+    sources: &[Source],
+    opts: &StitchOptions,
+) -> Result<(Vec<PlacedTile>, GridSpec, Option<SpatialRef>)> {
     let first = &sources[0];
     let target = match &opts.target_crs {
         Some(def) => Some(crs::parse(def)?),
@@ -206,7 +265,10 @@ fn warp_all(sources: &[Source], opts: &StitchOptions) -> Result<(Vec<PlacedTile>
                 let (cx, cy) = if same_crs(s) {
                     geo.cell_size()
                 } else {
-                    let (from, to) = (s.srs.as_ref().expect("has CRS"), target.as_ref().expect("has CRS"));
+                    let (from, to) = (
+                        s.srs.as_ref().expect("has CRS"),
+                        target.as_ref().expect("has CRS"),
+                    );
                     let cell = crs::detail_preserving_cell(&geo, s.width, s.height, from, to)
                         .with_context(|| s.path.display().to_string())?;
                     (cell, cell)
@@ -240,18 +302,31 @@ fn warp_all(sources: &[Source], opts: &StitchOptions) -> Result<(Vec<PlacedTile>
         }
         None => {
             let union = footprints.iter().fold(
-                [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY],
-                |b, f| [b[0].min(f[0]), b[1].min(f[1]), b[2].max(f[2]), b[3].max(f[3])],
+                [
+                    f64::INFINITY,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                    f64::NEG_INFINITY,
+                ],
+                |b, f| {
+                    [
+                        b[0].min(f[0]),
+                        b[1].min(f[1]),
+                        b[2].max(f[2]),
+                        b[3].max(f[3]),
+                    ]
+                },
             );
             // Align to the first tile's cell lines when it already lies on the
             // target grid, so aligned tiles are copied without resampling;
             // otherwise to multiples of the resolution.
             let geo = first.geotransform.expect("checked georeferenced");
-            let (anchor_x, anchor_y) = if same_crs(first) && geo.is_north_up() && geo.cell_size() == (rx, ry) {
-                (geo.0[0], geo.0[3])
-            } else {
-                (0.0, 0.0)
-            };
+            let (anchor_x, anchor_y) =
+                if same_crs(first) && geo.is_north_up() && geo.cell_size() == (rx, ry) {
+                    (geo.0[0], geo.0[3])
+                } else {
+                    (0.0, 0.0)
+                };
             let ox = anchor_x + ((union[0] - anchor_x) / rx + 1e-6).floor() * rx;
             let oy = anchor_y + ((union[3] - anchor_y) / ry - 1e-6).ceil() * ry;
             let w = ((union[2] - ox) / rx - 1e-6).ceil().max(1.0) as usize;
@@ -286,12 +361,23 @@ fn warp_all(sources: &[Source], opts: &StitchOptions) -> Result<(Vec<PlacedTile>
         }
         let window = GridSpec {
             crs_wkt: grid.crs_wkt.clone(),
-            geotransform: GeoTransform::north_up(origin_x + c0 as f64 * rx, origin_y - r0 as f64 * ry, rx, ry),
+            geotransform: GeoTransform::north_up(
+                origin_x + c0 as f64 * rx,
+                origin_y - r0 as f64 * ry,
+                rx,
+                ry,
+            ),
             width: c1 - c0,
             height: r1 - r0,
         };
         let raster = if opts.encoding == Encoding::Plain {
-            gdalio::warp(&s.dataset, &s.path, &window, opts.resampling, opts.src_nodata)?
+            gdalio::warp(
+                &s.dataset,
+                &s.path,
+                &window,
+                opts.resampling,
+                opts.src_nodata,
+            )?
         } else {
             let decoded = decode(s, opts)?;
             let geo = s.geotransform.expect("checked georeferenced");
@@ -313,5 +399,7 @@ fn warp_all(sources: &[Source], opts: &StitchOptions) -> Result<(Vec<PlacedTile>
 }
 
 fn file_name(path: &Path) -> String {
-    path.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default()
+    path.file_name()
+        .map(|n| n.to_string_lossy().to_string())
+        .unwrap_or_default()
 }

@@ -58,7 +58,12 @@ impl GeoTransform {
             self.apply(0.0, height as f64),
             self.apply(width as f64, height as f64),
         ];
-        let mut b = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+        let mut b = [
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ];
         for (x, y) in corners {
             b[0] = b[0].min(x);
             b[1] = b[1].min(y);

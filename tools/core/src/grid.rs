@@ -75,7 +75,8 @@ impl HeightGrid {
                     for c in 0..side {
                         let sc = c.min(width - 1);
                         heights[r * side + c] = dense[sr * width + sc] as f32;
-                        mask[r * side + c] = (r < height && c < width && valid[sr * width + sc]) as u8;
+                        mask[r * side + c] =
+                            (r < height && c < width && valid[sr * width + sc]) as u8;
                     }
                 }
                 HeightGrid {

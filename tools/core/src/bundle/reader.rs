@@ -33,10 +33,15 @@ impl Bundle {
     pub fn open(dir: &Path) -> Result<Bundle> {
         let path = dir.join(MANIFEST_FILE);
         let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
-        let manifest: Manifest =
-            serde_json::from_str(&text).map_err(|e| Error::Manifest { path: path.clone(), source: e })?;
+        let manifest: Manifest = serde_json::from_str(&text).map_err(|e| Error::Manifest {
+            path: path.clone(),
+            source: e,
+        })?;
         if manifest.format != FORMAT {
-            return Err(Error::invalid(&path, format!("format is {:?}, expected {FORMAT:?}", manifest.format)));
+            return Err(Error::invalid(
+                &path,
+                format!("format is {:?}, expected {FORMAT:?}", manifest.format),
+            ));
         }
         if manifest.format_version != FORMAT_VERSION {
             return Err(Error::invalid(
@@ -55,10 +60,12 @@ impl Bundle {
 
     /// The manifest entry of artifact `name`.
     pub fn artifact(&self, name: &str) -> Result<&Artifact> {
-        self.manifest
-            .artifacts
-            .get(name)
-            .ok_or_else(|| Error::invalid(self.dir.join(MANIFEST_FILE), format!("no artifact {name:?}")))
+        self.manifest.artifacts.get(name).ok_or_else(|| {
+            Error::invalid(
+                self.dir.join(MANIFEST_FILE),
+                format!("no artifact {name:?}"),
+            )
+        })
     }
 
     /// Map artifact `name` as an array of `T`, checking dtype size and length.
@@ -66,7 +73,10 @@ impl Bundle {
         let artifact = self.artifact(name)?;
         let path = self.dir.join(&artifact.file);
         if artifact.dtype.size() != Some(std::mem::size_of::<T>()) {
-            return Err(Error::invalid(&path, format!("dtype {:?} cannot be read as this type", artifact.dtype)));
+            return Err(Error::invalid(
+                &path,
+                format!("dtype {:?} cannot be read as this type", artifact.dtype),
+            ));
         }
         let file = std::fs::File::open(&path).map_err(|e| Error::io(&path, e))?;
         let len = file.metadata().map_err(|e| Error::io(&path, e))?.len();
@@ -74,7 +84,10 @@ impl Bundle {
         if len != expected as u64 {
             return Err(Error::invalid(
                 &path,
-                format!("{len} bytes, but shape {:?} needs {expected}", artifact.shape),
+                format!(
+                    "{len} bytes, but shape {:?} needs {expected}",
+                    artifact.shape
+                ),
             ));
         }
         // SAFETY: the map is read-only; a bundle is not modified while read.

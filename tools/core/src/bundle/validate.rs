@@ -15,15 +15,24 @@ pub fn validate(bundle: &Bundle) -> Vec<String> {
             Err(e) => problems.push(format!("{name}: {e}")),
             Ok((bytes, sha)) => {
                 if bytes != a.bytes {
-                    problems.push(format!("{name}: {} is {bytes} bytes, manifest says {}", a.file, a.bytes));
+                    problems.push(format!(
+                        "{name}: {} is {bytes} bytes, manifest says {}",
+                        a.file, a.bytes
+                    ));
                 }
                 if sha != a.sha256 {
-                    problems.push(format!("{name}: {} has sha256 {sha}, manifest says {}", a.file, a.sha256));
+                    problems.push(format!(
+                        "{name}: {} has sha256 {sha}, manifest says {}",
+                        a.file, a.sha256
+                    ));
                 }
                 if let Some(size) = a.dtype.size() {
                     let expected = a.shape.iter().product::<usize>() * size;
                     if expected as u64 != bytes {
-                        problems.push(format!("{name}: shape {:?} needs {expected} bytes, file has {bytes}", a.shape));
+                        problems.push(format!(
+                            "{name}: shape {:?} needs {expected} bytes, file has {bytes}",
+                            a.shape
+                        ));
                     }
                 }
             }
@@ -40,9 +49,10 @@ pub fn validate(bundle: &Bundle) -> Vec<String> {
     for name in ["height", "mask"] {
         match m.artifacts.get(name) {
             None => problems.push(format!("missing artifact {name:?}")),
-            Some(a) if a.shape != [side, side] => {
-                problems.push(format!("{name}: shape {:?}, expected [{side}, {side}]", a.shape))
-            }
+            Some(a) if a.shape != [side, side] => problems.push(format!(
+                "{name}: shape {:?}, expected [{side}, {side}]",
+                a.shape
+            )),
             Some(_) => {}
         }
     }
@@ -54,22 +64,36 @@ pub fn validate(bundle: &Bundle) -> Vec<String> {
         (Err(e), _) | (_, Err(e)) => return vec![e.to_string()],
     };
     if let Some(bad) = mask.iter().position(|&v| v > 1) {
-        problems.push(format!("mask: value {} at vertex {bad}; only 0 and 1 are allowed", mask[bad]));
+        problems.push(format!(
+            "mask: value {} at vertex {bad}; only 0 and 1 are allowed",
+            mask[bad]
+        ));
     }
     let valid = mask.iter().filter(|&&v| v == 1).count();
     if valid != m.grid.valid_vertices {
-        problems.push(format!("mask: {valid} valid vertices, manifest says {}", m.grid.valid_vertices));
+        problems.push(format!(
+            "mask: {valid} valid vertices, manifest says {}",
+            m.grid.valid_vertices
+        ));
     }
     if let Some(bad) = heights.iter().position(|h| !h.is_finite()) {
         problems.push(format!("height: non-finite value at vertex {bad}"));
     }
     let [lo, hi] = m.grid.height_range_m;
-    if let Some(bad) = heights.iter().zip(mask.iter()).position(|(&h, &k)| k == 1 && !(lo..=hi).contains(&h)) {
-        problems.push(format!("height: {} at vertex {bad} is outside the recorded range [{lo}, {hi}]", heights[bad]));
+    if let Some(bad) = heights
+        .iter()
+        .zip(mask.iter())
+        .position(|(&h, &k)| k == 1 && !(lo..=hi).contains(&h))
+    {
+        problems.push(format!(
+            "height: {} at vertex {bad} is outside the recorded range [{lo}, {hi}]",
+            heights[bad]
+        ));
     }
     if let Some(color) = &m.color {
         match m.artifacts.get("color") {
-            None => problems.push("manifest describes a colour image but has no \"color\" artifact".into()),
+            None => problems
+                .push("manifest describes a colour image but has no \"color\" artifact".into()),
             Some(a) if a.shape != [color.height, color.width, 4] => problems.push(format!(
                 "color: shape {:?}, expected [{}, {}, 4]",
                 a.shape, color.height, color.width

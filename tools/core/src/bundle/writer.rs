@@ -28,7 +28,8 @@ impl BundleWriter {
         if staging.exists() {
             fs::remove_dir_all(&staging).map_err(|e| Error::io(&staging, e))?;
         }
-        fs::create_dir_all(&staging).map_err(|e| Error::io(&staging, e))?;
+        fs::create_dir_all(&staging)
+            .map_err(|e| Error::invalid(target, format!("cannot write ({e})")))?;
         Ok(BundleWriter {
             target: target.to_path_buf(),
             staging,
@@ -51,7 +52,11 @@ impl BundleWriter {
     ) -> Result<Artifact> {
         let elements: usize = shape.iter().product();
         assert_eq!(elements, data.len(), "{file}: shape does not match data");
-        assert_eq!(dtype.size(), Some(std::mem::size_of::<T>()), "{file}: dtype");
+        assert_eq!(
+            dtype.size(),
+            Some(std::mem::size_of::<T>()),
+            "{file}: dtype"
+        );
         // Every target Relevo builds for is little-endian; refuse others.
         const { assert!(cfg!(target_endian = "little")) };
         let bytes: &[u8] = bytemuck::cast_slice(data);

@@ -21,35 +21,34 @@ pub fn distance_to_seeds(seed: &[bool], width: usize, height: usize) -> Vec<f32>
 
     // Pass 1: along columns, stored column-major.
     let mut by_column = vec![0.0f64; w * h];
-    by_column
-        .par_chunks_mut(h)
-        .enumerate()
-        .for_each_init(
-            || Envelope::new(h),
-            |env, (x, column)| {
-                for (y, value) in column.iter_mut().enumerate() {
-                    *value = if is_inside(x, y) { far } else { 0.0 };
-                }
-                env.transform(column);
-            },
-        );
+    by_column.par_chunks_mut(h).enumerate().for_each_init(
+        || Envelope::new(h),
+        |env, (x, column)| {
+            for (y, value) in column.iter_mut().enumerate() {
+                *value = if is_inside(x, y) { far } else { 0.0 };
+            }
+            env.transform(column);
+        },
+    );
 
     // Pass 2: along rows, reading the column pass transposed.
     let mut out = vec![0.0f32; width * height];
-    out.par_chunks_mut(width)
-        .enumerate()
-        .for_each_init(
-            || (Envelope::new(w), vec![0.0f64; w]),
-            |(env, row), (y, out_row)| {
-                for (x, value) in row.iter_mut().enumerate() {
-                    *value = by_column[x * h + y];
-                }
-                env.transform(row);
-                for (value, squared) in out_row.iter_mut().zip(row.iter()) {
-                    *value = if *squared >= far { NO_SEED } else { squared.sqrt() as f32 };
-                }
-            },
-        );
+    out.par_chunks_mut(width).enumerate().for_each_init(
+        || (Envelope::new(w), vec![0.0f64; w]),
+        |(env, row), (y, out_row)| {
+            for (x, value) in row.iter_mut().enumerate() {
+                *value = by_column[x * h + y];
+            }
+            env.transform(row);
+            for (value, squared) in out_row.iter_mut().zip(row.iter()) {
+                *value = if *squared >= far {
+                    NO_SEED
+                } else {
+                    squared.sqrt() as f32
+                };
+            }
+        },
+    );
     out
 }
 
@@ -76,8 +75,9 @@ impl Envelope {
         let n = f.len();
         self.input[..n].copy_from_slice(f);
         let g = &self.input;
-        let intersect =
-            |q: usize, p: usize| ((g[q] + (q * q) as f64) - (g[p] + (p * p) as f64)) / (2.0 * (q as f64 - p as f64));
+        let intersect = |q: usize, p: usize| {
+            ((g[q] + (q * q) as f64) - (g[p] + (p * p) as f64)) / (2.0 * (q as f64 - p as f64))
+        };
         let mut k = 0usize;
         self.vertex[0] = 0;
         self.boundary[0] = f64::NEG_INFINITY;

@@ -89,7 +89,10 @@ pub fn mosaic(
     let weights: Vec<Vec<f32>> = match rule {
         Overlap::Blend => {
             let covered = coverage(width, height, tiles);
-            tiles.par_iter().map(|t| feather_weights(t, &covered, width)).collect()
+            tiles
+                .par_iter()
+                .map(|t| feather_weights(t, &covered, width))
+                .collect()
         }
         Overlap::First | Overlap::Last => Vec::new(),
     };
@@ -156,6 +159,68 @@ pub fn mosaic(
     out
 }
 
+/// How visible tile seams are in a mosaic, as a step relative to texture.
+///
+/// Neighbouring cells covered by different sets of tiles straddle a tile
+/// edge. For each kind of edge (pair of cover sets) the mean *signed*
+/// difference across it is the systematic step there (texture averages out);
+/// the figure is the mean of those |steps| weighted by how many neighbour
+/// pairs each kind has, divided by the mean absolute
+/// difference between neighbours covered by the same tiles (the image's own
+/// texture). 0 means no step; a visible seam is a sizeable fraction of 1.
+/// Averaged over bands; `None` without both kinds of pairs. At most 64 tiles.
+pub fn seam_visibility(mosaic: &Raster, tiles: &[PlacedTile]) -> Option<f64> {
+    assert!(tiles.len() <= 64, "seam_visibility takes at most 64 tiles");
+    let (w, h) = (mosaic.width, mosaic.height);
+    let mut cover = vec![0u64; w * h];
+    for (k, t) in tiles.iter().enumerate() {
+        for i in 0..t.raster.cells() {
+            if t.raster.is_valid(i) {
+                cover[(t.row + i / t.raster.width) * w + t.col + i % t.raster.width] |= 1 << k;
+            }
+        }
+    }
+    // Signed step sums per edge kind, ordered (smaller cover set first).
+    let mut steps: std::collections::BTreeMap<(u64, u64), (f64, usize)> = Default::default();
+    let (mut texture, mut texture_n) = (0.0, 0usize);
+    for r in 0..h {
+        for c in 0..w {
+            let p = r * w + c;
+            for q in [(c + 1 < w).then(|| p + 1), (r + 1 < h).then(|| p + w)]
+                .into_iter()
+                .flatten()
+            {
+                if !mosaic.is_valid(p) || !mosaic.is_valid(q) || cover[p] == 0 || cover[q] == 0 {
+                    continue;
+                }
+                let (p, q) = if cover[p] <= cover[q] { (p, q) } else { (q, p) };
+                let diff: f64 = (0..mosaic.bands)
+                    .map(|b| mosaic.band(b)[q] - mosaic.band(b)[p])
+                    .sum::<f64>()
+                    / mosaic.bands as f64;
+                if cover[p] == cover[q] {
+                    texture += diff.abs();
+                    texture_n += 1;
+                } else {
+                    let s = steps.entry((cover[p], cover[q])).or_default();
+                    s.0 += diff;
+                    s.1 += 1;
+                }
+            }
+        }
+    }
+    if steps.is_empty() || texture_n == 0 || texture == 0.0 {
+        return None;
+    }
+    let pairs: usize = steps.values().map(|s| s.1).sum();
+    let step = steps
+        .values()
+        .map(|&(sum, n)| (sum / n as f64).abs() * n as f64)
+        .sum::<f64>()
+        / pairs as f64;
+    Some(step / (texture / texture_n as f64))
+}
+
 /// Cells of the grid where at least one tile has data.
 fn coverage(width: usize, height: usize, tiles: &[PlacedTile]) -> Vec<bool> {
     let mut covered = vec![false; width * height];
@@ -205,6 +270,29 @@ mod tests {
                 assert!(row[c + 1] - row[c] <= 10.0 / 20.0 + 1e-9, "row {r} col {c}");
             }
         }
+    }
+
+    #[test]
+    fn blend_hides_a_radiometric_step_that_first_shows() {
+        // Two overlapping tiles of one textured scene, the second 30 units brighter.
+        let texture = |c: usize, r: usize| ((c * 7 + r * 13) % 11) as f64;
+        let make = |col: usize, offset: f64| PlacedTile {
+            col,
+            row: 0,
+            raster: Raster::from_data(
+                40,
+                20,
+                1,
+                (0..800)
+                    .map(|i| texture(col + i % 40, i / 40) + offset)
+                    .collect(),
+            ),
+        };
+        let tiles = [make(0, 0.0), make(20, 30.0)];
+        let first = seam_visibility(&mosaic(60, 20, 1, &tiles, Overlap::First), &tiles).unwrap();
+        let blend = seam_visibility(&mosaic(60, 20, 1, &tiles, Overlap::Blend), &tiles).unwrap();
+        assert!(first > 3.0, "first: {first}");
+        assert!(blend < 0.5, "blend: {blend}");
     }
 
     #[test]

@@ -1,0 +1,326 @@
+//! Bad input: every case must fail with a message naming the file and the
+//! problem, exit non-zero, and leave no output behind.
+
+mod common;
+use common::*;
+use std::path::{Path, PathBuf};
+
+/// Run `relevo ARGS` in `dir`, expecting failure; check stderr mentions every
+/// needle and that `dir` holds only `keep` afterwards.
+fn fails(dir: &Path, args: &[&str], needles: &[&str], keep: &[&str]) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_relevo"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{args:?} succeeded");
+    assert!(!stderr.contains("panicked"), "{args:?} panicked: {stderr}");
+    for n in needles {
+        assert!(
+            stderr.contains(n),
+            "{args:?}: stderr lacks {n:?}:\n{stderr}"
+        );
+    }
+    let mut expected: Vec<String> = keep.iter().map(|s| s.to_string()).collect();
+    expected.sort();
+    assert_eq!(listing(dir), expected, "{args:?} left files behind");
+}
+
+fn copy_in(dir: &Path, src: &Path, name: &str) -> PathBuf {
+    let to = dir.join(name);
+    std::fs::copy(src, &to).unwrap();
+    to
+}
+
+#[test]
+fn missing_file() {
+    let d = tempfile::tempdir().unwrap();
+    fails(
+        d.path(),
+        &["stitch", "nope.tif", "--out", "o.tif"],
+        &["nope.tif", "no such file"],
+        &[],
+    );
+    fails(
+        d.path(),
+        &["prep", "--dem", "nope.tif", "--out", "o.relevo"],
+        &["nope.tif", "no such file"],
+        &[],
+    );
+}
+
+#[test]
+fn not_a_raster() {
+    let d = tempfile::tempdir().unwrap();
+    std::fs::write(d.path().join("notes.tif"), "just some text\n").unwrap();
+    fails(
+        d.path(),
+        &["prep", "--dem", "notes.tif", "--out", "o.relevo"],
+        &["notes.tif", "not a raster GDAL can read"],
+        &["notes.tif"],
+    );
+}
+
+#[test]
+fn truncated_tiff() {
+    let d = tempfile::tempdir().unwrap();
+    let full = std::fs::read(shared("dem/srtm_ref.tif")).unwrap();
+    std::fs::write(d.path().join("cut.tif"), &full[..full.len() / 3]).unwrap();
+    fails(
+        d.path(),
+        &["stitch", "cut.tif", "--out", "o.tif"],
+        &["cut.tif"],
+        &["cut.tif"],
+    );
+    fails(
+        d.path(),
+        &["prep", "--dem", "cut.tif", "--out", "o.relevo"],
+        &["cut.tif"],
+        &["cut.tif"],
+    );
+}
+
+#[test]
+fn tiles_with_different_band_counts() {
+    let d = tempfile::tempdir().unwrap();
+    copy_in(d.path(), &shared("tiles/rgbn_5m/rgbn_suba.tif"), "a.tif");
+    copy_in(d.path(), &shared("dem/lidar_minnesota_1m.tif"), "b.tif");
+    fails(
+        d.path(),
+        &["stitch", "a.tif", "b.tif", "--out", "o.tif"],
+        &["b.tif", "has 1 band(s)", "a.tif", "has 4"],
+        &["a.tif", "b.tif"],
+    );
+}
+
+#[test]
+fn all_nodata_input() {
+    let d = tempfile::tempdir().unwrap();
+    write_f32_tif(
+        &d.path().join("empty.tif"),
+        8,
+        8,
+        &[-9999.0; 64],
+        Some(-9999.0),
+    );
+    fails(
+        d.path(),
+        &["prep", "--dem", "empty.tif", "--out", "o.relevo"],
+        &["empty.tif", "no valid data"],
+        &["empty.tif"],
+    );
+    fails(
+        d.path(),
+        &["fill", "empty.tif", "--out", "f.tif"],
+        &["empty.tif", "no valid data"],
+        &["empty.tif"],
+    );
+}
+
+#[test]
+fn nan_heights() {
+    let d = tempfile::tempdir().unwrap();
+    let mut v = vec![10.0f32; 64];
+    v[27] = f32::NAN;
+    write_f32_tif(&d.path().join("nan.tif"), 8, 8, &v, None);
+    fails(
+        d.path(),
+        &["prep", "--dem", "nan.tif", "--out", "o.relevo"],
+        &["nan.tif", "1 value(s) are NaN", "--src-nodata nan"],
+        &["nan.tif"],
+    );
+    // Declared as holes, the same file goes through and the hole is filled.
+    let (dem, out) = (d.path().join("nan.tif"), d.path().join("o.relevo"));
+    let json = relevo_ok([
+        "prep",
+        "--dem",
+        dem.to_str().unwrap(),
+        "--src-nodata",
+        "nan",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    let summary: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(summary["fill"]["cells_filled"], 1);
+}
+
+#[test]
+fn one_cell_raster() {
+    let d = tempfile::tempdir().unwrap();
+    write_f32_tif(&d.path().join("dot.tif"), 1, 1, &[5.0], None);
+    fails(
+        d.path(),
+        &["prep", "--dem", "dot.tif", "--out", "o.relevo"],
+        &["dot.tif", "1×1", "at least 2×2"],
+        &["dot.tif"],
+    );
+    fails(
+        d.path(),
+        &["pad", "dot.tif", "--out", "p.tif"],
+        &["dot.tif", "at least 2×2"],
+        &["dot.tif"],
+    );
+}
+
+#[test]
+fn region_file_errors() {
+    let d = tempfile::tempdir().unwrap();
+    let cases = [
+        (
+            "syntax.toml",
+            "name = \"x\"\n[dem\nfiles = [\"a.tif\"]\n",
+            "line 2",
+        ),
+        (
+            "unknown.toml",
+            "[dem]\nfiles = [\"a.tif\"]\nresolution = 5\n",
+            "unknown field `resolution`",
+        ),
+        ("nodem.toml", "name = \"x\"\n", "missing field `dem`"),
+        ("empty.toml", "[dem]\nfiles = []\n", "dem.files is empty"),
+        (
+            "stretch.toml",
+            "[dem]\nfiles = [\"a.tif\"]\n[image]\nfiles = [\"b.tif\"]\nstretch = [90, 10]\n",
+            "image.stretch",
+        ),
+        (
+            "nodata.toml",
+            "[dem]\nfiles = [\"a.tif\"]\nsrc_nodata = \"none\"\n",
+            "src_nodata",
+        ),
+    ];
+    let names: Vec<&str> = cases.iter().map(|c| c.0).collect();
+    for (name, text, _) in &cases {
+        std::fs::write(d.path().join(name), text).unwrap();
+    }
+    for (name, _, needle) in &cases {
+        fails(
+            d.path(),
+            &["prep", name, "--out", "o.relevo"],
+            &[name, needle],
+            &names,
+        );
+    }
+}
+
+#[test]
+fn unwritable_or_existing_output() {
+    let d = tempfile::tempdir().unwrap();
+    let dem = copy_in(d.path(), &shared("dem/luxembourg_elev.tif"), "lux.tif");
+    fails(
+        d.path(),
+        &["prep", "--dem", "lux.tif", "--out", "no/such/dir/x.relevo"],
+        &["no/such/dir", "does not exist"],
+        &["lux.tif"],
+    );
+    fails(
+        d.path(),
+        &["stitch", "lux.tif", "--out", "/proc/lux.tif"],
+        &["/proc/lux.tif"],
+        &["lux.tif"],
+    );
+    fails(
+        d.path(),
+        &["prep", "--dem", "lux.tif", "--out", "/proc/lux.relevo"],
+        &["/proc/lux.relevo"],
+        &["lux.tif"],
+    );
+    std::fs::write(d.path().join("taken.tif"), "keep me").unwrap();
+    fails(
+        d.path(),
+        &["stitch", "lux.tif", "--out", "taken.tif"],
+        &["taken.tif", "already exists", "--force"],
+        &["lux.tif", "taken.tif"],
+    );
+    assert_eq!(
+        std::fs::read_to_string(d.path().join("taken.tif")).unwrap(),
+        "keep me"
+    );
+    let _ = dem;
+}
+
+#[test]
+fn bands_and_encodings_that_do_not_exist() {
+    let d = tempfile::tempdir().unwrap();
+    copy_in(d.path(), &repo("data/olinda/L7_ETMs.tif"), "l7.tif");
+    copy_in(d.path(), &shared("dem/luxembourg_elev.tif"), "lux.tif");
+    fails(
+        d.path(),
+        &["stitch", "l7.tif", "--bands", "9,2,1", "--out", "o.tif"],
+        &["l7.tif", "no band 9"],
+        &["l7.tif", "lux.tif"],
+    );
+    fails(
+        d.path(),
+        &[
+            "prep",
+            "--dem",
+            "lux.tif",
+            "--encoding",
+            "terrain-rgb",
+            "--out",
+            "o.relevo",
+        ],
+        &["lux.tif", "needs 3"],
+        &["l7.tif", "lux.tif"],
+    );
+}
+
+#[test]
+fn ungeoreferenced_tiles_cannot_be_mosaicked() {
+    let d = tempfile::tempdir().unwrap();
+    copy_in(d.path(), &shared("terrain_rgb_martini/fuji.png"), "a.png");
+    copy_in(d.path(), &shared("terrain_rgb_martini/fuji.png"), "b.png");
+    fails(
+        d.path(),
+        &[
+            "stitch",
+            "a.png",
+            "b.png",
+            "--encoding",
+            "terrain-rgb",
+            "--out",
+            "o.tif",
+        ],
+        &["a.png", "no georeferencing"],
+        &["a.png", "b.png"],
+    );
+}
+
+#[test]
+fn broken_bundles_are_reported() {
+    let d = tempfile::tempdir().unwrap();
+    let bundle = d.path().join("lux.relevo");
+    relevo_ok([
+        "prep",
+        "--dem",
+        shared("dem/luxembourg_elev.tif").to_str().unwrap(),
+        "--out",
+        bundle.to_str().unwrap(),
+    ]);
+    relevo_ok(["validate", bundle.to_str().unwrap()]);
+
+    // One flipped byte in the heights.
+    let heights = bundle.join("height.f32");
+    let mut bytes = std::fs::read(&heights).unwrap();
+    bytes[100] ^= 0x40;
+    std::fs::write(&heights, &bytes).unwrap();
+    let out = relevo(["validate", bundle.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(stderr.contains("height.f32 has sha256"), "{stderr}");
+
+    // A manifest that is not JSON.
+    std::fs::write(bundle.join("manifest.json"), "{ nope").unwrap();
+    for cmd in ["validate", "info"] {
+        let out = relevo([cmd, bundle.to_str().unwrap()]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success());
+        assert!(
+            stderr.contains("manifest.json") && stderr.contains("invalid manifest"),
+            "{stderr}"
+        );
+    }
+}

@@ -1,0 +1,192 @@
+//! The sample bundle: golden artifact hashes, determinism, atomic writes.
+
+mod common;
+use common::*;
+use serde_json::Value;
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::Command;
+
+const GOLDEN: &str = "data/golden/olinda.json";
+
+fn manifest(bundle: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(bundle.join("manifest.json")).unwrap()).unwrap()
+}
+
+/// Artifact name → sha256, recomputed from the files (not trusted from the manifest).
+fn artifact_hashes(bundle: &Path) -> BTreeMap<String, String> {
+    manifest(bundle)["artifacts"]
+        .as_object()
+        .unwrap()
+        .iter()
+        .map(|(name, a)| {
+            (
+                name.clone(),
+                sha256(&bundle.join(a["file"].as_str().unwrap())),
+            )
+        })
+        .collect()
+}
+
+fn prep_with_threads(args: &[&str], out: &Path, threads: &str) {
+    let status = Command::new(env!("CARGO_BIN_EXE_relevo"))
+        .args(args)
+        .args(["--out", out.to_str().unwrap()])
+        .env("RAYON_NUM_THREADS", threads)
+        .env("GDAL_NUM_THREADS", threads)
+        .status()
+        .unwrap();
+    assert!(status.success());
+}
+
+/// Rebuild the sample region and compare with `data/golden/`. Set
+/// RELEVO_BLESS=1 to rewrite the golden file after a reviewed change.
+#[test]
+fn sample_bundle_matches_golden_hashes() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("olinda.relevo");
+    let region = repo("data/olinda/REGION.toml");
+    relevo_ok([
+        "prep".as_ref(),
+        region.as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    relevo_ok(["validate".as_ref(), out.as_os_str()]);
+    let hashes = artifact_hashes(&out);
+    let golden_path = repo(GOLDEN);
+    if std::env::var_os("RELEVO_BLESS").is_some() {
+        std::fs::write(
+            &golden_path,
+            serde_json::to_string_pretty(&hashes).unwrap() + "\n",
+        )
+        .unwrap();
+    }
+    let golden: BTreeMap<String, String> =
+        serde_json::from_str(&std::fs::read_to_string(&golden_path).unwrap()).unwrap();
+    assert_eq!(
+        hashes, golden,
+        "sample bundle differs from {GOLDEN}; if intended, rerun with RELEVO_BLESS=1"
+    );
+
+    let m = manifest(&out);
+    assert_eq!(m["grid"]["side"], 129);
+    assert_eq!(m["grid"]["valid_vertices"], 111 * 111);
+    assert_eq!(m["color"]["bands"], serde_json::json!([3, 2, 1]));
+    assert_eq!(m["inputs"].as_array().unwrap().len(), 2);
+    // Padding replicates the last real row and column.
+    let heights: Vec<f32> = std::fs::read(out.join("height.f32"))
+        .unwrap()
+        .chunks(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    for r in 0..129 {
+        for c in 111..129 {
+            assert_eq!(heights[r * 129 + c], heights[r.min(110) * 129 + 110]);
+        }
+    }
+}
+
+#[test]
+fn bundles_are_identical_across_thread_counts() {
+    let d = tempfile::tempdir().unwrap();
+    let srtm = shared("dem/srtm_ref.tif");
+    let region = repo("data/olinda/REGION.toml");
+    let cases: [Vec<&str>; 2] = [
+        vec!["prep", region.to_str().unwrap()],
+        vec!["prep", "--dem", srtm.to_str().unwrap()],
+    ];
+    for (k, args) in cases.iter().enumerate() {
+        let one = d.path().join(format!("{k}-1.relevo"));
+        let two = d.path().join(format!("{k}-2.relevo"));
+        prep_with_threads(args, &one, "1");
+        prep_with_threads(args, &two, "2");
+        assert_eq!(artifact_hashes(&one), artifact_hashes(&two), "{args:?}");
+        assert_eq!(manifest(&one)["artifacts"], manifest(&two)["artifacts"]);
+    }
+}
+
+#[test]
+fn existing_bundles_are_kept_unless_forced() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("lux.relevo");
+    let dem = shared("dem/luxembourg_elev.tif");
+    let args = [
+        "prep",
+        "--dem",
+        dem.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    relevo_ok(args);
+    std::fs::write(out.join("marker"), "old").unwrap();
+    let again = relevo(args);
+    assert!(!again.status.success());
+    assert!(out.join("marker").exists(), "existing bundle was touched");
+    relevo_ok(args.iter().chain(&["--force"]));
+    assert!(
+        !out.join("marker").exists(),
+        "--force did not replace the bundle"
+    );
+    assert_eq!(listing(d.path()), ["lux.relevo"]);
+}
+
+#[test]
+fn stale_staging_is_cleared_and_failures_leave_nothing() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("lux.relevo");
+    // Debris of a killed run.
+    std::fs::create_dir_all(d.path().join("lux.relevo.tmp/junk")).unwrap();
+    let dem = shared("dem/luxembourg_elev.tif");
+    relevo_ok([
+        "prep",
+        "--dem",
+        dem.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(listing(d.path()), ["lux.relevo"]);
+    assert!(!out.join("junk").exists());
+
+    // A run that fails in a late stage (imagery that is not a raster).
+    std::fs::write(d.path().join("bad.tif"), "x").unwrap();
+    let failed = relevo([
+        "prep",
+        "--dem",
+        dem.to_str().unwrap(),
+        "--image",
+        d.path().join("bad.tif").to_str().unwrap(),
+        "--out",
+        d.path().join("other.relevo").to_str().unwrap(),
+    ]);
+    assert!(!failed.status.success());
+    assert!(String::from_utf8_lossy(&failed.stderr).contains("stage drape"));
+    assert_eq!(listing(d.path()), ["bad.tif", "lux.relevo"]);
+}
+
+#[test]
+fn a_killed_prep_never_leaves_a_partial_bundle() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("srtm.relevo");
+    let srtm = shared("dem/srtm_ref.tif");
+    for delay_ms in [20, 150, 400] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_relevo"))
+            .args([
+                "prep",
+                "--dem",
+                srtm.to_str().unwrap(),
+                "--force",
+                "--out",
+                out.to_str().unwrap(),
+            ])
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(delay_ms));
+        let _ = child.kill();
+        let _ = child.wait();
+        // Either there is no bundle, or it is complete and valid.
+        if out.exists() {
+            relevo_ok(["validate", out.to_str().unwrap()]);
+        }
+    }
+}

@@ -1,0 +1,136 @@
+//! Helpers shared by the end-to-end tests: running the `relevo` binary,
+//! locating the shared real inputs, and reading rasters back with GDAL.
+#![allow(dead_code)]
+
+use gdal::raster::Buffer;
+use gdal::Dataset;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// The real inputs (DEMs, imagery, tiles) shipped beside the repository.
+pub fn shared(rel: &str) -> PathBuf {
+    let root = std::env::var_os("RELEVO_SHARED_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"));
+    let path = root.join(rel);
+    assert!(
+        path.exists(),
+        "{} is missing: set RELEVO_SHARED_DATA to the shared data folder",
+        path.display()
+    );
+    path
+}
+
+/// A file of this repository.
+pub fn repo(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .join(rel)
+}
+
+/// Run `relevo ARGS…` and return its output.
+pub fn relevo<I, S>(args: I) -> Output
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<std::ffi::OsStr>,
+{
+    Command::new(env!("CARGO_BIN_EXE_relevo"))
+        .args(args)
+        .output()
+        .expect("relevo runs")
+}
+
+/// Run `relevo`, asserting success, and return stdout.
+pub fn relevo_ok<I, S>(args: I) -> String
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<std::ffi::OsStr>,
+{
+    let out = relevo(args);
+    assert!(
+        out.status.success(),
+        "relevo failed: {}\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        String::from_utf8_lossy(&out.stdout)
+    );
+    String::from_utf8_lossy(&out.stdout).to_string()
+}
+
+/// Run a GDAL command-line program (gdal-bin), asserting success.
+pub fn gdal_tool(program: &str, args: &[&str]) {
+    let out = Command::new(program)
+        .args(args)
+        .output()
+        .expect("gdal-bin is installed");
+    assert!(
+        out.status.success(),
+        "{program} {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// A raster read back: size, geotransform, nodata and band 1..n as f64.
+pub struct Read {
+    pub width: usize,
+    pub height: usize,
+    pub geotransform: [f64; 6],
+    pub nodata: Option<f64>,
+    pub bands: Vec<Vec<f64>>,
+}
+
+pub fn read(path: &Path) -> Read {
+    let ds = Dataset::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let (width, height) = ds.raster_size();
+    let nodata = ds.rasterband(1).unwrap().no_data_value();
+    let bands = (1..=ds.raster_count())
+        .map(|b| {
+            let buf: Buffer<f64> = ds
+                .rasterband(b)
+                .unwrap()
+                .read_as((0, 0), (width, height), (width, height), None)
+                .unwrap();
+            buf.data().to_vec()
+        })
+        .collect();
+    Read {
+        width,
+        height,
+        geotransform: ds.geo_transform().unwrap_or([0.0, 1.0, 0.0, 0.0, 0.0, 1.0]),
+        nodata,
+        bands,
+    }
+}
+
+/// SHA-256 of a file, hex.
+pub fn sha256(path: &Path) -> String {
+    relevo_core::bundle::sha256_file(path).unwrap().1
+}
+
+/// Write a one-band Float32 GeoTIFF (EPSG:32633, 30 m cells) for bad-input cases.
+pub fn write_f32_tif(path: &Path, width: usize, height: usize, data: &[f32], nodata: Option<f64>) {
+    use gdal::DriverManager;
+    let driver = DriverManager::get_driver_by_name("GTiff").unwrap();
+    let mut ds = driver
+        .create_with_band_type::<f32, _>(path, width, height, 1)
+        .unwrap();
+    ds.set_geo_transform(&[500000.0, 30.0, 0.0, 4000000.0, 0.0, -30.0])
+        .unwrap();
+    ds.set_spatial_ref(&gdal::spatial_ref::SpatialRef::from_epsg(32633).unwrap())
+        .unwrap();
+    let mut band = ds.rasterband(1).unwrap();
+    if let Some(nd) = nodata {
+        band.set_no_data_value(Some(nd)).unwrap();
+    }
+    let mut buf = Buffer::new((width, height), data.to_vec());
+    band.write((0, 0), (width, height), &mut buf).unwrap();
+}
+
+/// Names of the entries of a folder, sorted.
+pub fn listing(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+        .collect();
+    names.sort();
+    names
+}
