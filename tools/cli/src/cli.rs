@@ -71,10 +71,38 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Measure performance against reference tools (release builds only).
+    #[command(subcommand)]
+    Bench(BenchCommand),
     /// Check a bundle's files, hashes, shapes and invariants; exit 1 on any problem.
     #[command(after_help = "Examples:
   relevo validate olinda.relevo")]
     Validate { bundle: PathBuf },
+}
+
+#[derive(Subcommand, Debug)]
+pub enum BenchCommand {
+    /// `prep` on the sample region; `stitch` on the Landsat overlap beside gdalwarp.
+    #[command(after_help = "Examples:
+  relevo bench ingest
+  relevo bench ingest --json --runs 7 --data ../shared/data")]
+    Ingest(BenchArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// One JSON object per line instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// Runs per figure; the median is reported.
+    #[arg(long, default_value_t = 5)]
+    pub runs: usize,
+    /// The shared real-data folder (tiles/, dem/, …).
+    #[arg(long, env = "RELEVO_SHARED_DATA", default_value = "../shared/data")]
+    pub data: PathBuf,
+    /// The Relevo repository (for data/olinda).
+    #[arg(long, default_value = ".")]
+    pub repo: PathBuf,
 }
 
 #[derive(Args, Debug)]
@@ -256,6 +284,9 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Prep(a) => run_prep(a),
         Command::Info { bundle, json } => run_info(&bundle, json),
         Command::Validate { bundle } => run_validate(&bundle),
+        Command::Bench(BenchCommand::Ingest(a)) => {
+            crate::bench::ingest(&a.repo, &a.data, a.runs.max(1), a.json)
+        }
     }
 }
 

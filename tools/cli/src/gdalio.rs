@@ -107,14 +107,27 @@ impl Source {
     /// Read every band into memory as f64, turning `nodata` into NaN.
     /// Reads the whole file, so a truncated or corrupt file fails here.
     pub fn read(&self, nodata: Option<f64>) -> Result<Raster> {
-        let mut data = Vec::with_capacity(self.width * self.height * self.bands);
+        self.read_window(0, 0, self.width, self.height, nodata)
+    }
+
+    /// Read the `width`×`height` window at (`col`, `row`) of every band as f64,
+    /// turning `nodata` into NaN.
+    pub fn read_window(
+        &self,
+        col: usize,
+        row: usize,
+        width: usize,
+        height: usize,
+        nodata: Option<f64>,
+    ) -> Result<Raster> {
+        let mut data = Vec::with_capacity(width * height * self.bands);
         for b in 1..=self.bands {
             let band = self.dataset.rasterband(b)?;
             let buffer: Buffer<f64> = band
                 .read_as(
-                    (0, 0),
-                    (self.width, self.height),
-                    (self.width, self.height),
+                    (col as isize, row as isize),
+                    (width, height),
+                    (width, height),
                     None,
                 )
                 .map_err(|_| {
@@ -129,7 +142,7 @@ impl Source {
                 _ => v,
             }));
         }
-        Ok(Raster::from_data(self.width, self.height, self.bands, data))
+        Ok(Raster::from_data(width, height, self.bands, data))
     }
 }
 

@@ -1,6 +1,7 @@
 //! The `relevo` command-line tools: GDAL ingest and the bundle pipeline.
 //! `main.rs` only parses arguments and calls [`cli::run`].
 
+pub mod bench;
 pub mod cli;
 pub mod crs;
 pub mod gdalio;

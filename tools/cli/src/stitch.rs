@@ -371,13 +371,16 @@ fn warp_all(
             height: r1 - r0,
         };
         let raster = if opts.encoding == Encoding::Plain {
-            gdalio::warp(
-                &s.dataset,
-                &s.path,
-                &window,
-                opts.resampling,
-                opts.src_nodata,
-            )?
+            match aligned_offset(s, &window, same_crs(s)) {
+                Some(offset) => copy_aligned(s, &window, offset, opts.src_nodata.or(s.nodata))?,
+                None => gdalio::warp(
+                    &s.dataset,
+                    &s.path,
+                    &window,
+                    opts.resampling,
+                    opts.src_nodata,
+                )?,
+            }
         } else {
             let decoded = decode(s, opts)?;
             let geo = s.geotransform.expect("checked georeferenced");
@@ -396,6 +399,53 @@ fn warp_all(
         bail!("no input tile reaches the target extent");
     }
     Ok((tiles, grid, target))
+}
+
+/// When `source` lies on the window's own grid (same CRS, north-up, same
+/// cell size, whole-cell offset), the (column, row) of the window's origin in
+/// source cells: every kernel then reduces to copying cells.
+fn aligned_offset(source: &Source, window: &GridSpec, same_crs: bool) -> Option<(i64, i64)> {
+    let geo = source.geotransform?;
+    let (rx, ry) = window.geotransform.cell_size();
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs());
+    if !same_crs || !geo.is_north_up() || !close(geo.0[1], rx) || !close(-geo.0[5], ry) {
+        return None;
+    }
+    let dc = (window.geotransform.0[0] - geo.0[0]) / rx;
+    let dr = (geo.0[3] - window.geotransform.0[3]) / ry;
+    let whole = |v: f64| (v - v.round()).abs() < 1e-6;
+    (whole(dc) && whole(dr)).then(|| (dc.round() as i64, dr.round() as i64))
+}
+
+/// Fill the window from the source cells it overlaps, no-data elsewhere.
+fn copy_aligned(
+    source: &Source,
+    window: &GridSpec,
+    (dc, dr): (i64, i64),
+    nodata: Option<f64>,
+) -> Result<Raster> {
+    let mut out = Raster::empty(window.width, window.height, source.bands);
+    // Overlap of the window with the source, in source cells.
+    let c0 = dc.max(0);
+    let r0 = dr.max(0);
+    let c1 = (dc + window.width as i64).min(source.width as i64);
+    let r1 = (dr + window.height as i64).min(source.height as i64);
+    if c1 <= c0 || r1 <= r0 {
+        return Ok(out);
+    }
+    let (w, h) = ((c1 - c0) as usize, (r1 - r0) as usize);
+    let part = source.read_window(c0 as usize, r0 as usize, w, h, nodata)?;
+    let (oc, or) = ((c0 - dc) as usize, (r0 - dr) as usize);
+    for b in 0..source.bands {
+        let src = part.band(b);
+        let dst = out.band_mut(b);
+        for r in 0..h {
+            let at = (or + r) * window.width + oc;
+            dst[at..at + w].copy_from_slice(&src[r * w..(r + 1) * w]);
+        }
+    }
+    out.unify_validity();
+    Ok(out)
 }
 
 fn file_name(path: &Path) -> String {

@@ -19,17 +19,30 @@ pub fn distance_to_seeds(seed: &[bool], width: usize, height: usize) -> Vec<f32>
     let far = ((w * w + h * h) as f64) * 4.0;
     let is_inside = |x: usize, y: usize| !seed[y * width + x];
 
-    // Pass 1: along columns, stored column-major.
+    // Pass 1: along columns, stored column-major. For a binary input the 1-D
+    // transform is the distance to the nearest seed above or below: two sweeps.
     let mut by_column = vec![0.0f64; w * h];
-    by_column.par_chunks_mut(h).enumerate().for_each_init(
-        || Envelope::new(h),
-        |env, (x, column)| {
+    by_column
+        .par_chunks_mut(h)
+        .enumerate()
+        .for_each(|(x, column)| {
+            let mut last: Option<usize> = None;
             for (y, value) in column.iter_mut().enumerate() {
-                *value = if is_inside(x, y) { far } else { 0.0 };
+                if !is_inside(x, y) {
+                    last = Some(y);
+                }
+                *value = last.map_or(f64::INFINITY, |s| (y - s) as f64);
             }
-            env.transform(column);
-        },
-    );
+            last = None;
+            for (y, value) in column.iter_mut().enumerate().rev() {
+                if !is_inside(x, y) {
+                    last = Some(y);
+                }
+                let below = last.map_or(f64::INFINITY, |s| (s - y) as f64);
+                let d = value.min(below);
+                *value = if d.is_finite() { d * d } else { far };
+            }
+        });
 
     // Pass 2: along rows, reading the column pass transposed.
     let mut out = vec![0.0f32; width * height];
