@@ -74,12 +74,19 @@ fn sample_bundle_matches_golden_hashes() {
     assert_eq!(m["grid"]["valid_vertices"], 111 * 111);
     assert_eq!(m["color"]["bands"], serde_json::json!([3, 2, 1]));
     assert_eq!(m["inputs"].as_array().unwrap().len(), 2);
-    // Padding replicates the last real row and column.
     let heights: Vec<f32> = std::fs::read(out.join("height.f32"))
         .unwrap()
         .chunks(4)
         .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
         .collect();
+    // The DEM is already on the bundle grid: its heights are copied exactly.
+    let source = read(&repo("data/olinda/olinda_dem_utm25s.tif"));
+    for r in 0..111 {
+        for c in 0..111 {
+            assert_eq!(heights[r * 129 + c] as f64, source.bands[0][r * 111 + c], "({c}, {r})");
+        }
+    }
+    // Padding replicates the last real row and column.
     for r in 0..129 {
         for c in 111..129 {
             assert_eq!(heights[r * 129 + c], heights[r.min(110) * 129 + 110]);
