@@ -48,12 +48,13 @@ pub fn feather_weights(tile: &PlacedTile, covered: &[bool], grid_width: usize) -
     let c1 = (tile.col + r.width + 1).min(grid_width);
     let r1 = (tile.row + r.height + 1).min(grid_height);
     let (w, h) = (c1 - c0, r1 - r0);
+    let valid = r.valid_mask();
     let valid_here = |gc: usize, gr: usize| {
         gc >= tile.col
             && gr >= tile.row
             && gc < tile.col + r.width
             && gr < tile.row + r.height
-            && r.is_valid((gr - tile.row) * r.width + (gc - tile.col))
+            && valid[(gr - tile.row) * r.width + (gc - tile.col)]
     };
     let seed: Vec<bool> = (0..w * h)
         .map(|i| {
@@ -65,7 +66,7 @@ pub fn feather_weights(tile: &PlacedTile, covered: &[bool], grid_width: usize) -
     let mut weights = vec![0.0f32; r.cells()];
     for (i, weight) in weights.iter_mut().enumerate() {
         let (gc, gr) = (tile.col + i % r.width, tile.row + i / r.width);
-        if r.is_valid(i) {
+        if valid[i] {
             *weight = distance[(gr - r0) * w + (gc - c0)] - 0.5;
         }
     }
@@ -119,12 +120,13 @@ pub fn mosaic(
                 for tc in 0..r.width {
                     let i = tr * r.width + tc;
                     let c = tile.col + tc;
+                    // A blend weight is positive exactly where the tile has data.
                     let w = match rule {
                         Overlap::Blend => weights[ti][i] as f64,
-                        _ if weight_sum[c] > 0.0 => continue,
+                        _ if weight_sum[c] > 0.0 || !r.is_valid(i) => continue,
                         _ => 1.0,
                     };
-                    if w <= 0.0 || !r.is_valid(i) {
+                    if w <= 0.0 {
                         continue;
                     }
                     for b in 0..bands {
