@@ -17,6 +17,7 @@ use relevo_core::bundle::{
 };
 use relevo_core::geo::GeoTransform;
 use relevo_core::grid::HeightGrid;
+use relevo_core::lp::Hierarchy;
 use relevo_core::raster::fill::{fill_holes, FillReport};
 use relevo_core::raster::Raster;
 use serde::Serialize;
@@ -32,6 +33,7 @@ const STAGES: &[(&str, Stage)] = &[
     ("dem", stage_dem),
     ("fill", stage_fill),
     ("grid", stage_grid),
+    ("hierarchy", stage_hierarchy),
     ("drape", stage_drape),
     ("write", stage_write),
 ];
@@ -60,6 +62,7 @@ struct Build<'a> {
     cell_size_m: f64,
     fill: FillReport,
     grid: Option<HeightGrid>,
+    hierarchy: Option<Hierarchy>,
     color: Option<(Mosaic, [usize; 3])>,
     artifacts: BTreeMap<String, Artifact>,
     exports: BTreeMap<String, Artifact>,
@@ -81,6 +84,7 @@ pub fn prep(region: &Region, out: &Path, force: bool) -> Result<Summary> {
         cell_size_m: 1.0,
         fill: FillReport::default(),
         grid: None,
+        hierarchy: None,
         color: None,
         artifacts: BTreeMap::new(),
         exports: BTreeMap::new(),
@@ -184,6 +188,13 @@ fn stage_grid(b: &mut Build) -> Result<()> {
     Ok(())
 }
 
+/// Lindstrom–Pascucci errors and radii of every vertex.
+fn stage_hierarchy(b: &mut Build) -> Result<()> {
+    let grid = b.grid.as_ref().context("grid stage did not run")?;
+    b.hierarchy = Some(Hierarchy::compute(&grid.heights, grid.side, b.cell_size_m));
+    Ok(())
+}
+
 /// Bring the imagery onto the bundle CRS at its own resolution, cropped to the DEM.
 fn stage_drape(b: &mut Build) -> Result<()> {
     let Some(image) = &b.region.image else {
@@ -225,6 +236,14 @@ fn stage_write(b: &mut Build) -> Result<()> {
         b.writer
             .write_array("mask.u8", Dtype::U8, &[side, side], &grid.mask)?,
     );
+    if let Some(h) = &b.hierarchy {
+        let values: &[f32] = bytemuck::cast_slice(&h.error_radius);
+        b.artifacts.insert(
+            "lp".into(),
+            b.writer
+                .write_array("lp.f32x2", Dtype::F32, &[side, side, 2], values)?,
+        );
+    }
     std::fs::create_dir_all(b.writer.dir().join("exports")).context("cannot create exports/")?;
 
     let spec = GridSpec {

@@ -83,7 +83,11 @@ fn sample_bundle_matches_golden_hashes() {
     let source = read(&repo("data/olinda/olinda_dem_utm25s.tif"));
     for r in 0..111 {
         for c in 0..111 {
-            assert_eq!(heights[r * 129 + c] as f64, source.bands[0][r * 111 + c], "({c}, {r})");
+            assert_eq!(
+                heights[r * 129 + c] as f64,
+                source.bands[0][r * 111 + c],
+                "({c}, {r})"
+            );
         }
     }
     // Padding replicates the last real row and column.

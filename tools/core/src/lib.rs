@@ -13,6 +13,7 @@
 pub mod bundle;
 pub mod geo;
 pub mod grid;
+pub mod lp;
 pub mod raster;
 
 mod error;

@@ -1,10 +1,11 @@
 use super::{sha256_file, Bundle};
 use crate::grid::pow2_plus_1_at_least;
+use crate::lp::Hierarchy;
 
 /// Check a bundle against its manifest: every file present with the recorded
 /// size and SHA-256, array shapes consistent with their byte length, and the
 /// grid invariants (side 2^n+1, mask of 0/1 agreeing with the manifest,
-/// finite heights within the recorded range). Returns one line per problem;
+/// finite heights within the recorded range, nested LP errors and radii). Returns one line per problem;
 /// empty means valid.
 pub fn validate(bundle: &Bundle) -> Vec<String> {
     let mut problems = Vec::new();
@@ -89,6 +90,37 @@ pub fn validate(bundle: &Bundle) -> Vec<String> {
             "height: {} at vertex {bad} is outside the recorded range [{lo}, {hi}]",
             heights[bad]
         ));
+    }
+    if let Some(lp) = m.artifacts.get("lp") {
+        if lp.shape != [side, side, 2] {
+            problems.push(format!(
+                "lp: shape {:?}, expected [{side}, {side}, 2]",
+                lp.shape
+            ));
+        } else {
+            match bundle.array::<f32>("lp") {
+                Err(e) => problems.push(e.to_string()),
+                Ok(values) => {
+                    if let Some(bad) = values.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
+                        problems.push(format!(
+                            "lp: value {} at index {bad} is not a finite non-negative number",
+                            values[bad]
+                        ));
+                    } else {
+                        let h = Hierarchy {
+                            side,
+                            cell_size_m: m.grid.cell_size_m,
+                            error_radius: bytemuck::cast_slice(&values).to_vec(),
+                        };
+                        problems.extend(
+                            h.nesting_violations(&heights, 5)
+                                .into_iter()
+                                .map(|p| format!("lp: {p}")),
+                        );
+                    }
+                }
+            }
+        }
     }
     if let Some(color) = &m.color {
         match m.artifacts.get("color") {

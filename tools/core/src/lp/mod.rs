@@ -1,0 +1,37 @@
+//! Lindstrom–Pascucci view-dependent refinement over the (2^n+1)² grid.
+//!
+//! Lindstrom and Pascucci, "Terrain Simplification Simplified: A General
+//! Framework for View-Dependent Out-of-Core Visualization" (IEEE TVCG 2002),
+//! as presented in chapter 3 of the LP seed (pre-processing of errors and
+//! radii, `RefinaMalha`/`RefinaSubMalha`/`AnexaStrip`, culling, geomorphing).
+//!
+//! The mesh hierarchy is longest-edge bisection of right isosceles triangles:
+//! every vertex except the four corners is the midpoint of the hypotenuse of
+//! one or two triangles (its *diamond*), the triangles' right-angle vertices
+//! are its *parents*, and the midpoints of the legs are its *children*.
+//! - [`hierarchy`]: per-vertex object-space error δ and bounding-sphere radius
+//!   r, nested child → parent.
+//! - [`extract`]: the view-independent mesh for an object-space tolerance.
+//! - [`refine`]: the view-dependent triangle strip for a camera and a
+//!   screen-space tolerance, with frustum culling and geomorphing.
+//!
+//! Coordinates: vertex (c, r) of the grid (column, row; row 0 is north) sits
+//! in the *terrain frame* at x = c·cell (east), y = (side − 1 − r)·cell
+//! (north), z = height, all in metres.
+
+pub mod extract;
+pub mod hierarchy;
+
+pub use hierarchy::Hierarchy;
+
+/// Where vertex (c, r) of a `side`-wide grid with `cell`-metre spacing and
+/// height `z` lies in the terrain frame.
+#[inline]
+pub fn terrain_position(c: usize, r: usize, side: usize, cell: f64, z: f64) -> [f64; 3] {
+    [c as f64 * cell, (side - 1 - r) as f64 * cell, z]
+}
+
+/// Number of bisection levels of a `side` = 2^k + 1 grid: 2k.
+pub fn levels(side: usize) -> u32 {
+    2 * (side - 1).trailing_zeros()
+}
