@@ -132,9 +132,11 @@ fn stage_dem(b: &mut Build) -> Result<()> {
             bail!("the bundle CRS must be projected (metric), not geographic");
         }
     }
+    // Without georeferencing, cells are pixels: `cell_size_m` only scales them.
+    let georeferenced = first.geotransform.is_some();
     let mut opts = StitchOptions {
         target_crs: target.as_ref().map(crs::to_wkt).transpose()?,
-        resolution: r.cell_size_m.map(|c| (c, c)),
+        resolution: r.cell_size_m.filter(|_| georeferenced).map(|c| (c, c)),
         resampling: r.dem.resampling,
         src_nodata: r.dem.src_nodata.map(|n| n.value()),
         overlap: r.dem.overlap,
@@ -148,6 +150,10 @@ fn stage_dem(b: &mut Build) -> Result<()> {
         // The LP hierarchy needs square cells: stitch again at the finer spacing.
         opts.resolution = Some((cx.min(cy), cx.min(cy)));
         dem = stitch(&r.dem.files, &opts)?;
+    }
+    if !georeferenced {
+        let cell = r.cell_size_m.unwrap_or(1.0);
+        dem.grid.geotransform = GeoTransform::north_up(0.0, 0.0, cell, cell);
     }
     let (w, h) = (dem.grid.width, dem.grid.height);
     if w < 2 || h < 2 {

@@ -11,6 +11,7 @@
 //! - [`bundle`]: the `NAME.relevo/` directory: manifest, artifacts, validation.
 
 pub mod bundle;
+pub mod camera;
 pub mod geo;
 pub mod grid;
 pub mod lp;

@@ -21,6 +21,7 @@
 
 pub mod extract;
 pub mod hierarchy;
+pub mod refine;
 
 pub use hierarchy::Hierarchy;
 
