@@ -61,6 +61,12 @@ pub enum Command {
   relevo prep --dem srtm_ref.tif --out turkey.relevo --json
   relevo prep --dem t1.tif t2.tif --image ortho.tif --bands 3,2,1 --crs EPSG:32633 --out r.relevo --force")]
     Prep(PrepArgs),
+    /// Export the mesh at an object-space tolerance as glTF (.glb) or OBJ.
+    #[command(after_help = "Examples:
+  relevo mesh olinda.relevo --max-error 2 --out olinda.glb
+  relevo mesh olinda.relevo --max-error 0.5 --format obj --out olinda.obj   # also olinda.mtl, olinda.png
+  relevo mesh fuji.relevo --max-error 5 --keep-padding --out fuji.glb")]
+    Mesh(MeshArgs),
     /// Describe a bundle.
     #[command(after_help = "Examples:
   relevo info olinda.relevo
@@ -103,6 +109,30 @@ pub struct BenchArgs {
     /// The Relevo repository (for data/olinda).
     #[arg(long, default_value = ".")]
     pub repo: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct MeshArgs {
+    pub bundle: PathBuf,
+    /// Largest vertical error left, metres.
+    #[arg(long)]
+    pub max_error: f32,
+    /// Output format; default: from the output's extension.
+    #[arg(long, value_enum)]
+    pub format: Option<MeshFormat>,
+    #[arg(long, short)]
+    pub out: PathBuf,
+    /// Mesh the padding and voids too (as martini does), ignoring the mask.
+    #[arg(long)]
+    pub keep_padding: bool,
+    #[arg(long)]
+    pub force: bool,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq)]
+pub enum MeshFormat {
+    Glb,
+    Obj,
 }
 
 #[derive(Args, Debug)]
@@ -282,6 +312,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Fill(a) => run_fill(a),
         Command::Pad(a) => run_pad(a),
         Command::Prep(a) => run_prep(a),
+        Command::Mesh(a) => run_mesh(a),
         Command::Info { bundle, json } => run_info(&bundle, json),
         Command::Validate { bundle } => run_validate(&bundle),
         Command::Bench(BenchCommand::Ingest(a)) => {
@@ -519,6 +550,65 @@ fn run_prep(a: PrepArgs) -> Result<()> {
             total
         );
     }
+    Ok(())
+}
+
+fn run_mesh(a: MeshArgs) -> Result<()> {
+    use crate::mesh;
+    let format = match a.format {
+        Some(f) => f,
+        None => match a
+            .out
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .as_deref()
+        {
+            Some("glb") => MeshFormat::Glb,
+            Some("obj") => MeshFormat::Obj,
+            _ => bail!(
+                "{}: cannot tell the format from the extension; pass --format glb|obj",
+                a.out.display()
+            ),
+        },
+    };
+    if !(a.max_error.is_finite() && a.max_error >= 0.0) {
+        bail!(
+            "--max-error must be a non-negative number of metres, got {}",
+            a.max_error
+        );
+    }
+    check_output(&a.out, a.force)?;
+    let bundle = Bundle::open(&a.bundle)?;
+    let m = mesh::build(&bundle, a.max_error, a.keep_padding)?;
+    match format {
+        MeshFormat::Glb => {
+            mesh::write_atomic(&a.out, &mesh::to_glb(&m, &bundle.manifest.crs.wkt)?)?
+        }
+        MeshFormat::Obj => {
+            let stem = a
+                .out
+                .file_stem()
+                .map(|s| s.to_string_lossy().to_string())
+                .unwrap_or_else(|| "mesh".into());
+            if let Some(png) = &m.texture_png {
+                mesh::write_atomic(&a.out.with_file_name(format!("{stem}.png")), png)?;
+                let mtl = format!("newmtl drape\nKd 1 1 1\nmap_Kd {stem}.png\n");
+                mesh::write_atomic(&a.out.with_file_name(format!("{stem}.mtl")), mtl.as_bytes())?;
+            }
+            mesh::write_atomic(
+                &a.out,
+                &mesh::to_obj(&m, m.texture_png.as_ref().map(|_| stem.as_str())),
+            )?;
+        }
+    }
+    eprintln!(
+        "{}: {} vertices, {} triangles at {} m",
+        a.out.display(),
+        m.positions.len(),
+        m.triangles.len(),
+        a.max_error
+    );
     Ok(())
 }
 

@@ -5,6 +5,7 @@ pub mod bench;
 pub mod cli;
 pub mod crs;
 pub mod gdalio;
+pub mod mesh;
 pub mod prep;
 pub mod progress;
 pub mod region;
