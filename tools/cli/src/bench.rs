@@ -111,6 +111,8 @@ pub fn ingest(repo: &Path, data: &Path, runs: usize, json_lines: bool) -> Result
                     "-co",
                     "COMPRESS=DEFLATE",
                     "-co",
+                    "ZLEVEL=1",
+                    "-co",
                     "TILED=YES",
                 ])
                 .args(extra)
@@ -138,4 +140,227 @@ fn tempfile_dir() -> Result<PathBuf> {
     let dir = std::env::temp_dir().join(format!("relevo-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir).with_context(|| dir.display().to_string())?;
     Ok(dir)
+}
+
+/// A deterministic fractal heightfield (diamond-square with hash-based
+/// offsets, Hurst exponent about 0.75), `side` = 2^n + 1, heights in metres.
+pub fn fractal_heights(side: usize, seed: u64) -> Vec<f32> {
+    let mut z = vec![0.0f64; side * side];
+    let hash = |c: usize, r: usize| {
+        let mut x = seed ^ ((c as u64) << 32 | r as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        x ^= x >> 29;
+        x = x.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        x ^= x >> 32;
+        (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    let mut step = side - 1;
+    let mut amplitude = 1500.0;
+    while step > 1 {
+        let half = step / 2;
+        for r in (half..side).step_by(step) {
+            for c in (half..side).step_by(step) {
+                let corners = z[(r - half) * side + c - half]
+                    + z[(r - half) * side + c + half]
+                    + z[(r + half) * side + c - half]
+                    + z[(r + half) * side + c + half];
+                z[r * side + c] = corners / 4.0 + amplitude * hash(c, r);
+            }
+        }
+        for r in (0..side).step_by(half) {
+            let start = if (r / half) % 2 == 0 { half } else { 0 };
+            for c in (start..side).step_by(step) {
+                let mut sum = 0.0;
+                let mut n = 0.0;
+                for (dc, dr) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
+                    let (nc, nr) = (c as i64 + dc * half as i64, r as i64 + dr * half as i64);
+                    if nc >= 0 && nr >= 0 && nc < side as i64 && nr < side as i64 {
+                        sum += z[nr as usize * side + nc as usize];
+                        n += 1.0;
+                    }
+                }
+                z[r * side + c] = sum / n + amplitude * hash(c, r);
+            }
+        }
+        step = half;
+        // Roughness of real relief: amplitude falls by 2^-0.75 per octave.
+        amplitude *= 0.6;
+    }
+    z.into_iter().map(|v| v as f32).collect()
+}
+
+/// Hierarchy figures: ours beside @mapbox/martini on the same grids, and
+/// view-dependent refinement on each grid.
+pub fn hierarchy(
+    repo: &Path,
+    data: &Path,
+    runs: usize,
+    max_side: usize,
+    json_lines: bool,
+) -> Result<()> {
+    use relevo_core::camera::Camera;
+    use relevo_core::grid::{HeightGrid, Squaring};
+    use relevo_core::lp::refine::{RefineParams, Refiner};
+    use relevo_core::lp::{Hierarchy, Layout};
+
+    let scratch = tempfile_dir()?;
+    let mut grids: Vec<(String, usize, Vec<f32>)> = [257usize, 1025, 4097, 8193]
+        .into_iter()
+        .filter(|&s| s <= max_side)
+        .map(|s| (format!("fractal {s}²"), s, fractal_heights(s, 1)))
+        .collect();
+    let srtm = gdalio::open(&data.join("dem/srtm_ref.tif"))?;
+    let raw = srtm.read(srtm.nodata)?;
+    let square = HeightGrid::square(
+        raw.band(0),
+        raw.width,
+        raw.height,
+        relevo_core::geo::GeoTransform::IDENTITY,
+        Squaring::Pad,
+    );
+    grids.push(("srtm_ref padded".into(), square.side, square.heights));
+
+    let script = repo.join("tools/js/martini-bench.mjs");
+    for (name, side, heights) in &grids {
+        let cell = 30.0;
+        let ours = median_ms(runs, || {
+            std::hint::black_box(Hierarchy::compute(heights, *side, cell));
+            Ok(())
+        })?;
+        let h = Hierarchy::compute(heights, *side, cell);
+
+        // martini needs the terrain as raw float32; 8193² exceeds its u16 coordinates.
+        let martini = if *side <= 4097 {
+            let file = scratch.join(format!("{side}.f32"));
+            std::fs::write(&file, bytemuck::cast_slice::<f32, u8>(heights))?;
+            let out = Command::new("node")
+                .arg(&script)
+                .arg(runs.min(5).to_string())
+                .arg(&file)
+                .arg(side.to_string())
+                .output()
+                .context("cannot run node (scripts/setup installs it and martini)")?;
+            if !out.status.success() {
+                bail!(
+                    "martini benchmark failed: {}",
+                    String::from_utf8_lossy(&out.stderr)
+                );
+            }
+            let v: serde_json::Value = serde_json::from_slice(&out.stdout)?;
+            v["create_ms"].as_f64()
+        } else {
+            None
+        };
+
+        // Refinement: 1920×1080, τ = 1 px, culling on, eight headings, from
+        // above the middle of the grid looking 20° down.
+        let extent = (*side - 1) as f64 * cell;
+        let top = heights.iter().cloned().fold(f32::MIN, f32::max) as f64;
+        let mut refiner = Refiner::new();
+        let mut times = Vec::new();
+        let mut triangles = Vec::new();
+        let view = |k: usize| Camera {
+            position: glam::DVec3::new(extent * 0.5, extent * 0.5, top + 300.0),
+            heading_deg: k as f64 * 45.0,
+            pitch_deg: -20.0,
+            fov_x_deg: 60.0,
+            width: 1920,
+            height: 1080,
+            near_m: 1.0,
+            far_m: extent * 2.0,
+        };
+        for k in 0..8 {
+            let params = RefineParams::for_camera(&view(k), 1.0, None, true);
+            refiner.refine(&h, heights, &params); // warm the buffers
+            let ms = median_ms(runs, || {
+                std::hint::black_box(refiner.refine(&h, heights, &params));
+                Ok(())
+            })?;
+            times.push(ms);
+            triangles.push(refiner.refine(&h, heights, &params).triangles().count());
+        }
+        // The same views with every per-vertex array in 64×64 tiles.
+        let tiled_er = Layout::Tiled.arrange(*side, &h.error_radius);
+        let tiled_z = Layout::Tiled.arrange(*side, heights);
+        let mut tiled_times = Vec::new();
+        for k in 0..8 {
+            let params = RefineParams::for_camera(&view(k), 1.0, None, true);
+            tiled_times.push(median_ms(runs, || {
+                std::hint::black_box(refiner.refine_in(
+                    Layout::Tiled,
+                    *side,
+                    cell,
+                    &tiled_er,
+                    &tiled_z,
+                    &params,
+                ));
+                Ok(())
+            })?);
+        }
+        tiled_times.sort_by(f64::total_cmp);
+        let refine_tiled_ms = (tiled_times[3] + tiled_times[4]) / 2.0;
+
+        // Whole `prep` on the grid written as a GeoTIFF (30 m, UTM 33N).
+        let prep_ms = {
+            let tif = scratch.join(format!("{side}.tif"));
+            let raster = relevo_core::raster::Raster::from_data(
+                *side,
+                *side,
+                1,
+                heights.iter().map(|&v| v as f64).collect(),
+            );
+            let spec = gdalio::GridSpec {
+                crs_wkt: crate::crs::to_wkt(&crate::crs::parse("EPSG:32633")?)?,
+                geotransform: relevo_core::geo::GeoTransform::north_up(
+                    500_000.0,
+                    5_000_000.0,
+                    cell,
+                    cell,
+                ),
+                width: *side,
+                height: *side,
+            };
+            gdalio::write_geotiff(
+                &tif,
+                &raster,
+                &spec,
+                gdal::raster::GdalDataType::Float32,
+                None,
+            )?;
+            let region: Region = toml::from_str(&format!(
+                "[dem]\nfiles = [{:?}]\n",
+                tif.display().to_string()
+            ))?;
+            let out = scratch.join(format!("{side}.relevo"));
+            median_ms(1, || prep(&region, &out, true).map(|_| ()))?
+        };
+
+        let mut sorted = times.clone();
+        sorted.sort_by(f64::total_cmp);
+        let refine_ms = (sorted[3] + sorted[4]) / 2.0;
+        let strip_entries: Vec<f64> = (0..8)
+            .map(|k| triangles[k] as f64 / times[k] / 1e3)
+            .collect();
+        let mtris = strip_entries.iter().sum::<f64>() / 8.0;
+        let median_triangles = {
+            let mut t = triangles.clone();
+            t.sort();
+            (t[3] + t[4]) / 2
+        };
+        let msamples = (*side * *side) as f64 / ours / 1e3;
+        emit(
+            json_lines,
+            json!({
+                "grid": side, "input": name, "ours_ms": ours, "martini_ms": martini,
+                "speedup": martini.map(|m| m / ours), "msamples_per_s": msamples,
+                "refine_ms": refine_ms, "refine_tiled_ms": refine_tiled_ms,
+                "triangles": median_triangles, "mtriangles_per_s": mtris, "prep_ms": prep_ms,
+            }),
+            format!(
+                "{name:>16}: errors+radii {ours:8.1} ms ({msamples:6.1} Msamples/s), martini createTile {}, refine τ=1px {refine_ms:6.2} ms (tiled {refine_tiled_ms:6.2}) for {median_triangles} triangles ({mtris:.1} M/s), prep {prep_ms:.0} ms",
+                martini.map_or("n/a".to_string(), |m| format!("{m:8.1} ms ({:.0}×)", m / ours))
+            ),
+        );
+    }
+    let _ = std::fs::remove_dir_all(&scratch);
+    Ok(())
 }

@@ -93,6 +93,17 @@ pub enum BenchCommand {
   relevo bench ingest
   relevo bench ingest --json --runs 7 --data ../shared/data")]
     Ingest(BenchArgs),
+    /// LP errors and radii beside @mapbox/martini; view-dependent refinement.
+    #[command(after_help = "Examples:
+  relevo bench hierarchy --json
+  relevo bench hierarchy --max-side 8193 --runs 3")]
+    Hierarchy {
+        #[command(flatten)]
+        common: BenchArgs,
+        /// Largest fractal grid side to run (257, 1025, 4097, 8193).
+        #[arg(long, default_value_t = 4097)]
+        max_side: usize,
+    },
 }
 
 #[derive(Args, Debug)]
@@ -318,6 +329,10 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Bench(BenchCommand::Ingest(a)) => {
             crate::bench::ingest(&a.repo, &a.data, a.runs.max(1), a.json)
         }
+        Command::Bench(BenchCommand::Hierarchy {
+            common: a,
+            max_side,
+        }) => crate::bench::hierarchy(&a.repo, &a.data, a.runs.max(1), max_side, a.json),
     }
 }
 

@@ -137,8 +137,19 @@ impl Source {
                         last_error("read failed")
                     )
                 })?;
+            let nan_is_nodata = nodata.is_some_and(f64::is_nan);
+            if !nan_is_nodata {
+                let nans = buffer.data().iter().filter(|v| v.is_nan()).count();
+                if nans > 0 {
+                    bail!(
+                        "{}: {nans} value(s) are NaN but the file does not declare NaN as no-data; \
+                         pass --src-nodata nan to treat them as holes",
+                        self.path.display()
+                    );
+                }
+            }
             data.extend(buffer.data().iter().map(|&v| match nodata {
-                Some(nd) if v == nd || (nd.is_nan() && v.is_nan()) => f64::NAN,
+                Some(nd) if v == nd || nan_is_nodata && v.is_nan() => f64::NAN,
                 _ => v,
             }));
         }
@@ -393,8 +404,10 @@ fn write_typed<T: FromF64>(
     let mut options = RasterCreationOptions::new();
     for (k, v) in [
         ("COMPRESS", "DEFLATE"),
+        ("ZLEVEL", "1"),
         ("TILED", "YES"),
         ("BIGTIFF", "IF_SAFER"),
+        ("NUM_THREADS", "ALL_CPUS"),
     ] {
         options.set_name_value(k, v)?;
     }

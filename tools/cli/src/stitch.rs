@@ -59,9 +59,20 @@ pub struct Placement {
 
 /// Open, check, warp and combine `paths`.
 pub fn stitch(paths: &[PathBuf], opts: &StitchOptions) -> Result<Mosaic> {
-    let p = place(paths, opts)?;
+    let mut p = place(paths, opts)?;
     let bands = p.tiles.first().map_or(1, |t| t.raster.bands);
-    let raster = mosaic(p.grid.width, p.grid.height, bands, &p.tiles, opts.overlap);
+    let whole_grid = |t: &PlacedTile| {
+        t.col == 0
+            && t.row == 0
+            && t.raster.width == p.grid.width
+            && t.raster.height == p.grid.height
+    };
+    let raster = if p.tiles.len() == 1 && whole_grid(&p.tiles[0]) {
+        // One tile covering the grid is its own mosaic.
+        p.tiles.remove(0).raster
+    } else {
+        mosaic(p.grid.width, p.grid.height, bands, &p.tiles, opts.overlap)
+    };
     if raster.valid_count() == 0 {
         let names: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
         bail!(
@@ -195,20 +206,6 @@ fn check_sources(sources: &[Source], opts: &StitchOptions) -> Result<()> {
                 "{}: has no band {b} (bands are 1..={available})",
                 first.path.display()
             );
-        }
-    }
-    for s in sources {
-        let nodata = opts.src_nodata.or(s.nodata);
-        if gdalio::is_float(s.band_type) && !nodata.is_some_and(f64::is_nan) {
-            let raster = s.read(None)?;
-            let nans = raster.data.iter().filter(|v| v.is_nan()).count();
-            if nans > 0 {
-                bail!(
-                    "{}: {nans} value(s) are NaN but the file does not declare NaN as no-data; \
-                     pass --src-nodata nan to treat them as holes",
-                    s.path.display()
-                );
-            }
         }
     }
     Ok(())
@@ -373,13 +370,21 @@ fn warp_all(
         let raster = if opts.encoding == Encoding::Plain {
             match aligned_offset(s, &window, same_crs(s)) {
                 Some(offset) => copy_aligned(s, &window, offset, opts.src_nodata.or(s.nodata))?,
-                None => gdalio::warp(
-                    &s.dataset,
-                    &s.path,
-                    &window,
-                    opts.resampling,
-                    opts.src_nodata,
-                )?,
+                None => {
+                    // GDAL's warper would take NaN for no-data silently;
+                    // reading once refuses undeclared NaN with the file named.
+                    let nodata = opts.src_nodata.or(s.nodata);
+                    if gdalio::is_float(s.band_type) && !nodata.is_some_and(f64::is_nan) {
+                        s.read(nodata)?;
+                    }
+                    gdalio::warp(
+                        &s.dataset,
+                        &s.path,
+                        &window,
+                        opts.resampling,
+                        opts.src_nodata,
+                    )?
+                }
             }
         } else {
             let decoded = decode(s, opts)?;

@@ -64,7 +64,11 @@ impl HeightGrid {
     ) -> HeightGrid {
         assert_eq!(values.len(), width * height);
         let valid: Vec<bool> = values.iter().map(|v| !v.is_nan()).collect();
-        let dense = nearest_fill(values, width, height);
+        let dense: std::borrow::Cow<[f64]> = if valid.iter().all(|&v| v) {
+            std::borrow::Cow::Borrowed(values)
+        } else {
+            std::borrow::Cow::Owned(nearest_fill(values, width, height))
+        };
         match squaring {
             Squaring::Pad => {
                 let side = pow2_plus_1_at_least(width.max(height));

@@ -50,11 +50,12 @@ impl Hierarchy {
         );
         assert_eq!(heights.len(), side * side);
         let mut out = vec![[0.0f32; 2]; side * side];
-        let mut scratch = Vec::new();
-        let mut h = 1;
+        finest_levels(heights, side, cell_size_m, &mut out);
+        let shared = SharedOut::new(&mut out);
+        let mut h = 2;
         while h < side - 1 {
-            edge_level(heights, side, cell_size_m, h, &mut out, &mut scratch);
-            centre_level(heights, side, cell_size_m, h, &mut out, &mut scratch);
+            coarse_level(heights, side, cell_size_m, h, true, shared);
+            coarse_level(heights, side, cell_size_m, h, false, shared);
             h *= 2;
         }
         Hierarchy {
@@ -148,13 +149,20 @@ fn own_error(heights: &[f32], a: usize, b: usize, m: usize) -> f64 {
     (average - heights[m] as f64).abs()
 }
 
-/// Error and radius of vertex (c, r) from its own error and its children.
+/// Distance between two terrain-frame points, metres.
+#[inline]
+fn distance(p: [f64; 3], q: [f64; 3]) -> f64 {
+    ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
+}
+
+/// Error and radius of vertex (c, r) from its own error and its finished
+/// children in `out`.
 #[inline]
 fn combine(
     heights: &[f32],
     side: usize,
     cell: f64,
-    out: &[[f32; 2]],
+    out: SharedOut,
     (c, r): (usize, usize),
     own: f64,
     children: &[(i64, i64)],
@@ -170,9 +178,10 @@ fn combine(
         let (nc, nr) = (nc as usize, nr as usize);
         let k = nr * side + nc;
         let q = terrain_position(nc, nr, side, cell, heights[k] as f64);
-        error = error.max(out[k][0]);
-        let d = ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt();
-        radius = radius.max(d + out[k][1] as f64);
+        // SAFETY: children belong to finer levels, finished before this one.
+        let [child_error, child_radius] = unsafe { out.get(k) };
+        error = error.max(child_error);
+        radius = radius.max(distance(p, q) + child_radius as f64);
     }
     [error, round_up(radius)]
 }
@@ -188,55 +197,123 @@ fn round_up(v: f64) -> f32 {
     }
 }
 
-/// One level of the hierarchy: the vertices on rows `first, first + step, …`,
-/// at the columns `columns(row)` gives as (start, step).
-struct Level {
-    first_row: usize,
-    row_step: usize,
-    columns: fn(usize, usize) -> (usize, usize),
-    h: usize,
+/// The output array shared by the threads of one level: each level writes
+/// only its own vertices and reads only finer levels' vertices, which no
+/// thread writes during that level, so accesses never overlap.
+#[derive(Clone, Copy)]
+struct SharedOut {
+    ptr: *mut [f32; 2],
+    len: usize,
 }
 
-impl Level {
-    /// Compute `value(c, r)` for every vertex of the level from the finished
-    /// finer levels in `out`, then store the results. Values are computed in
-    /// parallel into `scratch`, so `out` is only read while they are.
-    fn run(
-        &self,
-        out: &mut [[f32; 2]],
-        scratch: &mut Vec<[f32; 2]>,
-        side: usize,
-        value: impl Fn(&[[f32; 2]], usize, usize) -> [f32; 2] + Sync,
-    ) {
-        let rows: Vec<usize> = (self.first_row..side).step_by(self.row_step).collect();
-        let per_row = (side - 1) / (2 * self.h) + 1;
-        scratch.clear();
-        scratch.resize(rows.len() * per_row, [0.0; 2]);
-        let read: &[[f32; 2]] = out;
-        scratch
-            .par_chunks_mut(per_row)
-            .zip(&rows)
-            .for_each(|(values, &r)| {
-                let (start, step) = (self.columns)(r, self.h);
-                for (value_out, c) in values.iter_mut().zip((start..side).step_by(step)) {
-                    *value_out = value(read, c, r);
-                }
-            });
-        let written: &[[f32; 2]] = scratch;
-        out.par_chunks_mut(side).enumerate().for_each(|(r, row)| {
-            if r < self.first_row || (r - self.first_row) % self.row_step != 0 {
-                return;
-            }
-            let k = (r - self.first_row) / self.row_step;
-            let (start, step) = (self.columns)(r, self.h);
-            for (v, c) in written[k * per_row..(k + 1) * per_row]
-                .iter()
-                .zip((start..side).step_by(step))
-            {
-                row[c] = *v;
-            }
-        });
+// SAFETY: see the type's documentation; every access is to a distinct
+// element or to one no thread writes at that time.
+unsafe impl Send for SharedOut {}
+unsafe impl Sync for SharedOut {}
+
+impl SharedOut {
+    fn new(out: &mut [[f32; 2]]) -> Self {
+        SharedOut {
+            ptr: out.as_mut_ptr(),
+            len: out.len(),
+        }
     }
+    /// # Safety
+    /// No thread may be writing element `i`.
+    unsafe fn get(&self, i: usize) -> [f32; 2] {
+        assert!(i < self.len);
+        *self.ptr.add(i)
+    }
+    /// # Safety
+    /// No other thread may be reading or writing element `i`.
+    unsafe fn set(&self, i: usize, value: [f32; 2]) {
+        assert!(i < self.len);
+        *self.ptr.add(i) = value;
+    }
+}
+
+/// Both levels of scale 1 in one pass over the rows. Edge vertices of scale
+/// 1 have no children; a centre vertex of a 2-block has the four edge
+/// vertices around it as children, whose errors are recomputed here from
+/// the heights (the same arithmetic as when they are stored), so each row
+/// depends on the heights alone.
+fn finest_levels(heights: &[f32], side: usize, cell: f64, out: &mut [[f32; 2]]) {
+    out.par_chunks_mut(side).enumerate().for_each(|(r, row)| {
+        let at = |c: usize, r: usize| r * side + c;
+        let edge_error = |c: usize, r: usize| {
+            let m = at(c, r);
+            if r % 2 == 0 {
+                own_error(heights, m - 1, m + 1, m)
+            } else {
+                own_error(heights, m - side, m + side, m)
+            }
+        };
+        if r % 2 == 0 {
+            for c in (1..side).step_by(2) {
+                row[c] = [edge_error(c, r) as f32, 0.0];
+            }
+            return;
+        }
+        for c in (0..side).step_by(2) {
+            row[c] = [edge_error(c, r) as f32, 0.0];
+        }
+        for c in (1..side).step_by(2) {
+            let (a, b) = hypotenuse(side, c, r, 1, false);
+            let mut error = own_error(heights, a, b, at(c, r)) as f32;
+            let p = terrain_position(c, r, side, cell, heights[at(c, r)] as f64);
+            // The children have radius 0: the largest squared distance gives
+            // the radius with one square root (sqrt is monotonic and exact).
+            let mut farthest = 0.0f64;
+            // The vertical edges beside it on this row are already stored.
+            error = error.max(row[c - 1][0]).max(row[c + 1][0]);
+            for (k, (nc, nr)) in [(c - 1, r), (c + 1, r), (c, r - 1), (c, r + 1)]
+                .into_iter()
+                .enumerate()
+            {
+                if k >= 2 {
+                    error = error.max(edge_error(nc, nr) as f32);
+                }
+                let q = terrain_position(nc, nr, side, cell, heights[at(nc, nr)] as f64);
+                farthest = farthest
+                    .max((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2));
+            }
+            row[c] = [error, round_up(farthest.sqrt())];
+        }
+    });
+}
+
+/// The edge (`edge`) or centre vertices of scale `h` ≥ 2, rows in parallel.
+fn coarse_level(heights: &[f32], side: usize, cell: f64, h: usize, edge: bool, out: SharedOut) {
+    let (q, hi) = ((h / 2) as i64, h as i64);
+    let children: [(i64, i64); 4] = if edge {
+        [(-q, -q), (q, -q), (-q, q), (q, q)]
+    } else {
+        [(-hi, 0), (hi, 0), (0, -hi), (0, hi)]
+    };
+    let (first_row, row_step) = if edge { (0, h) } else { (h, 2 * h) };
+    let rows: Vec<usize> = (first_row..side).step_by(row_step).collect();
+    rows.into_par_iter().for_each(|r| {
+        let (start, step) = if edge {
+            edge_columns(r, h)
+        } else {
+            centre_columns(r, h)
+        };
+        for c in (start..side).step_by(step) {
+            let (a, b) = hypotenuse(side, c, r, h, edge);
+            let m = r * side + c;
+            let value = combine(
+                heights,
+                side,
+                cell,
+                out,
+                (c, r),
+                own_error(heights, a, b, m),
+                &children,
+            );
+            // SAFETY: (c, r) belongs to this level and to this row only.
+            unsafe { out.set(m, value) };
+        }
+    });
 }
 
 /// A vertex as [`visit_bottom_up`] presents it; all fields are row-major
@@ -321,72 +398,6 @@ fn edge_columns(r: usize, h: usize) -> (usize, usize) {
 /// Columns of centre vertices: c ≡ h (mod 2h).
 fn centre_columns(_r: usize, h: usize) -> (usize, usize) {
     (h, 2 * h)
-}
-
-/// Edge vertices of scale h: (c ≡ h, r ≡ 0) and (c ≡ 0, r ≡ h) modulo 2h.
-fn edge_level(
-    heights: &[f32],
-    side: usize,
-    cell: f64,
-    h: usize,
-    out: &mut [[f32; 2]],
-    scratch: &mut Vec<[f32; 2]>,
-) {
-    let q = (h / 2) as i64;
-    let kids: &[(i64, i64)] = if h >= 2 {
-        &[(-q, -q), (q, -q), (-q, q), (q, q)]
-    } else {
-        &[]
-    };
-    let level = Level {
-        first_row: 0,
-        row_step: h,
-        columns: edge_columns,
-        h,
-    };
-    level.run(out, scratch, side, |read, c, r| {
-        let (a, b) = hypotenuse(side, c, r, h, true);
-        combine(
-            heights,
-            side,
-            cell,
-            read,
-            (c, r),
-            own_error(heights, a, b, r * side + c),
-            kids,
-        )
-    });
-}
-
-/// Centre vertices of 2h-blocks: c ≡ h and r ≡ h modulo 2h.
-fn centre_level(
-    heights: &[f32],
-    side: usize,
-    cell: f64,
-    h: usize,
-    out: &mut [[f32; 2]],
-    scratch: &mut Vec<[f32; 2]>,
-) {
-    let hi = h as i64;
-    let kids = [(-hi, 0), (hi, 0), (0, -hi), (0, hi)];
-    let level = Level {
-        first_row: h,
-        row_step: 2 * h,
-        columns: centre_columns,
-        h,
-    };
-    level.run(out, scratch, side, |read, c, r| {
-        let (a, b) = hypotenuse(side, c, r, h, false);
-        combine(
-            heights,
-            side,
-            cell,
-            read,
-            (c, r),
-            own_error(heights, a, b, r * side + c),
-            &kids,
-        )
-    });
 }
 
 #[cfg(test)]

@@ -12,7 +12,7 @@
 //! each vertex's height between the edge it replaces and its own (seed eqs.
 //! 3–8), cascading through the heights of already-morphed ancestors.
 
-use super::{levels, terrain_position, Hierarchy};
+use super::{levels, terrain_position, Hierarchy, Layout};
 
 /// What to refine for.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -48,7 +48,8 @@ impl RefineParams {
     }
 }
 
-/// A triangle strip over grid vertices (row-major indices). Consecutive
+/// A triangle strip over grid vertices (indices in the layout refined,
+/// row-major unless [`Refiner::refine_in`] was given another). Consecutive
 /// triples are triangles of alternating orientation; triples with a
 /// repeated vertex are degenerate and draw nothing.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -84,9 +85,11 @@ pub struct Refiner {
 
 /// Everything the recursion reads, bundled to keep its signature short.
 struct Ctx<'a> {
-    h: &'a Hierarchy,
+    error_radius: &'a [[f32; 2]],
     heights: &'a [f32],
+    layout: Layout,
     side: usize,
+    cell: f64,
     eye: [f64; 3],
     /// ν = λ/τ (activation; λ/τmin when morphing).
     nu_max: f64,
@@ -102,11 +105,33 @@ impl Refiner {
 
     /// Refine `h` (with its `heights`) for `p` and return the strip.
     pub fn refine(&mut self, h: &Hierarchy, heights: &[f32], p: &RefineParams) -> &Strip {
-        let side = h.side;
-        let ctx = Ctx {
-            h,
+        self.refine_in(
+            Layout::RowMajor,
+            h.side,
+            h.cell_size_m,
+            &h.error_radius,
             heights,
+            p,
+        )
+    }
+
+    /// Refine from per-vertex arrays stored in `layout` (`error_radius` and
+    /// `heights` both); the strip's indices are in that layout too.
+    pub fn refine_in(
+        &mut self,
+        layout: Layout,
+        side: usize,
+        cell_size_m: f64,
+        error_radius: &[[f32; 2]],
+        heights: &[f32],
+        p: &RefineParams,
+    ) -> &Strip {
+        let ctx = Ctx {
+            error_radius,
+            heights,
+            layout,
             side,
+            cell: cell_size_m,
             eye: p.eye,
             nu_max: p.lambda / p.tau_px,
             nu_min: p.morph_tau_max_px.map(|t| p.lambda / t),
@@ -114,7 +139,7 @@ impl Refiner {
         };
         let m = (side - 1) as i64;
         let hh = m / 2;
-        let z = |c: i64, r: i64| heights[r as usize * side + c as usize];
+        let z = |c: i64, r: i64| heights[layout.index(side, c as usize, r as usize)];
         let (sw, se, ne, nw) = ((0, m), (m, m), (m, 0), (0, 0));
         let centre = (hh, hh);
         let inside = if p.planes.is_some() { 0 } else { ALL_INSIDE };
@@ -125,7 +150,7 @@ impl Refiner {
         self.strip.indices.clear();
         self.strip.morphed_z.clear();
         self.parity = 0;
-        let idx = |v: (i64, i64)| (v.1 as usize * side + v.0 as usize) as u32;
+        let idx = |v: (i64, i64)| layout.index(side, v.0 as usize, v.1 as usize) as u32;
         self.push(idx(sw), z(sw.0, sw.1));
         self.push(idx(sw), z(sw.0, sw.1));
         let quadrants = [
@@ -198,16 +223,10 @@ impl Refiner {
             return;
         }
         let side = ctx.side;
-        let vi = i.1 as usize * side + i.0 as usize;
+        let vi = ctx.layout.index(side, i.0 as usize, i.1 as usize);
         let zi = ctx.heights[vi];
-        let p = terrain_position(
-            i.0 as usize,
-            i.1 as usize,
-            side,
-            ctx.h.cell_size_m,
-            zi as f64,
-        );
-        let [delta, radius] = ctx.h.error_radius[vi];
+        let p = terrain_position(i.0 as usize, i.1 as usize, side, ctx.cell, zi as f64);
+        let [delta, radius] = ctx.error_radius[vi];
         let (delta, radius) = (delta as f64, radius as f64);
         let d2 =
             (p[0] - ctx.eye[0]).powi(2) + (p[1] - ctx.eye[1]).powi(2) + (p[2] - ctx.eye[2]).powi(2);
