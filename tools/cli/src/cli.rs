@@ -55,6 +55,11 @@ pub enum Command {
   relevo pad dem.tif --out dem_1025.tif            # also writes dem_1025_mask.tif
   relevo pad dem.tif --resample --out dem_sq.tif --mask-out mask.tif")]
     Pad(PadArgs),
+    /// Compute LP object-space errors and bounding-sphere radii of a (2^n+1)² heightfield.
+    #[command(after_help = "Examples:
+  relevo pad dem.tif --out dem_1025.tif && relevo hierarchy dem_1025.tif --out lp.tif
+  relevo hierarchy fuji_513.tif --cell-size 30 --out lp.tif")]
+    Hierarchy(HierarchyArgs),
     /// Build a bundle from a REGION.toml, or straight from rasters.
     #[command(after_help = "Examples:
   relevo prep data/olinda/REGION.toml --out olinda.relevo
@@ -120,6 +125,20 @@ pub struct BenchArgs {
     /// The Relevo repository (for data/olinda).
     #[arg(long, default_value = ".")]
     pub repo: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct HierarchyArgs {
+    /// Square (2^n+1)² heights in metres, e.g. from `relevo pad`.
+    pub input: PathBuf,
+    /// Output GeoTIFF: band 1 error δ, band 2 radius r, metres.
+    #[arg(long, short)]
+    pub out: PathBuf,
+    /// Vertex spacing in metres; default: the input's cell size.
+    #[arg(long)]
+    pub cell_size: Option<f64>,
+    #[arg(long)]
+    pub force: bool,
 }
 
 #[derive(Args, Debug)]
@@ -324,6 +343,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Pad(a) => run_pad(a),
         Command::Prep(a) => run_prep(a),
         Command::Mesh(a) => run_mesh(a),
+        Command::Hierarchy(a) => run_hierarchy(a),
         Command::Info { bundle, json } => run_info(&bundle, json),
         Command::Validate { bundle } => run_validate(&bundle),
         Command::Bench(BenchCommand::Ingest(a)) => {
@@ -565,6 +585,52 @@ fn run_prep(a: PrepArgs) -> Result<()> {
             total
         );
     }
+    Ok(())
+}
+
+fn run_hierarchy(a: HierarchyArgs) -> Result<()> {
+    check_output(&a.out, a.force)?;
+    let (raster, grid, _, _) = read_single(&a.input, None)?;
+    let side = raster.width;
+    if raster.height != side || side < 3 || !(side - 1).is_power_of_two() {
+        bail!(
+            "{}: {}×{} cells; the hierarchy needs a square (2^n+1)² grid (run `relevo pad` first)",
+            a.input.display(),
+            raster.width,
+            raster.height
+        );
+    }
+    if raster.valid_count() != raster.cells() {
+        bail!(
+            "{}: has no-data cells; fill or pad it first",
+            a.input.display()
+        );
+    }
+    let (cx, cy) = grid.geotransform.cell_size();
+    let cell = match a.cell_size {
+        Some(c) if c.is_finite() && c > 0.0 => c,
+        Some(c) => bail!("--cell-size must be positive, got {c}"),
+        None if (cx - cy).abs() <= 1e-9 * cx => cx,
+        None => bail!(
+            "{}: cells are {cx} × {cy}, not square; pass --cell-size",
+            a.input.display()
+        ),
+    };
+    let heights: Vec<f32> = raster.band(0).iter().map(|&v| v as f32).collect();
+    let h = relevo_core::lp::Hierarchy::compute(&heights, side, cell);
+    let data = h
+        .error_radius
+        .iter()
+        .map(|e| e[0] as f64)
+        .chain(h.error_radius.iter().map(|e| e[1] as f64))
+        .collect();
+    let out = Raster::from_data(side, side, 2, data);
+    gdalio::write_geotiff(&a.out, &out, &grid, GdalDataType::Float32, None)?;
+    let max_error = h.error_radius.iter().map(|e| e[0]).fold(0.0, f32::max);
+    eprintln!(
+        "{}: {side}×{side} vertices, largest error {max_error:.3} m",
+        a.out.display()
+    );
     Ok(())
 }
 

@@ -458,3 +458,40 @@ mod refinement {
         );
     }
 }
+
+#[test]
+fn hierarchy_command_matches_the_bundle_and_refuses_non_square_input() {
+    let d = tempfile::tempdir().unwrap();
+    let dem = shared("dem/luxembourg_elev.tif");
+    let padded = d.path().join("lux_129.tif");
+    relevo_ok([
+        "pad".as_ref(),
+        dem.as_os_str(),
+        "--out".as_ref(),
+        padded.as_os_str(),
+    ]);
+    let lp = d.path().join("lp.tif");
+    relevo_ok([
+        "hierarchy".as_ref(),
+        padded.as_os_str(),
+        "--cell-size".as_ref(),
+        "30".as_ref(),
+        "--out".as_ref(),
+        lp.as_os_str(),
+    ]);
+    let r = read(&lp);
+    assert_eq!((r.width, r.height, r.bands.len()), (129, 129, 2));
+    let heights: Vec<f32> = read(&padded).bands[0].iter().map(|&v| v as f32).collect();
+    let h = Hierarchy::compute(&heights, 129, 30.0);
+    for (i, e) in h.error_radius.iter().enumerate() {
+        assert_eq!((r.bands[0][i] as f32, r.bands[1][i] as f32), (e[0], e[1]));
+    }
+    let out = relevo([
+        "hierarchy".as_ref(),
+        dem.as_os_str(),
+        "--out".as_ref(),
+        d.path().join("x.tif").as_os_str(),
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("(2^n+1)²"));
+}
