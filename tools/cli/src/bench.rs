@@ -262,6 +262,7 @@ pub fn hierarchy(
             position: glam::DVec3::new(extent * 0.5, extent * 0.5, top + 300.0),
             heading_deg: k as f64 * 45.0,
             pitch_deg: -20.0,
+            incl_px: 540.0,
             fov_x_deg: 60.0,
             width: 1920,
             height: 1080,

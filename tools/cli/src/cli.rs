@@ -72,6 +72,12 @@ pub enum Command {
   relevo mesh olinda.relevo --max-error 0.5 --format obj --out olinda.obj   # also olinda.mtl, olinda.png
   relevo mesh fuji.relevo --max-error 5 --keep-padding --out fuji.glb")]
     Mesh(MeshArgs),
+    /// Render a bundle with the CPU floating-horizon raycaster (PNG and depth).
+    #[command(after_help = "Examples:
+  relevo render olinda.relevo --camera 290000,9112000,400,45,300 --size 960x540 --out shot.png
+  relevo render olinda.relevo --camera 290000,9112000,400,45,300 --depth depth.f32 --bands 2000:4:sub,inf:1 --out shot.png
+  relevo render olinda.relevo --camera 290000,9112000,400,45,300 --mode distorted --out voxel_space.png")]
+    Render(RenderArgs),
     /// Describe a bundle.
     #[command(after_help = "Examples:
   relevo info olinda.relevo
@@ -128,6 +134,69 @@ pub struct BenchArgs {
 }
 
 #[derive(Args, Debug)]
+pub struct RenderArgs {
+    pub bundle: PathBuf,
+    /// Eye easting, northing (bundle CRS), height (m), heading (° clockwise
+    /// from north) and incl (projection-plane shift: the screen row, in pixels
+    /// from the bottom, of the horizon; larger looks further down).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_negative_numbers = true,
+        value_name = "X,Y,Z,HEADING[,INCL]",
+        required = true
+    )]
+    pub camera: Vec<f64>,
+    /// Horizontal field of view, degrees.
+    #[arg(long, default_value_t = 60.0)]
+    pub fov: f64,
+    /// Image size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "960x540", value_parser = parse_size)]
+    pub size: [u32; 2],
+    /// Far plane, in grid cells.
+    #[arg(long, default_value_t = 1024.0)]
+    pub far: f64,
+    #[arg(long, value_enum, default_value_t = RenderMode::Raycast)]
+    pub mode: RenderMode,
+    /// 16.16 fixed-point inner loop instead of floating point.
+    #[arg(long)]
+    pub fixed: bool,
+    /// Distance bands UNTIL_M:SLICES_PER_CELL[:sub], e.g. 3000:4:sub,inf:1 (sub = sub-voxel bilinear).
+    #[arg(long, value_parser = crate::render::parse_bands)]
+    pub bands: Option<std::vec::Vec<relevo_core::horizon::Band>>,
+    /// Sample prefiltered colour levels by slice footprint (anti-aliasing).
+    #[arg(long)]
+    pub prefilter: bool,
+    /// Bake a hillshade: sun AZIMUTH,ELEVATION in degrees.
+    #[arg(long, value_delimiter = ',', value_name = "AZIMUTH,ELEVATION")]
+    pub hillshade: Option<Vec<f64>>,
+    /// Also write the depth buffer: raw little-endian f32, row-major, top row first, [0, 1].
+    #[arg(long)]
+    pub depth: Option<PathBuf>,
+    #[arg(long, short)]
+    pub out: PathBuf,
+    #[arg(long)]
+    pub force: bool,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum RenderMode {
+    Raycast,
+    Distorted,
+}
+
+fn parse_size(text: &str) -> Result<[u32; 2], String> {
+    let (w, h) = text
+        .split_once('x')
+        .ok_or_else(|| format!("{text:?}: expected WIDTHxHEIGHT"))?;
+    let parse = |v: &str| v.parse::<u32>().ok().filter(|&v| (1..=16384).contains(&v));
+    match (parse(w), parse(h)) {
+        (Some(w), Some(h)) => Ok([w, h]),
+        _ => Err(format!("{text:?}: expected WIDTHxHEIGHT, each 1..=16384")),
+    }
+}
+
+#[derive(Args, Debug)]
 pub struct HierarchyArgs {
     /// Square (2^n+1)² heights in metres, e.g. from `relevo pad`.
     pub input: PathBuf,
@@ -177,7 +246,7 @@ pub struct StitchArgs {
     #[arg(long = "t-srs")]
     pub t_srs: Option<String>,
     /// Target cell size: one value for square cells, or X,Y.
-    #[arg(long, value_delimiter = ',', num_args = 1..=2)]
+    #[arg(long, value_delimiter = ',', value_name = "X[,Y]")]
     pub tr: Option<Vec<f64>>,
     /// Target extent in target CRS units.
     #[arg(long, num_args = 4, value_names = ["XMIN", "YMIN", "XMAX", "YMAX"], allow_negative_numbers = true)]
@@ -295,7 +364,7 @@ pub struct PrepArgs {
     #[arg(long, num_args = 1..)]
     pub image: Vec<PathBuf>,
     /// Image bands shown as red, green, blue (quick form), e.g. 3,2,1.
-    #[arg(long, value_delimiter = ',', num_args = 3)]
+    #[arg(long, value_delimiter = ',', value_name = "R,G,B")]
     pub bands: Option<Vec<usize>>,
     /// DEM encoding (quick form).
     #[arg(long, value_enum, default_value_t = EncodingArg::Plain)]
@@ -343,6 +412,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Pad(a) => run_pad(a),
         Command::Prep(a) => run_prep(a),
         Command::Mesh(a) => run_mesh(a),
+        Command::Render(a) => run_render(a),
         Command::Hierarchy(a) => run_hierarchy(a),
         Command::Info { bundle, json } => run_info(&bundle, json),
         Command::Validate { bundle } => run_validate(&bundle),
@@ -380,6 +450,9 @@ fn check_output(out: &Path, force: bool) -> Result<()> {
 
 fn run_stitch(a: StitchArgs) -> Result<()> {
     check_output(&a.out, a.force)?;
+    if a.tr.as_ref().is_some_and(|v| v.len() > 2) {
+        bail!("--tr takes X or X,Y");
+    }
     let resolution = a.tr.map(|v| (v[0], *v.get(1).unwrap_or(&v[0])));
     let opts = StitchOptions {
         target_crs: a.t_srs,
@@ -526,6 +599,9 @@ fn run_pad(a: PadArgs) -> Result<()> {
 }
 
 fn run_prep(a: PrepArgs) -> Result<()> {
+    if a.bands.as_ref().is_some_and(|b| b.len() != 3) {
+        bail!("--bands takes three bands R,G,B, e.g. 3,2,1");
+    }
     let region = match &a.region {
         Some(path) => Region::load(path)?,
         None => {
@@ -585,6 +661,61 @@ fn run_prep(a: PrepArgs) -> Result<()> {
             total
         );
     }
+    Ok(())
+}
+
+fn run_render(a: RenderArgs) -> Result<()> {
+    use crate::render;
+    check_output(&a.out, a.force)?;
+    if let Some(d) = &a.depth {
+        check_output(d, a.force)?;
+    }
+    if !(a.fov > 0.0 && a.fov < 179.0) {
+        bail!("--fov must be between 0 and 179 degrees, got {}", a.fov);
+    }
+    if !(a.far >= 2.0) {
+        bail!("--far must be at least 2 cells, got {}", a.far);
+    }
+    if !(4..=5).contains(&a.camera.len()) {
+        bail!(
+            "--camera takes X,Y,Z,HEADING[,INCL], got {} value(s)",
+            a.camera.len()
+        );
+    }
+    if a.hillshade.as_ref().is_some_and(|h| h.len() != 2) {
+        bail!("--hillshade takes AZIMUTH,ELEVATION");
+    }
+    let bundle = Bundle::open(&a.bundle)?;
+    let view = render::View {
+        eye: [a.camera[0], a.camera[1], a.camera[2]],
+        heading_deg: a.camera[3],
+        incl_px: a.camera.get(4).copied(),
+        fov_x_deg: a.fov,
+        size: a.size,
+        far_cells: a.far,
+    };
+    let mode = match a.mode {
+        RenderMode::Raycast => relevo_core::horizon::Mode::Raycast,
+        RenderMode::Distorted => relevo_core::horizon::Mode::Distorted,
+    };
+    let options = render::options(mode, a.fixed, a.bands, a.prefilter)?;
+    let hillshade = a.hillshade.map(|v| [v[0], v[1]]);
+    let frame = render::render_bundle(&bundle, &view, &options, hillshade)?;
+    render::write_png(&a.out, &frame)?;
+    if let Some(d) = &a.depth {
+        crate::mesh::write_atomic(d, bytemuck::cast_slice(&frame.depth))?;
+    }
+    let s = frame.steps;
+    eprintln!(
+        "{}: {}×{} in {:.1} ms (setup {:.1}, march {:.1}, output {:.1})",
+        a.out.display(),
+        frame.width,
+        frame.height,
+        s.setup_ms + s.march_ms + s.output_ms,
+        s.setup_ms,
+        s.march_ms,
+        s.output_ms
+    );
     Ok(())
 }
 

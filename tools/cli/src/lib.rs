@@ -9,4 +9,5 @@ pub mod mesh;
 pub mod prep;
 pub mod progress;
 pub mod region;
+pub mod render;
 pub mod stitch;

@@ -12,6 +12,11 @@ pub struct Camera {
     pub heading_deg: f64,
     /// Elevation of the view direction above the horizon, degrees.
     pub pitch_deg: f64,
+    /// Vertical shift of the projection plane (the seed's `incl`): the
+    /// screen row, in pixels from the bottom, that the view axis passes
+    /// through. `height / 2` is the usual centred projection; the floating-
+    /// horizon raycast keeps `pitch_deg` at 0 and looks down by raising it.
+    pub incl_px: f64,
     /// Horizontal field of view, degrees.
     pub fov_x_deg: f64,
     /// Viewport size in pixels.
@@ -41,20 +46,36 @@ impl Camera {
         DMat4::look_to_rh(self.position, forward, up)
     }
 
-    /// Vertical field of view in radians, from the horizontal one and the aspect.
-    pub fn fov_y(&self) -> f64 {
-        let aspect = self.height as f64 / self.width as f64;
-        2.0 * ((self.fov_x_deg.to_radians() / 2.0).tan() * aspect).atan()
+    /// Eye → clip transform with depth in [0, 1], as wgpu expects: the
+    /// off-axis frustum of seed 000, eqs. 5.1–5.6, scaled to the near plane —
+    /// left/right at ∓tan(q/2), bottom at −2·tan(q/2)·incl/w and top at
+    /// 2·tan(q/2)·(h − incl)/w, for horizontal field of view q.
+    pub fn projection(&self) -> DMat4 {
+        let (n, f) = (self.near_m, self.far_m);
+        let tan = (self.fov_x_deg.to_radians() / 2.0).tan();
+        let (w, h) = (self.width as f64, self.height as f64);
+        let (l, r) = (-tan * n, tan * n);
+        let b = -2.0 * tan * self.incl_px / w * n;
+        let t = 2.0 * tan * (h - self.incl_px) / w * n;
+        DMat4::from_cols(
+            DVec4::new(2.0 * n / (r - l), 0.0, 0.0, 0.0),
+            DVec4::new(0.0, 2.0 * n / (t - b), 0.0, 0.0),
+            DVec4::new((r + l) / (r - l), (t + b) / (t - b), f / (n - f), -1.0),
+            DVec4::new(0.0, 0.0, n * f / (n - f), 0.0),
+        )
     }
 
-    /// Eye → clip transform with depth in [0, 1], as wgpu expects.
-    pub fn projection(&self) -> DMat4 {
-        DMat4::perspective_rh(
-            self.fov_y(),
-            self.width as f64 / self.height as f64,
-            self.near_m,
-            self.far_m,
-        )
+    /// Distance from the eye to the projection plane in pixels,
+    /// d = w / (2·tan(q/2)) (seed 000, chapter 7).
+    pub fn plane_distance_px(&self) -> f64 {
+        self.width as f64 / (2.0 * (self.fov_x_deg.to_radians() / 2.0).tan())
+    }
+
+    /// The [0, 1] depth of a point `distance_m` ahead of the eye along the
+    /// view axis: (f − f·n/d)/(f − n), seed 000 eq. 5.11 with near n and far f.
+    pub fn depth_at(&self, distance_m: f64) -> f64 {
+        let (n, f) = (self.near_m, self.far_m);
+        (f - f * n / distance_m) / (f - n)
     }
 
     pub fn view_projection(&self) -> DMat4 {
@@ -91,6 +112,7 @@ mod tests {
             position: DVec3::new(100.0, 200.0, 50.0),
             heading_deg: 30.0,
             pitch_deg: -10.0,
+            incl_px: 540.0,
             fov_x_deg: 60.0,
             width: 1920,
             height: 1080,
@@ -120,6 +142,21 @@ mod tests {
         let ndc = clip.truncate() / clip.w;
         assert!(ndc.x.abs() < 1e-9 && ndc.y.abs() < 1e-9);
         assert!(ndc.z > 0.0 && ndc.z < 1.0);
+    }
+
+    #[test]
+    fn off_axis_projection_puts_the_horizon_on_row_incl() {
+        let mut c = camera();
+        c.pitch_deg = 0.0;
+        c.incl_px = 200.0;
+        // A far point at eye height projects onto screen row incl (from the bottom).
+        let clip = c.view_projection() * (c.position + c.forward() * 5000.0).extend(1.0);
+        let ndc_y = clip.y / clip.w;
+        let row_from_bottom = (ndc_y + 1.0) / 2.0 * c.height as f64;
+        assert!((row_from_bottom - 200.0).abs() < 1e-6, "{row_from_bottom}");
+        // Depth agrees with eq. 5.11.
+        let ndc_z = clip.z / clip.w;
+        assert!((ndc_z - c.depth_at(5000.0)).abs() < 1e-12);
     }
 
     #[test]

@@ -14,6 +14,7 @@ pub mod bundle;
 pub mod camera;
 pub mod geo;
 pub mod grid;
+pub mod horizon;
 pub mod lp;
 pub mod raster;
 

@@ -1,0 +1,335 @@
+//! What the raycaster samples: heights (nearest voxel or sub-voxel
+//! bilinear), the mask, and colour from the drape image (optionally from a
+//! prefiltered level and with baked hillshade).
+
+use crate::geo::GeoTransform;
+
+/// Sub-voxel divisions per cell side (seed 000, §6.2 uses 8).
+const DIVISIONS: usize = 8;
+
+/// Bilinear weights of the four voxels around each of the DIVISIONS² sub-voxels,
+/// `[top-left, top-right, bottom-left, bottom-right]` in grid order — the
+/// contribution matrix of seed 000, Algorithm 3, taken at sub-voxel centres.
+fn contribution_matrix() -> [[[f64; 4]; DIVISIONS]; DIVISIONS] {
+    let mut m = [[[0.0; 4]; DIVISIONS]; DIVISIONS];
+    for (p, row) in m.iter_mut().enumerate() {
+        for (q, w) in row.iter_mut().enumerate() {
+            let (u, v) = (
+                (q as f64 + 0.5) / DIVISIONS as f64,
+                (p as f64 + 0.5) / DIVISIONS as f64,
+            );
+            *w = [(1.0 - u) * (1.0 - v), u * (1.0 - v), (1.0 - u) * v, u * v];
+        }
+    }
+    m
+}
+
+/// One level of the colour pyramid.
+struct Level {
+    width: usize,
+    height: usize,
+    texels: Vec<[u8; 4]>,
+}
+
+/// The drape image, as levels halving in size (level 0 is the image).
+pub struct ColorSource {
+    levels: Vec<Level>,
+    /// Terrain frame (x, y) → level-0 pixel (u, v): u = a₀ + a₁x + a₂y, v = a₃ + a₄x + a₅y.
+    to_pixel: [f64; 6],
+    /// Ground size of a level-0 pixel, metres.
+    texel_m: f64,
+}
+
+impl ColorSource {
+    /// `rgba` (row-major, `width`×`height`) georeferenced by `color_geo`, on
+    /// a grid whose cells are georeferenced by `grid_geo` with `side` vertices
+    /// of `cell_m` spacing.
+    pub fn new(
+        rgba: &[u8],
+        width: usize,
+        height: usize,
+        color_geo: &GeoTransform,
+        grid_geo: &GeoTransform,
+        side: usize,
+        cell_m: f64,
+    ) -> Option<Self> {
+        // Terrain frame → grid cell coordinates → world → colour pixel, all affine.
+        let world =
+            |x: f64, y: f64| grid_geo.apply(x / cell_m + 0.5, (side - 1) as f64 - y / cell_m + 0.5);
+        let pixel = |x: f64, y: f64| {
+            let (wx, wy) = world(x, y);
+            color_geo.invert(wx, wy)
+        };
+        let (o, ex, ey) = (pixel(0.0, 0.0)?, pixel(1.0, 0.0)?, pixel(0.0, 1.0)?);
+        let to_pixel = [o.0, ex.0 - o.0, ey.0 - o.0, o.1, ex.1 - o.1, ey.1 - o.1];
+        let texel_m = color_geo.cell_size().0.max(color_geo.cell_size().1);
+        let mut levels = vec![Level {
+            width,
+            height,
+            texels: rgba
+                .chunks_exact(4)
+                .map(|c| [c[0], c[1], c[2], c[3]])
+                .collect(),
+        }];
+        while levels.last().is_some_and(|l| l.width > 1 || l.height > 1) {
+            let prev = levels.last().expect("non-empty");
+            let (w, h) = (prev.width.div_ceil(2), prev.height.div_ceil(2));
+            let mut texels = Vec::with_capacity(w * h);
+            for r in 0..h {
+                for c in 0..w {
+                    // Average of the (up to four) texels below, weighting by alpha.
+                    let mut sum = [0u32; 4];
+                    for (dc, dr) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                        let t = prev.texels[(2 * r + dr).min(prev.height - 1) * prev.width
+                            + (2 * c + dc).min(prev.width - 1)];
+                        for k in 0..4 {
+                            sum[k] += t[k] as u32;
+                        }
+                    }
+                    texels.push(sum.map(|s| ((s + 2) / 4) as u8));
+                }
+            }
+            levels.push(Level {
+                width: w,
+                height: h,
+                texels,
+            });
+        }
+        Some(ColorSource {
+            levels,
+            to_pixel,
+            texel_m,
+        })
+    }
+}
+
+/// The terrain the raycaster reads.
+pub struct Terrain<'a> {
+    pub side: usize,
+    /// Vertex spacing, metres.
+    pub cell_m: f64,
+    heights: &'a [f32],
+    heights_fixed: Vec<i64>,
+    mask: &'a [u8],
+    color: Option<ColorSource>,
+    /// Per-vertex light factor, when hillshade is baked in.
+    shade: Option<Vec<f32>>,
+    weights: [[[f64; 4]; DIVISIONS]; DIVISIONS],
+}
+
+impl<'a> Terrain<'a> {
+    pub fn new(
+        side: usize,
+        cell_m: f64,
+        heights: &'a [f32],
+        mask: &'a [u8],
+        color: Option<ColorSource>,
+    ) -> Self {
+        assert_eq!(heights.len(), side * side);
+        assert_eq!(mask.len(), side * side);
+        Terrain {
+            side,
+            cell_m,
+            heights,
+            heights_fixed: heights
+                .iter()
+                .map(|&h| (h as f64 * 65536.0) as i64)
+                .collect(),
+            mask,
+            color,
+            shade: None,
+            weights: contribution_matrix(),
+        }
+    }
+
+    /// Bake a hillshade into the colour: Lambert shading of the grid's
+    /// normals for a sun at `azimuth_deg` (clockwise from north) and
+    /// `elevation_deg`, with 35 % ambient light.
+    pub fn with_hillshade(mut self, azimuth_deg: f64, elevation_deg: f64) -> Self {
+        let (az, el) = (azimuth_deg.to_radians(), elevation_deg.to_radians());
+        let sun = [az.sin() * el.cos(), az.cos() * el.cos(), el.sin()];
+        let (side, cell) = (self.side, self.cell_m);
+        let z = |c: usize, r: usize| self.heights[r * side + c] as f64;
+        let shade = (0..side * side)
+            .map(|i| {
+                let (c, r) = (i % side, i / side);
+                let (c0, c1) = (c.saturating_sub(1), (c + 1).min(side - 1));
+                let (r0, r1) = (r.saturating_sub(1), (r + 1).min(side - 1));
+                let gx = (z(c1, r) - z(c0, r)) / ((c1 - c0) as f64 * cell);
+                let gy = (z(c, r0) - z(c, r1)) / ((r1 - r0) as f64 * cell);
+                let n = [-gx, -gy, 1.0];
+                let len = (n[0] * n[0] + n[1] * n[1] + 1.0).sqrt();
+                let lambert = ((n[0] * sun[0] + n[1] * sun[1] + n[2] * sun[2]) / len).max(0.0);
+                (0.35 + 0.65 * lambert) as f32
+            })
+            .collect();
+        self.shade = Some(shade);
+        self
+    }
+
+    /// Colour level whose texels match a screen pixel of `metres_per_pixel`.
+    pub(super) fn color_level(&self, metres_per_pixel: f64) -> usize {
+        match &self.color {
+            None => 0,
+            Some(c) => {
+                let ratio = metres_per_pixel / c.texel_m;
+                if ratio <= 1.0 {
+                    0
+                } else {
+                    (ratio.log2().floor() as usize).min(c.levels.len() - 1)
+                }
+            }
+        }
+    }
+
+    /// Grid position (column, row), fractional, of terrain-frame (x, y).
+    #[inline]
+    fn grid(&self, x: f64, y: f64) -> (f64, f64) {
+        (x / self.cell_m, (self.side - 1) as f64 - y / self.cell_m)
+    }
+
+    /// Nearest vertex with data, if (c, r) is on the grid.
+    #[inline]
+    fn vertex(&self, c: f64, r: f64) -> Option<usize> {
+        let (c, r) = (c.round(), r.round());
+        if c < 0.0 || r < 0.0 || c > (self.side - 1) as f64 || r > (self.side - 1) as f64 {
+            return None;
+        }
+        let i = r as usize * self.side + c as usize;
+        (self.mask[i] == 1).then_some(i)
+    }
+
+    /// The four vertices around (c, r) and the weights of its sub-voxel.
+    #[inline]
+    fn bilinear(&self, c: f64, r: f64) -> ([usize; 4], [f64; 4]) {
+        let last = (self.side - 2) as f64;
+        let (c0, r0) = (c.floor().clamp(0.0, last), r.floor().clamp(0.0, last));
+        let q = (((c - c0) * DIVISIONS as f64) as usize).min(DIVISIONS - 1);
+        let p = (((r - r0) * DIVISIONS as f64) as usize).min(DIVISIONS - 1);
+        let i = r0 as usize * self.side + c0 as usize;
+        (
+            [i, i + 1, i + self.side, i + self.side + 1],
+            self.weights[p][q],
+        )
+    }
+
+    /// Terrain height at (x, y), metres; `None` off the grid or over masked cells.
+    #[inline]
+    pub fn height(&self, x: f64, y: f64, subvoxel: bool) -> Option<f64> {
+        let (c, r) = self.grid(x, y);
+        let nearest = self.vertex(c, r)?;
+        if !subvoxel {
+            return Some(self.heights[nearest] as f64);
+        }
+        let (v, w) = self.bilinear(c, r);
+        Some((0..4).map(|k| w[k] * self.heights[v[k]] as f64).sum())
+    }
+
+    /// Height at a 16.16 fixed-point grid position (`x`, `y` in cells of the
+    /// terrain frame), in 16.16 metres.
+    #[inline]
+    pub(super) fn height_fixed(&self, x: i64, y: i64, subvoxel: bool) -> Option<i64> {
+        let last = ((self.side - 1) as i64) << 16;
+        let (c, r) = (x, last - y);
+        if c < -(1 << 15) || r < -(1 << 15) || c >= last + (1 << 15) || r >= last + (1 << 15) {
+            return None;
+        }
+        let (nc, nr) = (
+            ((c + (1 << 15)) >> 16) as usize,
+            ((r + (1 << 15)) >> 16) as usize,
+        );
+        let nearest = nr * self.side + nc;
+        if self.mask[nearest] != 1 {
+            return None;
+        }
+        if !subvoxel {
+            return Some(self.heights_fixed[nearest]);
+        }
+        let max = ((self.side - 2) as i64) << 16;
+        let (c, r) = (c.clamp(0, max + 0xffff), r.clamp(0, max + 0xffff));
+        let (c0, r0) = (
+            (c >> 16).min(self.side as i64 - 2) as usize,
+            (r >> 16).min(self.side as i64 - 2) as usize,
+        );
+        let q = (((c - ((c0 as i64) << 16)) * DIVISIONS as i64) >> 16)
+            .clamp(0, DIVISIONS as i64 - 1) as usize;
+        let p = (((r - ((r0 as i64) << 16)) * DIVISIONS as i64) >> 16)
+            .clamp(0, DIVISIONS as i64 - 1) as usize;
+        let w = self.weights[p][q];
+        let i = r0 * self.side + c0;
+        let v = [i, i + 1, i + self.side, i + self.side + 1];
+        Some(
+            (0..4)
+                .map(|k| (w[k] * self.heights_fixed[v[k]] as f64) as i64)
+                .sum(),
+        )
+    }
+
+    /// Colour at (x, y) from colour level `level`, RGBA packed little-endian.
+    #[inline]
+    pub fn color(&self, x: f64, y: f64, subvoxel: bool, level: usize) -> u32 {
+        let (c, r) = self.grid(x, y);
+        let light = match &self.shade {
+            None => 1.0,
+            Some(shade) => match self.vertex(c, r) {
+                Some(i) => shade[i],
+                None => 1.0,
+            },
+        };
+        let rgb: [f64; 3] = match &self.color {
+            None => {
+                // No imagery: a grey ramp by height.
+                let z = self.height(x, y, false).unwrap_or(0.0);
+                let g = (80.0 + (z * 0.05).rem_euclid(150.0)).min(255.0);
+                [g, g, g]
+            }
+            Some(src) => {
+                let t = &src.to_pixel;
+                let scale = (1u64 << level) as f64;
+                let u = (t[0] + t[1] * x + t[2] * y) / scale;
+                let v = (t[3] + t[4] * x + t[5] * y) / scale;
+                let lv = &src.levels[level];
+                let texel = |cu: f64, cv: f64| {
+                    let cu = cu.clamp(0.0, (lv.width - 1) as f64) as usize;
+                    let cv = cv.clamp(0.0, (lv.height - 1) as f64) as usize;
+                    lv.texels[cv * lv.width + cu]
+                };
+                if subvoxel {
+                    let (u0, v0) = ((u - 0.5).floor(), (v - 0.5).floor());
+                    let (fu, fv) = (u - 0.5 - u0, v - 0.5 - v0);
+                    let ws = [
+                        (1.0 - fu) * (1.0 - fv),
+                        fu * (1.0 - fv),
+                        (1.0 - fu) * fv,
+                        fu * fv,
+                    ];
+                    let ts = [
+                        texel(u0, v0),
+                        texel(u0 + 1.0, v0),
+                        texel(u0, v0 + 1.0),
+                        texel(u0 + 1.0, v0 + 1.0),
+                    ];
+                    let mut rgb = [0.0; 3];
+                    for (w, t) in ws.iter().zip(ts) {
+                        for k in 0..3 {
+                            rgb[k] += w * t[k] as f64;
+                        }
+                    }
+                    rgb
+                } else {
+                    let t = texel(u.floor(), v.floor());
+                    [t[0] as f64, t[1] as f64, t[2] as f64]
+                }
+            }
+        };
+        let [r8, g8, b8] = rgb.map(|v| (v * light as f64).round().clamp(0.0, 255.0) as u8);
+        u32::from_le_bytes([r8, g8, b8, 255])
+    }
+
+    /// [`Terrain::color`] at a 16.16 fixed-point grid position.
+    #[inline]
+    pub(super) fn color_fixed(&self, x: i64, y: i64, subvoxel: bool, level: usize) -> u32 {
+        let to_m = self.cell_m / 65536.0;
+        self.color(x as f64 * to_m, y as f64 * to_m, subvoxel, level)
+    }
+}
