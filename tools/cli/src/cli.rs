@@ -673,7 +673,7 @@ fn run_render(a: RenderArgs) -> Result<()> {
     if !(a.fov > 0.0 && a.fov < 179.0) {
         bail!("--fov must be between 0 and 179 degrees, got {}", a.fov);
     }
-    if !(a.far >= 2.0) {
+    if a.far.is_nan() || a.far < 2.0 {
         bail!("--far must be at least 2 cells, got {}", a.far);
     }
     if !(4..=5).contains(&a.camera.len()) {
