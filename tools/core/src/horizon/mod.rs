@@ -115,8 +115,22 @@ struct Slice {
     /// Screen pixels per metre of height at this distance, d/s.
     scale: f64,
     subvoxel: bool,
-    /// Colour level from the footprint.
-    level: usize,
+    /// With prefiltering: a screen pixel's ground footprint across the ray
+    /// (s/d) and the factor s²/d that, divided by the eye's height above the
+    /// ground, gives its footprint along the ray; metres.
+    footprint: Option<(f64, f64)>,
+}
+
+impl Slice {
+    /// Colour level for a sample at height `z` seen from `eye_z`: the
+    /// larger of the pixel's two ground footprints picks it.
+    #[inline]
+    fn level(&self, terrain: &Terrain, eye_z: f64, z: f64) -> usize {
+        match self.footprint {
+            None => 0,
+            Some((across, along)) => terrain.color_level(across.max(along / (eye_z - z).max(1e-3))),
+        }
+    }
 }
 
 /// Forward distances of the slices from the near to the far plane
@@ -131,17 +145,13 @@ fn slices(terrain: &Terrain, camera: &Camera, opts: &RenderOptions) -> Vec<Slice
             band += 1;
         }
         let b = opts.bands[band];
-        let level = if opts.prefilter {
-            terrain.color_level(s / d)
-        } else {
-            0
-        };
+        let footprint = opts.prefilter.then_some((s / d, s * s / d));
         out.push(Slice {
             distance_m: s,
             depth: camera.depth_at(s) as f32,
             scale: d / s,
             subvoxel: b.subvoxel,
-            level,
+            footprint,
         });
         s += terrain.cell_m / b.slices_per_cell;
     }
@@ -240,6 +250,62 @@ pub fn render(terrain: &Terrain, camera: &Camera, opts: &RenderOptions) -> Frame
     }
 }
 
+/// The ray through the centre of pixel (`px`, `py`) (from the top-left),
+/// as a terrain-frame direction scaled so that moving by `dir · s` advances
+/// the forward distance by s. Pitch must be 0.
+pub fn pixel_ray(camera: &Camera, px: f64, py: f64) -> [f64; 3] {
+    let d = camera.plane_distance_px();
+    let heading = camera.heading_deg.to_radians();
+    let (forward, right) = (
+        [heading.sin(), heading.cos()],
+        [heading.cos(), -heading.sin()],
+    );
+    let across = px + 0.5 - camera.width as f64 / 2.0;
+    let up = (camera.height as f64 - 1.0 - py) + 0.5 - camera.incl_px;
+    [
+        forward[0] + right[0] * across / d,
+        forward[1] + right[1] * across / d,
+        up / d,
+    ]
+}
+
+/// Where the ray through pixel (`px`, `py`) first meets the exact bilinear
+/// terrain surface, as a forward distance in metres: an independent
+/// reference for the raycaster's depth, and a way to pick terrain points.
+/// Marches in steps of 1/32 cell, then bisects.
+pub fn pick(terrain: &Terrain, camera: &Camera, px: f64, py: f64) -> Option<f64> {
+    let dir = pixel_ray(camera, px, py);
+    let eye = camera.position;
+    let below = |s: f64| {
+        let (x, y, z) = (eye.x + dir[0] * s, eye.y + dir[1] * s, eye.z + dir[2] * s);
+        terrain.surface(x, y).map(|ground| z <= ground)
+    };
+    let step = terrain.cell_m / 32.0;
+    let mut s = camera.near_m;
+    while s <= camera.far_m {
+        if below(s) == Some(true) {
+            let (mut lo, mut hi) = (s - step, s);
+            for _ in 0..40 {
+                let mid = (lo + hi) / 2.0;
+                if below(mid) == Some(true) {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+            }
+            return Some(hi.max(camera.near_m));
+        }
+        s += step;
+    }
+    None
+}
+
+/// Forward distance of a [0, 1] depth, inverting eq. 5.11.
+pub fn distance_of_depth(camera: &Camera, depth: f64) -> f64 {
+    let (n, f) = (camera.near_m, camera.far_m);
+    f * n / (f - depth * (f - n))
+}
+
 /// One column in floating point (seed 000, Algorithm 1 with depth, line 11A).
 fn march_float(
     terrain: &Terrain,
@@ -262,7 +328,7 @@ fn march_float(
         if (row as f64 + 0.5) >= top {
             continue;
         }
-        let c = terrain.color(x, y, s.subvoxel, s.level);
+        let c = terrain.color(x, y, s.subvoxel, s.level(terrain, eye[2], z));
         while row < h && (row as f64 + 0.5) < top {
             colour[row] = c;
             depth[row] = s.depth;
@@ -306,7 +372,7 @@ fn march_fixed(
         if centre(row) >= top {
             continue;
         }
-        let c = terrain.color_fixed(x, y, s.subvoxel, s.level);
+        let c = terrain.color_fixed(x, y, s.subvoxel, s.level(terrain, eye[2], z as f64 / ONE));
         while row < h && centre(row) < top {
             colour[row as usize] = c;
             depth[row as usize] = s.depth;
@@ -315,5 +381,237 @@ fn march_fixed(
         if row >= h {
             break;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geo::GeoTransform;
+    use glam::DVec3;
+
+    fn camera(w: u32, h: u32, eye: [f64; 3], heading: f64, incl: f64, far_m: f64) -> Camera {
+        Camera {
+            position: DVec3::from_array(eye),
+            heading_deg: heading,
+            pitch_deg: 0.0,
+            incl_px: incl,
+            fov_x_deg: 60.0,
+            width: w,
+            height: h,
+            near_m: 1.0,
+            far_m,
+        }
+    }
+
+    /// A flat 257² grid, 1 m cells, with one-cell poles of height 40 m, and
+    /// an image (one texel per cell) that is red on the poles, green elsewhere.
+    fn poles() -> (Vec<f32>, Vec<u8>, Vec<u8>, Vec<(usize, usize)>) {
+        let side = 257;
+        let spots = vec![(128, 60), (70, 40), (190, 45), (100, 90), (160, 100)];
+        let mut heights = vec![0.0f32; side * side];
+        let mut rgba = vec![0u8; side * side * 4];
+        for i in 0..side * side {
+            rgba[i * 4..i * 4 + 4].copy_from_slice(&[40, 160, 40, 255]);
+        }
+        for &(c, r) in &spots {
+            heights[r * side + c] = 40.0;
+            rgba[(r * side + c) * 4..(r * side + c) * 4 + 4].copy_from_slice(&[255, 0, 0, 255]);
+        }
+        (heights, vec![1u8; side * side], rgba, spots)
+    }
+
+    /// Top pixel (column, row) of each pole in the image, by its red colour,
+    /// against where the camera's projection matrix sends the pole's top.
+    fn pole_misses(mode: Mode) -> Vec<f64> {
+        let side = 257;
+        let (heights, mask, rgba, spots) = poles();
+        let geo = GeoTransform::north_up(0.0, side as f64, 1.0, 1.0);
+        let color = ColorSource::new(&rgba, side, side, &geo, &geo, side, 1.0).unwrap();
+        let terrain = Terrain::new(side, 1.0, &heights, &mask, Some(color));
+        // Eye south of the poles, looking north, level.
+        let cam = camera(960, 540, [128.0, 0.0, 30.0], 0.0, 270.0, 400.0);
+        let opts = RenderOptions {
+            mode,
+            bands: vec![Band {
+                until_m: f64::INFINITY,
+                slices_per_cell: 8.0,
+                subvoxel: false,
+            }],
+            ..Default::default()
+        };
+        let frame = render(&terrain, &cam, &opts);
+        let vp = cam.view_projection();
+        spots
+            .iter()
+            .map(|&(c, r)| {
+                // Pole top centre in the terrain frame.
+                let p = DVec3::new(c as f64, (side - 1 - r) as f64, 40.0);
+                let clip = vp * p.extend(1.0);
+                let x = (clip.x / clip.w + 1.0) / 2.0 * 960.0;
+                let y = (1.0 - clip.y / clip.w) / 2.0 * 540.0;
+                // Red pixels: their topmost row and the mean column on it.
+                let red: Vec<(usize, usize)> = (0..540 * 960)
+                    .filter(|&i| frame.rgba[i * 4] == 255 && frame.rgba[i * 4 + 1] == 0)
+                    .map(|i| (i % 960, i / 960))
+                    .filter(|&(px, _)| (px as f64 - x).abs() < 40.0)
+                    .collect();
+                if red.is_empty() {
+                    return f64::INFINITY;
+                }
+                let top = red.iter().map(|p| p.1).min().unwrap();
+                let cols: Vec<f64> = red
+                    .iter()
+                    .filter(|p| p.1 == top)
+                    .map(|p| p.0 as f64 + 0.5)
+                    .collect();
+                let col = cols.iter().sum::<f64>() / cols.len() as f64;
+                (col - x).abs().max((top as f64 - y).abs())
+            })
+            .collect()
+    }
+
+    #[test]
+    fn poles_land_where_the_projection_matrix_puts_them() {
+        let raycast = pole_misses(Mode::Raycast);
+        assert!(
+            raycast.iter().all(|&m| m <= 1.0),
+            "raycast misses {raycast:?} px"
+        );
+        let distorted = pole_misses(Mode::Distorted);
+        let worst = distorted.iter().cloned().fold(0.0, f64::max);
+        eprintln!("pole misses, raycast {raycast:.2?} px, distorted {distorted:.2?} px");
+        assert!(
+            worst > 3.0,
+            "distorted mode should miss the off-centre poles, worst {worst}"
+        );
+    }
+
+    #[test]
+    fn depth_is_monotonic_up_each_column_and_matches_the_exact_surface() {
+        // A smooth real-looking surface: sums of sines, 129², 10 m cells.
+        let side = 129;
+        let heights: Vec<f32> = (0..side * side)
+            .map(|i| {
+                let (c, r) = ((i % side) as f64, (i / side) as f64);
+                (40.0 * (c / 9.0).sin() * (r / 13.0).cos() + 25.0 * ((c + r) / 21.0).sin()) as f32
+            })
+            .collect();
+        let mask = vec![1u8; side * side];
+        let terrain = Terrain::new(side, 10.0, &heights, &mask, None);
+        let cam = camera(160, 90, [300.0, 100.0, 120.0], 20.0, 70.0, 1200.0);
+        let opts = RenderOptions {
+            bands: vec![Band {
+                until_m: f64::INFINITY,
+                slices_per_cell: 8.0,
+                subvoxel: true,
+            }],
+            ..Default::default()
+        };
+        let frame = render(&terrain, &cam, &opts);
+        for k in 0..160 {
+            let mut last = 0.0f32;
+            for row in (0..90).rev() {
+                let d = frame.depth[row * 160 + k];
+                assert!((0.0..=1.0).contains(&d));
+                assert!(d >= last, "depth decreases up column {k}");
+                last = d;
+            }
+        }
+        let spacing = 10.0 / 8.0;
+        let mut errors = Vec::new();
+        for py in 0..90 {
+            for px in 0..160 {
+                let d = frame.depth[py * 160 + px];
+                if let (true, Some(exact)) = (d < 1.0, pick(&terrain, &cam, px as f64, py as f64)) {
+                    errors.push((distance_of_depth(&cam, d as f64) - exact).abs() / spacing);
+                }
+            }
+        }
+        errors.sort_by(f64::total_cmp);
+        let (median, p95) = (errors[errors.len() / 2], errors[errors.len() * 95 / 100]);
+        eprintln!("depth vs exact surface: median {median:.3}, 95th percentile {p95:.3} slice spacings over {} pixels", errors.len());
+        assert!(errors.len() > 5000);
+        assert!(
+            median <= 1.0 && p95 <= 2.0,
+            "median {median}, 95th percentile {p95} slice spacings"
+        );
+    }
+
+    #[test]
+    fn fixed_point_matches_floating_point() {
+        let (heights, mask, rgba, _) = poles();
+        let side = 257;
+        let geo = GeoTransform::north_up(0.0, side as f64, 1.0, 1.0);
+        let color = ColorSource::new(&rgba, side, side, &geo, &geo, side, 1.0).unwrap();
+        let terrain = Terrain::new(side, 1.0, &heights, &mask, Some(color));
+        let cam = camera(320, 180, [128.0, 0.0, 30.0], 10.0, 120.0, 400.0);
+        let float = render(&terrain, &cam, &RenderOptions::default());
+        let fixed = render(
+            &terrain,
+            &cam,
+            &RenderOptions {
+                arithmetic: Arithmetic::Fixed,
+                ..Default::default()
+            },
+        );
+        let differ = float
+            .depth
+            .iter()
+            .zip(&fixed.depth)
+            .filter(|(a, b)| a != b)
+            .count();
+        assert!(differ * 100 < float.depth.len(), "{differ} pixels differ");
+    }
+
+    #[test]
+    fn prefiltering_reduces_far_chessboard_aliasing() {
+        // Planar terrain with a chessboard of 1-cell squares (seed 000, §8.2).
+        let side = 513;
+        let heights = vec![0.0f32; side * side];
+        let mask = vec![1u8; side * side];
+        let rgba: Vec<u8> = (0..side * side)
+            .flat_map(|i| {
+                let v = if (i % side + i / side) % 2 == 0 {
+                    255
+                } else {
+                    0
+                };
+                [v, v, v, 255]
+            })
+            .collect();
+        let geo = GeoTransform::north_up(0.0, side as f64, 1.0, 1.0);
+        let energy = |prefilter: bool| {
+            let color = ColorSource::new(&rgba, side, side, &geo, &geo, side, 1.0).unwrap();
+            let terrain = Terrain::new(side, 1.0, &heights, &mask, Some(color));
+            let cam = camera(320, 180, [256.0, 0.0, 12.0], 0.0, 150.0, 500.0);
+            let opts = RenderOptions {
+                prefilter,
+                ..Default::default()
+            };
+            let f = render(&terrain, &cam, &opts);
+            // High-frequency energy of the far half of the terrain rows: mean
+            // absolute difference of horizontal neighbours.
+            let terrain_rows: Vec<usize> =
+                (0..180).filter(|&y| f.depth[y * 320 + 160] < 1.0).collect();
+            let far = &terrain_rows[..terrain_rows.len() / 2];
+            let mut sum = 0.0;
+            let mut n = 0;
+            for &y in far {
+                for x in 0..319 {
+                    sum += (f.rgba[(y * 320 + x) * 4] as f64
+                        - f.rgba[(y * 320 + x + 1) * 4] as f64)
+                        .abs();
+                    n += 1;
+                }
+            }
+            sum / n as f64
+        };
+        let (plain, filtered) = (energy(false), energy(true));
+        eprintln!("far-half chessboard energy: plain {plain:.1}, prefiltered {filtered:.1}");
+        assert!(
+            filtered < plain * 0.5,
+            "prefiltered {filtered} vs plain {plain}"
+        );
     }
 }

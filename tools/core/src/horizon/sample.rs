@@ -225,6 +225,21 @@ impl<'a> Terrain<'a> {
         Some((0..4).map(|k| w[k] * self.heights[v[k]] as f64).sum())
     }
 
+    /// The exact bilinear surface through the vertices at (x, y), metres;
+    /// `None` off the grid or over masked cells.
+    pub fn surface(&self, x: f64, y: f64) -> Option<f64> {
+        let (c, r) = self.grid(x, y);
+        self.vertex(c, r)?;
+        let last = (self.side - 2) as f64;
+        let (c0, r0) = (c.floor().clamp(0.0, last), r.floor().clamp(0.0, last));
+        let (u, v) = (c - c0, r - r0);
+        let i = r0 as usize * self.side + c0 as usize;
+        let z = |k: usize| self.heights[k] as f64;
+        let top = z(i) * (1.0 - u) + z(i + 1) * u;
+        let bottom = z(i + self.side) * (1.0 - u) + z(i + self.side + 1) * u;
+        Some(top * (1.0 - v) + bottom * v)
+    }
+
     /// Height at a 16.16 fixed-point grid position (`x`, `y` in cells of the
     /// terrain frame), in 16.16 metres.
     #[inline]
