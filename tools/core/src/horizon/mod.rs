@@ -406,7 +406,10 @@ mod tests {
 
     /// A flat 257² grid, 1 m cells, with one-cell poles of height 40 m, and
     /// an image (one texel per cell) that is red on the poles, green elsewhere.
-    fn poles() -> (Vec<f32>, Vec<u8>, Vec<u8>, Vec<(usize, usize)>) {
+    /// Heights, mask, RGBA image and pole cells of the pole scene.
+    type Scene = (Vec<f32>, Vec<u8>, Vec<u8>, Vec<(usize, usize)>);
+
+    fn poles() -> Scene {
         let side = 257;
         let spots = vec![(128, 60), (70, 40), (190, 45), (100, 90), (160, 100)];
         let mut heights = vec![0.0f32; side * side];
