@@ -115,6 +115,11 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 4097)]
         max_side: usize,
     },
+    /// The floating-horizon raycast: 1920×1080, far 1024, 8 headings, each configuration.
+    #[command(after_help = "Examples:
+  relevo bench render
+  relevo bench render --json --runs 3")]
+    Render(BenchArgs),
 }
 
 #[derive(Args, Debug)]
@@ -418,6 +423,9 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Validate { bundle } => run_validate(&bundle),
         Command::Bench(BenchCommand::Ingest(a)) => {
             crate::bench::ingest(&a.repo, &a.data, a.runs.max(1), a.json)
+        }
+        Command::Bench(BenchCommand::Render(a)) => {
+            crate::bench::render(&a.data, a.runs.max(1), a.json)
         }
         Command::Bench(BenchCommand::Hierarchy {
             common: a,

@@ -94,12 +94,12 @@ pub struct Steps {
     pub setup_ms: f64,
     /// Marching the columns.
     pub march_ms: f64,
-    /// Column-major buffers to row-major image and depth.
+    /// Column-major buffers to the row-major image and depth.
     pub output_ms: f64,
 }
 
 /// A rendered image: RGBA8 and [0, 1] depth, row-major, top row first.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct Frame {
     pub width: usize,
     pub height: usize,
@@ -109,6 +109,7 @@ pub struct Frame {
 }
 
 /// One slice: forward distance, its depth and its band.
+#[derive(Debug)]
 struct Slice {
     distance_m: f64,
     depth: f32,
@@ -135,9 +136,9 @@ impl Slice {
 
 /// Forward distances of the slices from the near to the far plane
 /// (seed 000, Algorithm 2b generalised to bands).
-fn slices(terrain: &Terrain, camera: &Camera, opts: &RenderOptions) -> Vec<Slice> {
+fn fill_slices(out: &mut Vec<Slice>, terrain: &Terrain, camera: &Camera, opts: &RenderOptions) {
     let d = camera.plane_distance_px();
-    let mut out = Vec::new();
+    out.clear();
     let mut s = camera.near_m;
     let mut band = 0;
     while s <= camera.far_m {
@@ -155,24 +156,69 @@ fn slices(terrain: &Terrain, camera: &Camera, opts: &RenderOptions) -> Vec<Slice
         });
         s += terrain.cell_m / b.slices_per_cell;
     }
-    out
 }
 
-/// Render `terrain` seen from `camera` (whose pitch must be 0: tilt is the
-/// projection-plane shift `incl_px`).
+/// Render `terrain` seen from `camera` into a new frame (see [`Renderer`]
+/// to reuse buffers from frame to frame).
 pub fn render(terrain: &Terrain, camera: &Camera, opts: &RenderOptions) -> Frame {
-    let start = Instant::now();
-    let (w, h) = (camera.width as usize, camera.height as usize);
-    let slices = slices(terrain, camera, opts);
-    let d = camera.plane_distance_px();
-    let heading = camera.heading_deg.to_radians();
-    let forward = [heading.sin(), heading.cos()];
-    let right = [heading.cos(), -heading.sin()];
-    let q = camera.fov_x_deg.to_radians();
-    // Ground direction of column k, scaled so that moving by `dir · s`
-    // advances the slice distance s (forward distance, or radial when distorted).
-    let columns: Vec<[f64; 2]> = (0..w)
-        .map(|k| {
+    let mut renderer = Renderer::default();
+    renderer.render(terrain, camera, opts);
+    renderer.frame
+}
+
+/// Buffers reused from frame to frame: after the first frame of a size,
+/// rendering allocates nothing.
+#[derive(Debug, Default)]
+pub struct Renderer {
+    slices: Vec<Slice>,
+    columns: Vec<[f64; 2]>,
+    /// Colour and depth column by column, bottom row first.
+    colour_columns: Vec<u32>,
+    depth_columns: Vec<f32>,
+    frame: Frame,
+}
+
+/// One column being painted, bottom row first.
+struct ColumnOut<'a> {
+    colour: &'a mut [u32],
+    depth: &'a mut [f32],
+}
+
+impl ColumnOut<'_> {
+    fn height(&self) -> usize {
+        self.colour.len()
+    }
+
+    /// Set pixel `row` (counted from the bottom).
+    #[inline]
+    fn paint(&mut self, row: usize, colour: u32, depth: f32) {
+        self.colour[row] = colour;
+        self.depth[row] = depth;
+    }
+
+    /// Sky (depth 1) from `row` to the top.
+    fn finish(&mut self, row: usize, sky: u32) {
+        self.colour[row..].fill(sky);
+        self.depth[row..].fill(1.0);
+    }
+}
+
+impl Renderer {
+    /// Render `terrain` seen from `camera` (whose pitch must be 0: tilt is
+    /// the projection-plane shift `incl_px`).
+    pub fn render(&mut self, terrain: &Terrain, camera: &Camera, opts: &RenderOptions) -> &Frame {
+        let start = Instant::now();
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        fill_slices(&mut self.slices, terrain, camera, opts);
+        let d = camera.plane_distance_px();
+        let heading = camera.heading_deg.to_radians();
+        let forward = [heading.sin(), heading.cos()];
+        let right = [heading.cos(), -heading.sin()];
+        let q = camera.fov_x_deg.to_radians();
+        // Ground direction of column k, scaled so that moving by `dir · s`
+        // advances the slice distance s (forward distance, or radial when distorted).
+        self.columns.clear();
+        self.columns.extend((0..w).map(|k| {
             let offset = k as f64 + 0.5 - w as f64 / 2.0;
             match opts.mode {
                 Mode::Raycast => [
@@ -188,65 +234,66 @@ pub fn render(terrain: &Terrain, camera: &Camera, opts: &RenderOptions) -> Frame
                     ]
                 }
             }
-        })
-        .collect();
-    let setup_ms = start.elapsed().as_secs_f64() * 1e3;
+        }));
+        let setup_ms = start.elapsed().as_secs_f64() * 1e3;
 
-    let start = Instant::now();
-    let eye = camera.position;
-    let sky = u32::from_le_bytes(opts.sky);
-    let mut colour_columns = vec![sky; w * h];
-    let mut depth_columns = vec![1.0f32; w * h];
-    colour_columns
-        .par_chunks_mut(h)
-        .zip(depth_columns.par_chunks_mut(h))
-        .zip(columns.par_iter())
-        .for_each(|((colour, depth), dir)| match opts.arithmetic {
-            Arithmetic::Float => march_float(
-                terrain,
-                &slices,
-                [eye.x, eye.y, eye.z],
-                *dir,
-                camera.incl_px,
-                colour,
-                depth,
-            ),
-            Arithmetic::Fixed => march_fixed(
-                terrain,
-                &slices,
-                [eye.x, eye.y, eye.z],
-                *dir,
-                camera.incl_px,
-                colour,
-                depth,
-            ),
-        });
-    let march_ms = start.elapsed().as_secs_f64() * 1e3;
+        let start = Instant::now();
+        let eye = [camera.position.x, camera.position.y, camera.position.z];
+        let sky = u32::from_le_bytes(opts.sky);
+        self.colour_columns.resize(w * h, 0);
+        self.depth_columns.resize(w * h, 0.0);
+        let slices = &self.slices;
+        self.colour_columns
+            .par_chunks_mut(h)
+            .zip(self.depth_columns.par_chunks_mut(h))
+            .zip(self.columns.par_iter())
+            .for_each(|((colour, depth), dir)| {
+                let mut out = ColumnOut { colour, depth };
+                match opts.arithmetic {
+                    Arithmetic::Float => {
+                        march_float(terrain, slices, eye, *dir, camera.incl_px, sky, &mut out)
+                    }
+                    Arithmetic::Fixed => {
+                        march_fixed(terrain, slices, eye, *dir, camera.incl_px, sky, &mut out)
+                    }
+                }
+            });
+        let march_ms = start.elapsed().as_secs_f64() * 1e3;
 
-    let start = Instant::now();
-    let mut rgba = vec![0u8; w * h * 4];
-    let mut depth = vec![0.0f32; w * h];
-    rgba.par_chunks_mut(w * 4)
-        .zip(depth.par_chunks_mut(w))
-        .enumerate()
-        .for_each(|(y, (row, drow))| {
-            let j = h - 1 - y; // row counted from the bottom
-            for k in 0..w {
-                row[k * 4..k * 4 + 4].copy_from_slice(&colour_columns[k * h + j].to_le_bytes());
-                drow[k] = depth_columns[k * h + j];
-            }
-        });
-    let output_ms = start.elapsed().as_secs_f64() * 1e3;
-    Frame {
-        width: w,
-        height: h,
-        rgba,
-        depth,
-        steps: Steps {
+        // Transpose in bands of rows so that reads of each column stay in cache.
+        let start = Instant::now();
+        const BAND: usize = 16;
+        let f = &mut self.frame;
+        f.width = w;
+        f.height = h;
+        f.rgba.resize(w * h * 4, 0);
+        f.depth.resize(w * h, 0.0);
+        let (colour_columns, depth_columns) = (&self.colour_columns, &self.depth_columns);
+        f.rgba
+            .par_chunks_mut(w * 4 * BAND)
+            .zip(f.depth.par_chunks_mut(w * BAND))
+            .enumerate()
+            .for_each(|(band, (rows, drows))| {
+                let first = band * BAND;
+                let count = drows.len() / w;
+                for k in 0..w {
+                    let column = &colour_columns[k * h..(k + 1) * h];
+                    let dcolumn = &depth_columns[k * h..(k + 1) * h];
+                    for y in 0..count {
+                        let j = h - 1 - (first + y); // row counted from the bottom
+                        rows[(y * w + k) * 4..(y * w + k) * 4 + 4]
+                            .copy_from_slice(&column[j].to_le_bytes());
+                        drows[y * w + k] = dcolumn[j];
+                    }
+                }
+            });
+        let output_ms = start.elapsed().as_secs_f64() * 1e3;
+        f.steps = Steps {
             setup_ms,
             march_ms,
             output_ms,
-        },
+        };
+        &self.frame
     }
 }
 
@@ -313,10 +360,10 @@ fn march_float(
     eye: [f64; 3],
     dir: [f64; 2],
     incl: f64,
-    colour: &mut [u32],
-    depth: &mut [f32],
+    sky: u32,
+    out: &mut ColumnOut,
 ) {
-    let h = colour.len();
+    let h = out.height();
     let mut row = 0usize; // next unpainted row, from the bottom
     for s in slices {
         let x = eye[0] + dir[0] * s.distance_m;
@@ -330,14 +377,14 @@ fn march_float(
         }
         let c = terrain.color(x, y, s.subvoxel, s.level(terrain, eye[2], z));
         while row < h && (row as f64 + 0.5) < top {
-            colour[row] = c;
-            depth[row] = s.depth;
+            out.paint(row, c, s.depth);
             row += 1;
         }
         if row >= h {
             break;
         }
     }
+    out.finish(row, sky);
 }
 
 /// One column in 16.16 fixed point: ground position and heights in 1/65536
@@ -348,11 +395,11 @@ fn march_fixed(
     eye: [f64; 3],
     dir: [f64; 2],
     incl: f64,
-    colour: &mut [u32],
-    depth: &mut [f32],
+    sky: u32,
+    out: &mut ColumnOut,
 ) {
     const ONE: f64 = 65536.0;
-    let h = colour.len() as i64;
+    let h = out.height() as i64;
     let to_cell = ONE / terrain.cell_m;
     let (ex, ey) = ((eye[0] * to_cell) as i64, (eye[1] * to_cell) as i64);
     let (dx, dy) = ((dir[0] * to_cell) as i64, (dir[1] * to_cell) as i64);
@@ -374,14 +421,14 @@ fn march_fixed(
         }
         let c = terrain.color_fixed(x, y, s.subvoxel, s.level(terrain, eye[2], z as f64 / ONE));
         while row < h && centre(row) < top {
-            colour[row as usize] = c;
-            depth[row as usize] = s.depth;
+            out.paint(row as usize, c, s.depth);
             row += 1;
         }
         if row >= h {
             break;
         }
     }
+    out.finish(row as usize, sky);
 }
 
 #[cfg(test)]

@@ -109,12 +109,18 @@ pub struct Terrain<'a> {
     /// Vertex spacing, metres.
     pub cell_m: f64,
     heights: &'a [f32],
+    /// Per vertex: the height, NaN where the mask is 0, and the colour used
+    /// without imagery (a grey ramp by height, shaded) — one cache line
+    /// answers a sample.
+    sampled: Vec<(f32, u32)>,
     heights_fixed: Vec<i64>,
     mask: &'a [u8],
     color: Option<ColorSource>,
     /// Per-vertex light factor, when hillshade is baked in.
     shade: Option<Vec<f32>>,
     weights: [[[f64; 4]; DIVISIONS]; DIVISIONS],
+    inv_cell: f64,
+    last: f64,
 }
 
 impl<'a> Terrain<'a> {
@@ -127,10 +133,15 @@ impl<'a> Terrain<'a> {
     ) -> Self {
         assert_eq!(heights.len(), side * side);
         assert_eq!(mask.len(), side * side);
-        Terrain {
+        let mut terrain = Terrain {
             side,
             cell_m,
             heights,
+            sampled: heights
+                .iter()
+                .zip(mask)
+                .map(|(&h, &m)| (if m == 1 { h } else { f32::NAN }, 0))
+                .collect(),
             heights_fixed: heights
                 .iter()
                 .map(|&h| (h as f64 * 65536.0) as i64)
@@ -139,6 +150,23 @@ impl<'a> Terrain<'a> {
             color,
             shade: None,
             weights: contribution_matrix(),
+            inv_cell: 1.0 / cell_m,
+            last: (side - 1) as f64,
+        };
+        terrain.update_vertex_colors();
+        terrain
+    }
+
+    /// Recompute the per-vertex colours used when there is no imagery.
+    fn update_vertex_colors(&mut self) {
+        if self.color.is_some() {
+            return;
+        }
+        for (i, sample) in self.sampled.iter_mut().enumerate() {
+            let g = (80.0 + (self.heights[i] as f64 * 0.05).rem_euclid(150.0)).min(255.0);
+            let light = self.shade.as_ref().map_or(1.0, |s| s[i] as f64);
+            let v = (g * light).round().clamp(0.0, 255.0) as u8;
+            sample.1 = u32::from_le_bytes([v, v, v, 255]);
         }
     }
 
@@ -164,6 +192,7 @@ impl<'a> Terrain<'a> {
             })
             .collect();
         self.shade = Some(shade);
+        self.update_vertex_colors();
         self
     }
 
@@ -185,7 +214,19 @@ impl<'a> Terrain<'a> {
     /// Grid position (column, row), fractional, of terrain-frame (x, y).
     #[inline]
     fn grid(&self, x: f64, y: f64) -> (f64, f64) {
-        (x / self.cell_m, (self.side - 1) as f64 - y / self.cell_m)
+        (x * self.inv_cell, self.last - y * self.inv_cell)
+    }
+
+    /// Index of the vertex nearest (x, y), if on the grid (mask not checked).
+    #[inline]
+    fn nearest(&self, x: f64, y: f64) -> Option<usize> {
+        let c = x * self.inv_cell + 0.5;
+        let r = self.last - y * self.inv_cell + 0.5;
+        if !(c >= 0.0 && r >= 0.0) {
+            return None;
+        }
+        let (c, r) = (c as usize, r as usize);
+        (c < self.side && r < self.side).then(|| r * self.side + c)
     }
 
     /// Nearest vertex with data, if (c, r) is on the grid.
@@ -216,11 +257,14 @@ impl<'a> Terrain<'a> {
     /// Terrain height at (x, y), metres; `None` off the grid or over masked cells.
     #[inline]
     pub fn height(&self, x: f64, y: f64, subvoxel: bool) -> Option<f64> {
-        let (c, r) = self.grid(x, y);
-        let nearest = self.vertex(c, r)?;
-        if !subvoxel {
-            return Some(self.heights[nearest] as f64);
+        let z = self.sampled[self.nearest(x, y)?].0;
+        if z.is_nan() {
+            return None;
         }
+        if !subvoxel {
+            return Some(z as f64);
+        }
+        let (c, r) = self.grid(x, y);
         let (v, w) = self.bilinear(c, r);
         Some((0..4).map(|k| w[k] * self.heights[v[k]] as f64).sum())
     }
@@ -283,6 +327,9 @@ impl<'a> Terrain<'a> {
     /// Colour at (x, y) from colour level `level`, RGBA packed little-endian.
     #[inline]
     pub fn color(&self, x: f64, y: f64, subvoxel: bool, level: usize) -> u32 {
+        let Some(src) = &self.color else {
+            return self.nearest(x, y).map_or(0, |i| self.sampled[i].1);
+        };
         let (c, r) = self.grid(x, y);
         let light = match &self.shade {
             None => 1.0,
@@ -291,14 +338,8 @@ impl<'a> Terrain<'a> {
                 None => 1.0,
             },
         };
-        let rgb: [f64; 3] = match &self.color {
-            None => {
-                // No imagery: a grey ramp by height.
-                let z = self.height(x, y, false).unwrap_or(0.0);
-                let g = (80.0 + (z * 0.05).rem_euclid(150.0)).min(255.0);
-                [g, g, g]
-            }
-            Some(src) => {
+        let rgb: [f64; 3] = {
+            {
                 let t = &src.to_pixel;
                 let scale = (1u64 << level) as f64;
                 let u = (t[0] + t[1] * x + t[2] * y) / scale;
