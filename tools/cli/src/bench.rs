@@ -382,7 +382,9 @@ pub fn render(data: &Path, runs: usize, json_lines: bool) -> Result<()> {
         relevo_core::geo::GeoTransform::IDENTITY,
         Squaring::Pad,
     );
-    let grids: Vec<(&str, usize, Vec<f32>, Vec<u8>, f64)> = vec![
+    // (name, side, heights, mask, cell size in metres)
+    type Grid<'a> = (&'a str, usize, Vec<f32>, Vec<u8>, f64);
+    let grids: Vec<Grid> = vec![
         (
             "fractal 4097²",
             4097,
