@@ -142,6 +142,20 @@ fn tempfile_dir() -> Result<PathBuf> {
     Ok(dir)
 }
 
+/// The raw srtm_ref DEM (1000², no reprojection) padded to 1025².
+fn srtm_padded(data: &Path) -> Result<relevo_core::grid::HeightGrid> {
+    use relevo_core::grid::{HeightGrid, Squaring};
+    let srtm = gdalio::open(&data.join("dem/srtm_ref.tif"))?;
+    let raw = srtm.read(srtm.nodata)?;
+    Ok(HeightGrid::square(
+        raw.band(0),
+        raw.width,
+        raw.height,
+        relevo_core::geo::GeoTransform::IDENTITY,
+        Squaring::Pad,
+    ))
+}
+
 /// A deterministic fractal heightfield (diamond-square with hash-based
 /// offsets, Hurst exponent about 0.75), `side` = 2^n + 1, heights in metres.
 pub fn fractal_heights(side: usize, seed: u64) -> Vec<f32> {
@@ -198,7 +212,6 @@ pub fn hierarchy(
     json_lines: bool,
 ) -> Result<()> {
     use relevo_core::camera::Camera;
-    use relevo_core::grid::{HeightGrid, Squaring};
     use relevo_core::lp::refine::{RefineParams, Refiner};
     use relevo_core::lp::{Hierarchy, Layout};
 
@@ -208,15 +221,7 @@ pub fn hierarchy(
         .filter(|&s| s <= max_side)
         .map(|s| (format!("fractal {s}²"), s, fractal_heights(s, 1)))
         .collect();
-    let srtm = gdalio::open(&data.join("dem/srtm_ref.tif"))?;
-    let raw = srtm.read(srtm.nodata)?;
-    let square = HeightGrid::square(
-        raw.band(0),
-        raw.width,
-        raw.height,
-        relevo_core::geo::GeoTransform::IDENTITY,
-        Squaring::Pad,
-    );
+    let square = srtm_padded(data)?;
     grids.push(("srtm_ref padded".into(), square.side, square.heights));
 
     let script = repo.join("tools/js/martini-bench.mjs");
@@ -370,18 +375,9 @@ pub fn hierarchy(
 /// breakdown, and how time grows with width, height and far.
 pub fn render(data: &Path, runs: usize, json_lines: bool) -> Result<()> {
     use relevo_core::camera::Camera;
-    use relevo_core::grid::{HeightGrid, Squaring};
     use relevo_core::horizon::{self, Arithmetic, Band, Mode, RenderOptions, Steps, Terrain};
 
-    let srtm = gdalio::open(&data.join("dem/srtm_ref.tif"))?;
-    let raw = srtm.read(srtm.nodata)?;
-    let srtm = HeightGrid::square(
-        raw.band(0),
-        raw.width,
-        raw.height,
-        relevo_core::geo::GeoTransform::IDENTITY,
-        Squaring::Pad,
-    );
+    let srtm = srtm_padded(data)?;
     // (name, side, heights, mask, cell size in metres)
     type Grid<'a> = (&'a str, usize, Vec<f32>, Vec<u8>, f64);
     let grids: Vec<Grid> = vec![

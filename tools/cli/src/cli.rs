@@ -442,6 +442,11 @@ fn check_output(out: &Path, force: bool) -> Result<()> {
             out.display()
         );
     }
+    check_folder(out)
+}
+
+/// Name a missing output folder before any work is done.
+fn check_folder(out: &Path) -> Result<()> {
     let parent = out
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
@@ -640,18 +645,7 @@ fn run_prep(a: PrepArgs) -> Result<()> {
             region
         }
     };
-    let parent = a
-        .out
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    if !parent.is_dir() {
-        bail!(
-            "{}: cannot write, folder {} does not exist",
-            a.out.display(),
-            parent.display()
-        );
-    }
+    check_folder(&a.out)?;
     let summary = prep(&region, &a.out, a.force)?;
     if a.json {
         println!("{}", serde_json::to_string(&summary)?);

@@ -336,27 +336,10 @@ fn geographic_dem_is_reprojected_to_utm_keeping_detail() {
 
 #[test]
 fn martini_tiles_decode_to_the_reference_terrain() {
-    let reference: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(shared("terrain_rgb_martini/martini_js.json")).unwrap(),
-    )
-    .unwrap();
-    for (name, file, encoding) in [
-        ("fuji", "fuji.png", "terrain-rgb"),
-        ("mapbox_st_helens", "mapbox_st_helens.png", "terrain-rgb"),
-        ("terrarium", "terrarium.png", "terrarium"),
-    ] {
-        let dir = tempfile::tempdir().unwrap();
-        let out = dir.path().join(format!("{name}.relevo"));
-        let png = shared(&format!("terrain_rgb_martini/{file}"));
-        relevo_ok([
-            "prep".as_ref(),
-            "--dem".as_ref(),
-            png.as_os_str(),
-            "--encoding".as_ref(),
-            encoding.as_ref(),
-            "--out".as_ref(),
-            out.as_os_str(),
-        ]);
+    let reference = martini_reference();
+    let dir = tempfile::tempdir().unwrap();
+    for (name, file, encoding) in MARTINI_TILES {
+        let out = prep_martini_tile(dir.path(), file, encoding);
         let expected = reference[name]["terrain"]["sha256"].as_str().unwrap();
         assert_eq!(sha256(&out.join("height.f32")), expected, "{name}");
     }

@@ -6,36 +6,13 @@ use common::*;
 use relevo_core::bundle::{sha256_bytes, Bundle};
 use relevo_core::lp::extract::extract;
 use relevo_core::lp::Hierarchy;
-use serde_json::Value;
-
-fn prep_tile(dir: &std::path::Path, file: &str, encoding: &str) -> Bundle {
-    let out = dir.join(format!("{file}.relevo"));
-    let png = shared(&format!("terrain_rgb_martini/{file}"));
-    relevo_ok([
-        "prep".as_ref(),
-        "--dem".as_ref(),
-        png.as_os_str(),
-        "--encoding".as_ref(),
-        encoding.as_ref(),
-        "--out".as_ref(),
-        out.as_os_str(),
-    ]);
-    Bundle::open(&out).unwrap()
-}
 
 #[test]
 fn errors_and_meshes_match_martini() {
-    let reference: Value = serde_json::from_str(
-        &std::fs::read_to_string(shared("terrain_rgb_martini/martini_js.json")).unwrap(),
-    )
-    .unwrap();
+    let reference = martini_reference();
     let d = tempfile::tempdir().unwrap();
-    for (name, file, encoding) in [
-        ("fuji", "fuji.png", "terrain-rgb"),
-        ("mapbox_st_helens", "mapbox_st_helens.png", "terrain-rgb"),
-        ("terrarium", "terrarium.png", "terrarium"),
-    ] {
-        let bundle = prep_tile(d.path(), file, encoding);
+    for (name, file, encoding) in MARTINI_TILES {
+        let bundle = Bundle::open(&prep_martini_tile(d.path(), file, encoding)).unwrap();
         let r = &reference[name];
         let heights = bundle.array::<f32>("height").unwrap();
         let side = bundle.manifest.grid.side;

@@ -107,22 +107,9 @@ fn the_mask_is_honoured_and_the_data_is_covered() {
 
 #[test]
 fn keep_padding_reproduces_martini_counts_through_the_cli() {
-    let reference: Value = serde_json::from_str(
-        &std::fs::read_to_string(shared("terrain_rgb_martini/martini_js.json")).unwrap(),
-    )
-    .unwrap();
+    let reference = martini_reference();
     let d = tempfile::tempdir().unwrap();
-    let bundle = d.path().join("fuji.relevo");
-    let png = shared("terrain_rgb_martini/fuji.png");
-    relevo_ok([
-        "prep".as_ref(),
-        "--dem".as_ref(),
-        png.as_os_str(),
-        "--encoding".as_ref(),
-        "terrain-rgb".as_ref(),
-        "--out".as_ref(),
-        bundle.as_os_str(),
-    ]);
+    let bundle = prep_martini_tile(d.path(), "fuji.png", "terrain-rgb");
     for max_error in ["5", "50"] {
         let glb = d.path().join(format!("fuji{max_error}.glb"));
         relevo_ok([

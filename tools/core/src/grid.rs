@@ -162,14 +162,7 @@ fn nearest_fill(values: &[f64], width: usize, height: usize) -> Vec<f64> {
     let mut out = values.to_vec();
     let mut queue: VecDeque<usize> = (0..values.len()).filter(|&i| !values[i].is_nan()).collect();
     while let Some(i) = queue.pop_front() {
-        let (c, r) = (i % width, i / width);
-        let neighbours = [
-            (c > 0).then(|| i - 1),
-            (c + 1 < width).then(|| i + 1),
-            (r > 0).then(|| i - width),
-            (r + 1 < height).then(|| i + width),
-        ];
-        for n in neighbours.into_iter().flatten() {
+        for n in crate::raster::neighbours4(i, width, height) {
             if out[n].is_nan() {
                 out[n] = out[i];
                 queue.push_back(n);

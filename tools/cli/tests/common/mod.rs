@@ -134,3 +134,35 @@ pub fn listing(dir: &Path) -> Vec<String> {
     names.sort();
     names
 }
+
+/// The three Terrain-RGB / Terrarium tiles martini's digests describe:
+/// (name in martini_js.json, file, `--encoding`).
+pub const MARTINI_TILES: [(&str, &str, &str); 3] = [
+    ("fuji", "fuji.png", "terrain-rgb"),
+    ("mapbox_st_helens", "mapbox_st_helens.png", "terrain-rgb"),
+    ("terrarium", "terrarium.png", "terrarium"),
+];
+
+/// martini_js.json: the digests @mapbox/martini produced from those tiles.
+pub fn martini_reference() -> serde_json::Value {
+    serde_json::from_str(
+        &std::fs::read_to_string(shared("terrain_rgb_martini/martini_js.json")).unwrap(),
+    )
+    .unwrap()
+}
+
+/// `relevo prep` of one martini tile into `dir`; returns the bundle path.
+pub fn prep_martini_tile(dir: &Path, file: &str, encoding: &str) -> PathBuf {
+    let out = dir.join(format!("{file}.relevo"));
+    let png = shared(&format!("terrain_rgb_martini/{file}"));
+    relevo_ok([
+        "prep".as_ref(),
+        "--dem".as_ref(),
+        png.as_os_str(),
+        "--encoding".as_ref(),
+        encoding.as_ref(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    out
+}

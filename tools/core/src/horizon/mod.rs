@@ -196,6 +196,23 @@ impl ColumnOut<'_> {
         self.depth[row] = depth;
     }
 
+    /// Paint rows from `*row` up while `below(row)` (the row's centre lies
+    /// under the sample), advancing `*row`; true once the column is full.
+    #[inline]
+    fn paint_while(
+        &mut self,
+        row: &mut usize,
+        below: impl Fn(usize) -> bool,
+        colour: u32,
+        depth: f32,
+    ) -> bool {
+        while *row < self.height() && below(*row) {
+            self.paint(*row, colour, depth);
+            *row += 1;
+        }
+        *row >= self.height()
+    }
+
     /// Sky (depth 1) from `row` to the top.
     fn finish(&mut self, row: usize, sky: u32) {
         self.colour[row..].fill(sky);
@@ -363,7 +380,6 @@ fn march_float(
     sky: u32,
     out: &mut ColumnOut,
 ) {
-    let h = out.height();
     let mut row = 0usize; // next unpainted row, from the bottom
     for s in slices {
         let x = eye[0] + dir[0] * s.distance_m;
@@ -376,11 +392,7 @@ fn march_float(
             continue;
         }
         let c = terrain.color(x, y, s.subvoxel, s.level(terrain, eye[2], z));
-        while row < h && (row as f64 + 0.5) < top {
-            out.paint(row, c, s.depth);
-            row += 1;
-        }
-        if row >= h {
+        if out.paint_while(&mut row, |r| (r as f64 + 0.5) < top, c, s.depth) {
             break;
         }
     }
@@ -399,13 +411,12 @@ fn march_fixed(
     out: &mut ColumnOut,
 ) {
     const ONE: f64 = 65536.0;
-    let h = out.height() as i64;
     let to_cell = ONE / terrain.cell_m;
     let (ex, ey) = ((eye[0] * to_cell) as i64, (eye[1] * to_cell) as i64);
     let (dx, dy) = ((dir[0] * to_cell) as i64, (dir[1] * to_cell) as i64);
     let ez = (eye[2] * ONE) as i64;
     let incl = (incl * ONE) as i64;
-    let mut row = 0i64;
+    let mut row = 0usize; // next unpainted row, from the bottom
     for s in slices {
         let dist = (s.distance_m * ONE) as i64;
         let x = ex + ((dx * dist) >> 16);
@@ -415,20 +426,16 @@ fn march_fixed(
         };
         let scale = (s.scale * ONE) as i64;
         let top = incl + (((z - ez) * scale) >> 16);
-        let centre = |row: i64| (row << 16) + (1 << 15);
+        let centre = |row: usize| ((row as i64) << 16) + (1 << 15);
         if centre(row) >= top {
             continue;
         }
         let c = terrain.color_fixed(x, y, s.subvoxel, s.level(terrain, eye[2], z as f64 / ONE));
-        while row < h && centre(row) < top {
-            out.paint(row as usize, c, s.depth);
-            row += 1;
-        }
-        if row >= h {
+        if out.paint_while(&mut row, |r| centre(r) < top, c, s.depth) {
             break;
         }
     }
-    out.finish(row as usize, sky);
+    out.finish(row, sky);
 }
 
 #[cfg(test)]

@@ -92,13 +92,7 @@ fn find_holes(values: &[f64], width: usize, height: usize) -> Vec<Hole> {
             if c == 0 || r == 0 || c + 1 == width || r + 1 == height {
                 hole.touches_edge = true;
             }
-            let neighbours = [
-                (c > 0).then(|| i - 1),
-                (c + 1 < width).then(|| i + 1),
-                (r > 0).then(|| i - width),
-                (r + 1 < height).then(|| i + width),
-            ];
-            for n in neighbours.into_iter().flatten() {
+            for n in super::neighbours4(i, width, height) {
                 if !seen[n] && values[n].is_nan() {
                     seen[n] = true;
                     stack.push(n);

@@ -7,6 +7,20 @@ pub mod encoding;
 pub mod fill;
 pub mod mosaic;
 
+/// The up-to-four edge neighbours of cell `i` (row-major) of a
+/// `width`×`height` grid.
+pub fn neighbours4(i: usize, width: usize, height: usize) -> impl Iterator<Item = usize> {
+    let (c, r) = (i % width, i / width);
+    [
+        (c > 0).then(|| i - 1),
+        (c + 1 < width).then(|| i + 1),
+        (r > 0).then(|| i - width),
+        (r + 1 < height).then(|| i + width),
+    ]
+    .into_iter()
+    .flatten()
+}
+
 /// A multiband raster held as `f64`, band-major (all of band 0, then band 1…),
 /// rows top to bottom. `NaN` marks no-data: a cell is valid when every band
 /// holds a number.
