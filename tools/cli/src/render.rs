@@ -126,7 +126,9 @@ pub fn write_png(path: &Path, frame: &Frame) -> Result<()> {
     let mut encoder = png::Encoder::new(&mut bytes, frame.width as u32, frame.height as u32);
     encoder.set_color(png::ColorType::Rgba);
     encoder.set_depth(png::BitDepth::Eight);
-    encoder.write_header()?.write_image_data(&frame.rgba)?;
+    encoder
+        .write_header()?
+        .write_image_data(frame.rgba_bytes())?;
     crate::mesh::write_atomic(path, &bytes)
 }
 

@@ -103,9 +103,18 @@ pub struct Steps {
 pub struct Frame {
     pub width: usize,
     pub height: usize,
-    pub rgba: Vec<u8>,
+    /// One pixel per element, RGBA bytes in little-endian order
+    /// ([`Frame::rgba_bytes`] views them as bytes).
+    pub rgba: Vec<u32>,
     pub depth: Vec<f32>,
     pub steps: Steps,
+}
+
+impl Frame {
+    /// The image as RGBA8 bytes, row-major.
+    pub fn rgba_bytes(&self) -> &[u8] {
+        bytemuck::cast_slice(&self.rgba)
+    }
 }
 
 /// One slice: forward distance, its depth and its band.
@@ -283,24 +292,23 @@ impl Renderer {
         let f = &mut self.frame;
         f.width = w;
         f.height = h;
-        f.rgba.resize(w * h * 4, 0);
+        f.rgba.resize(w * h, 0);
         f.depth.resize(w * h, 0.0);
         let (colour_columns, depth_columns) = (&self.colour_columns, &self.depth_columns);
         f.rgba
-            .par_chunks_mut(w * 4 * BAND)
+            .par_chunks_mut(w * BAND)
             .zip(f.depth.par_chunks_mut(w * BAND))
             .enumerate()
             .for_each(|(band, (rows, drows))| {
-                let first = band * BAND;
                 let count = drows.len() / w;
+                // Column k's rows of this band, bottom-counted from `low`, reversed.
+                let low = h - band * BAND - count;
                 for k in 0..w {
-                    let column = &colour_columns[k * h..(k + 1) * h];
-                    let dcolumn = &depth_columns[k * h..(k + 1) * h];
+                    let column = &colour_columns[k * h + low..k * h + low + count];
+                    let dcolumn = &depth_columns[k * h + low..k * h + low + count];
                     for y in 0..count {
-                        let j = h - 1 - (first + y); // row counted from the bottom
-                        rows[(y * w + k) * 4..(y * w + k) * 4 + 4]
-                            .copy_from_slice(&column[j].to_le_bytes());
-                        drows[y * w + k] = dcolumn[j];
+                        rows[y * w + k] = column[count - 1 - y];
+                        drows[y * w + k] = dcolumn[count - 1 - y];
                     }
                 }
             });
@@ -509,7 +517,9 @@ mod tests {
                 let y = (1.0 - clip.y / clip.w) / 2.0 * 540.0;
                 // Red pixels: their topmost row and the mean column on it.
                 let red: Vec<(usize, usize)> = (0..540 * 960)
-                    .filter(|&i| frame.rgba[i * 4] == 255 && frame.rgba[i * 4 + 1] == 0)
+                    .filter(|&i| {
+                        frame.rgba_bytes()[i * 4] == 255 && frame.rgba_bytes()[i * 4 + 1] == 0
+                    })
                     .map(|i| (i % 960, i / 960))
                     .filter(|&(px, _)| (px as f64 - x).abs() < 40.0)
                     .collect();
@@ -656,8 +666,8 @@ mod tests {
             let mut n = 0;
             for &y in far {
                 for x in 0..319 {
-                    sum += (f.rgba[(y * 320 + x) * 4] as f64
-                        - f.rgba[(y * 320 + x + 1) * 4] as f64)
+                    sum += (f.rgba_bytes()[(y * 320 + x) * 4] as f64
+                        - f.rgba_bytes()[(y * 320 + x + 1) * 4] as f64)
                         .abs();
                     n += 1;
                 }
