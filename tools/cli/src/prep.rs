@@ -207,7 +207,12 @@ fn stage_drape(b: &mut Build) -> Result<()> {
         return Ok(());
     };
     let dem = b.dem.as_ref().context("dem stage did not run")?;
-    let bands = image.bands.unwrap_or([1, 2, 3]);
+    // Default: the first three bands, or grey from a single-band image.
+    let bands = match image.bands {
+        Some(b) => b,
+        None if gdalio::open(&image.files[0])?.bands < 3 => [1, 1, 1],
+        None => [1, 2, 3],
+    };
     let opts = StitchOptions {
         target_crs: (!dem.grid.crs_wkt.is_empty()).then(|| dem.grid.crs_wkt.clone()),
         extent: Some(

@@ -81,7 +81,8 @@ pub struct GridSection {
 #[serde(deny_unknown_fields)]
 pub struct ImageSection {
     pub files: Vec<PathBuf>,
-    /// Source bands shown as red, green, blue (1-based); default 1, 2, 3.
+    /// Source bands shown as red, green, blue (1-based); default 1, 2, 3
+    /// (1, 1, 1 for single-band imagery).
     pub bands: Option<[usize; 3]>,
     pub src_nodata: Option<NoData>,
     #[serde(default)]

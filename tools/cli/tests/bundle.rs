@@ -201,3 +201,28 @@ fn a_killed_prep_never_leaves_a_partial_bundle() {
         }
     }
 }
+
+#[test]
+fn single_band_imagery_drapes_as_grey() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("mn.relevo");
+    // A 1 m LiDAR DEM draped with itself: one band.
+    let dem = shared("dem/lidar_minnesota_1m.tif");
+    relevo_ok([
+        "prep",
+        "--dem",
+        dem.to_str().unwrap(),
+        "--image",
+        dem.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let m = manifest(&out);
+    assert_eq!(m["color"]["bands"], serde_json::json!([1, 1, 1]));
+    let rgba = std::fs::read(out.join("color.rgba8")).unwrap();
+    assert!(rgba.chunks(4).all(|p| p[0] == p[1] && p[1] == p[2]));
+    assert!(
+        rgba.chunks(4).any(|p| p[0] > 200) && rgba.chunks(4).any(|p| p[0] < 50),
+        "stretched to the full range"
+    );
+}
