@@ -344,3 +344,63 @@ fn martini_tiles_decode_to_the_reference_terrain() {
         assert_eq!(sha256(&out.join("height.f32")), expected, "{name}");
     }
 }
+
+#[test]
+fn plain_images_with_world_files_stitch_exactly() {
+    let d = tempfile::tempdir().unwrap();
+    let src = repo("data/olinda/L7_ETMs.tif");
+    // Two overlapping halves as PNG (bands 3,2,1) with world files and no CRS:
+    // one keeps GDAL's .wld, the other is renamed to .pgw.
+    for (name, x0, w) in [("west", 0, 200), ("east", 150, 199)] {
+        let out = d.path().join(format!("{name}.png"));
+        gdal_tool(
+            "gdal_translate",
+            &[
+                "-q",
+                "-of",
+                "PNG",
+                "-co",
+                "WORLDFILE=YES",
+                "-b",
+                "3",
+                "-b",
+                "2",
+                "-b",
+                "1",
+                "-srcwin",
+                &x0.to_string(),
+                "0",
+                &w.to_string(),
+                "352",
+                src.to_str().unwrap(),
+                out.to_str().unwrap(),
+            ],
+        );
+        let _ = std::fs::remove_file(d.path().join(format!("{name}.png.aux.xml")));
+    }
+    std::fs::rename(d.path().join("east.wld"), d.path().join("east.pgw")).unwrap();
+    let out = d.path().join("mosaic.tif");
+    relevo_ok([
+        "stitch".as_ref(),
+        d.path().join("west.png").as_os_str(),
+        d.path().join("east.png").as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    let m = read(&out);
+    let original = read(&src);
+    assert_eq!((m.width, m.height), (349, 352));
+    for (k, b) in [3usize, 2, 1].into_iter().enumerate() {
+        for (i, (&v, &o)) in m.bands[k].iter().zip(&original.bands[b - 1]).enumerate() {
+            assert!((v - o).abs() < 1e-9, "band {b} cell {i}: {v} vs {o}");
+        }
+    }
+    for k in 0..6 {
+        assert!(
+            (m.geotransform[k] - original.geotransform[k]).abs() < 1e-6,
+            "{:?} vs {:?}",
+            m.geotransform,
+            original.geotransform
+        );
+    }
+}
