@@ -83,6 +83,7 @@ pub enum Command {
   relevo info olinda.relevo
   relevo info olinda.relevo --json")]
     Info {
+        /// The bundle to describe.
         bundle: PathBuf,
         /// Print the whole manifest as JSON.
         #[arg(long)]
@@ -94,7 +95,10 @@ pub enum Command {
     /// Check a bundle's files, hashes, shapes and invariants; exit 1 on any problem.
     #[command(after_help = "Examples:
   relevo validate olinda.relevo")]
-    Validate { bundle: PathBuf },
+    Validate {
+        /// The bundle to check.
+        bundle: PathBuf,
+    },
 }
 
 #[derive(Subcommand, Debug)]
@@ -140,6 +144,7 @@ pub struct BenchArgs {
 
 #[derive(Args, Debug)]
 pub struct RenderArgs {
+    /// The bundle to render.
     pub bundle: PathBuf,
     /// Eye easting, northing (bundle CRS), height (m), heading (° clockwise
     /// from north) and incl (projection-plane shift: the screen row, in pixels
@@ -161,6 +166,7 @@ pub struct RenderArgs {
     /// Far plane, in grid cells.
     #[arg(long, default_value_t = 1024.0)]
     pub far: f64,
+    /// Distortion-free raycast, or the voxel-space shortcuts as a baseline.
     #[arg(long, value_enum, default_value_t = RenderMode::Raycast)]
     pub mode: RenderMode,
     /// 16.16 fixed-point inner loop instead of floating point.
@@ -178,8 +184,10 @@ pub struct RenderArgs {
     /// Also write the depth buffer: raw little-endian f32, row-major, top row first, [0, 1].
     #[arg(long)]
     pub depth: Option<PathBuf>,
+    /// Output PNG.
     #[arg(long, short)]
     pub out: PathBuf,
+    /// Replace existing outputs.
     #[arg(long)]
     pub force: bool,
 }
@@ -211,12 +219,14 @@ pub struct HierarchyArgs {
     /// Vertex spacing in metres; default: the input's cell size.
     #[arg(long)]
     pub cell_size: Option<f64>,
+    /// Replace existing outputs.
     #[arg(long)]
     pub force: bool,
 }
 
 #[derive(Args, Debug)]
 pub struct MeshArgs {
+    /// The bundle to mesh.
     pub bundle: PathBuf,
     /// Largest vertical error left, metres.
     #[arg(long)]
@@ -224,11 +234,13 @@ pub struct MeshArgs {
     /// Output format; default: from the output's extension.
     #[arg(long, value_enum)]
     pub format: Option<MeshFormat>,
+    /// Output .glb or .obj (with .mtl and .png beside it).
     #[arg(long, short)]
     pub out: PathBuf,
     /// Mesh the padding and voids too (as martini does), ignoring the mask.
     #[arg(long)]
     pub keep_padding: bool,
+    /// Replace existing outputs.
     #[arg(long)]
     pub force: bool,
 }
@@ -322,7 +334,9 @@ impl From<EncodingArg> for Encoding {
 
 #[derive(Args, Debug)]
 pub struct FillArgs {
+    /// Heights with no-data holes (band 1 is used).
     pub input: PathBuf,
+    /// Output GeoTIFF.
     #[arg(long, short)]
     pub out: PathBuf,
     /// Largest hole filled, in cells; larger holes stay no-data.
@@ -331,12 +345,14 @@ pub struct FillArgs {
     /// Source no-data value (a number or nan), overriding the file's.
     #[arg(long, value_parser = parse_nodata, allow_negative_numbers = true)]
     pub src_nodata: Option<f64>,
+    /// Replace existing outputs.
     #[arg(long)]
     pub force: bool,
 }
 
 #[derive(Args, Debug)]
 pub struct PadArgs {
+    /// Heights to square (band 1 is used).
     pub input: PathBuf,
     /// Output heights, (2^n+1)², Float32.
     #[arg(long, short)]
@@ -350,6 +366,7 @@ pub struct PadArgs {
     /// Source no-data value (a number or nan), overriding the file's.
     #[arg(long, value_parser = parse_nodata, allow_negative_numbers = true)]
     pub src_nodata: Option<f64>,
+    /// Replace existing outputs.
     #[arg(long)]
     pub force: bool,
 }
