@@ -7,10 +7,23 @@ use crate::prep::prep;
 use crate::region::Region;
 use crate::stitch::{stitch, StitchOptions};
 use anyhow::{bail, Context, Result};
+use relevo_core::raster::mosaic::Overlap;
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
+
+/// Median of a non-empty set of values (mean of the middle two when even).
+fn median(values: &[f64]) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        (v[n / 2 - 1] + v[n / 2]) / 2.0
+    }
+}
 
 /// Median wall time in milliseconds of `runs` calls of `f`.
 pub fn median_ms(runs: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
@@ -20,8 +33,7 @@ pub fn median_ms(runs: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> 
         f()?;
         times.push(start.elapsed().as_secs_f64() * 1e3);
     }
-    times.sort_by(f64::total_cmp);
-    Ok(times[times.len() / 2])
+    Ok(median(&times))
 }
 
 fn emit(json_lines: bool, value: serde_json::Value, text: String) {
@@ -65,13 +77,10 @@ pub fn ingest(repo: &Path, data: &Path, runs: usize, json_lines: bool) -> Result
         }
     }
     let ours_out = scratch.join("ours.tif");
-    for (label, overlap) in [
-        ("blend", crate::cli::OverlapArg::Blend),
-        ("first", crate::cli::OverlapArg::First),
-    ] {
+    for (label, overlap) in [("blend", Overlap::Blend), ("first", Overlap::First)] {
         let opts = StitchOptions {
             src_nodata: Some(0.0),
-            overlap: overlap.into(),
+            overlap,
             ..Default::default()
         };
         let ours = median_ms(runs, || {
@@ -302,8 +311,7 @@ pub fn hierarchy(
                 Ok(())
             })?);
         }
-        tiled_times.sort_by(f64::total_cmp);
-        let refine_tiled_ms = (tiled_times[3] + tiled_times[4]) / 2.0;
+        let refine_tiled_ms = median(&tiled_times);
 
         // Whole `prep` on the grid written as a GeoTIFF (30 m, UTM 33N).
         let prep_ms = {
@@ -340,18 +348,13 @@ pub fn hierarchy(
             median_ms(1, || prep(&region, &out, true).map(|_| ()))?
         };
 
-        let mut sorted = times.clone();
-        sorted.sort_by(f64::total_cmp);
-        let refine_ms = (sorted[3] + sorted[4]) / 2.0;
-        let strip_entries: Vec<f64> = (0..8)
+        let refine_ms = median(&times);
+        let mtris = (0..8)
             .map(|k| triangles[k] as f64 / times[k] / 1e3)
-            .collect();
-        let mtris = strip_entries.iter().sum::<f64>() / 8.0;
-        let median_triangles = {
-            let mut t = triangles.clone();
-            t.sort();
-            (t[3] + t[4]) / 2
-        };
+            .sum::<f64>()
+            / 8.0;
+        let median_triangles =
+            median(&triangles.iter().map(|&t| t as f64).collect::<Vec<_>>()) as usize;
         let msamples = (*side * *side) as f64 / ours / 1e3;
         emit(
             json_lines,

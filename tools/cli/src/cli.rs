@@ -722,7 +722,7 @@ fn run_render(a: RenderArgs) -> Result<()> {
     let frame = render::render_bundle(&bundle, &view, &options, hillshade)?;
     render::write_png(&a.out, &frame)?;
     if let Some(d) = &a.depth {
-        crate::mesh::write_atomic(d, bytemuck::cast_slice(&frame.depth))?;
+        crate::gdalio::write_atomic(d, bytemuck::cast_slice(&frame.depth))?;
     }
     let s = frame.steps;
     eprintln!(
@@ -814,7 +814,7 @@ fn run_mesh(a: MeshArgs) -> Result<()> {
     let m = mesh::build(&bundle, a.max_error, a.keep_padding)?;
     match format {
         MeshFormat::Glb => {
-            mesh::write_atomic(&a.out, &mesh::to_glb(&m, &bundle.manifest.crs.wkt)?)?
+            gdalio::write_atomic(&a.out, &mesh::to_glb(&m, &bundle.manifest.crs.wkt)?)?
         }
         MeshFormat::Obj => {
             let stem = a
@@ -823,11 +823,11 @@ fn run_mesh(a: MeshArgs) -> Result<()> {
                 .map(|s| s.to_string_lossy().to_string())
                 .unwrap_or_else(|| "mesh".into());
             if let Some(png) = &m.texture_png {
-                mesh::write_atomic(&a.out.with_file_name(format!("{stem}.png")), png)?;
+                gdalio::write_atomic(&a.out.with_file_name(format!("{stem}.png")), png)?;
                 let mtl = format!("newmtl drape\nKd 1 1 1\nmap_Kd {stem}.png\n");
-                mesh::write_atomic(&a.out.with_file_name(format!("{stem}.mtl")), mtl.as_bytes())?;
+                gdalio::write_atomic(&a.out.with_file_name(format!("{stem}.mtl")), mtl.as_bytes())?;
             }
-            mesh::write_atomic(
+            gdalio::write_atomic(
                 &a.out,
                 &mesh::to_obj(&m, m.texture_png.as_ref().map(|_| stem.as_str())),
             )?;

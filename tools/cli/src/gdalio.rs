@@ -62,8 +62,8 @@ pub fn open(path: &Path) -> Result<Source> {
     if !path.exists() {
         bail!("{}: no such file", path.display());
     }
-    if path.is_dir() && !path.join("manifest.json").exists() {
-        // GDAL opens some directories; a plain one is a user mistake.
+    if path.is_dir() {
+        // GDAL opens some directories; as an input here one is a user mistake.
         bail!("{}: is a directory, not a raster", path.display());
     }
     let dataset = Dataset::open(path).map_err(|_| {
@@ -340,6 +340,24 @@ pub fn write_geotiff(
         let _ = std::fs::remove_file(&partial);
     }
     result
+}
+
+/// Write `bytes` to `path` through a partial file renamed into place.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let partial = partial_path(path);
+    std::fs::write(&partial, bytes).with_context(|| format!("{}: cannot write", path.display()))?;
+    std::fs::rename(&partial, path)
+        .with_context(|| format!("{}: cannot move into place", path.display()))
+}
+
+/// An RGBA8 image (row-major) encoded as PNG.
+pub fn encode_png(rgba: &[u8], width: usize, height: usize) -> Result<Vec<u8>> {
+    let mut out = Vec::new();
+    let mut encoder = png::Encoder::new(&mut out, width as u32, height as u32);
+    encoder.set_color(png::ColorType::Rgba);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder.write_header()?.write_image_data(rgba)?;
+    Ok(out)
 }
 
 /// `DIR/.NAME.partial` beside `path`.

@@ -13,7 +13,6 @@ use relevo_core::lp::extract::extract;
 use relevo_core::lp::{terrain_position, Hierarchy};
 use serde_json::json;
 use std::io::Write;
-use std::path::Path;
 
 /// Mesh arrays ready to write.
 pub struct ExportMesh {
@@ -119,7 +118,7 @@ pub fn build(bundle: &Bundle, max_error: f32, keep_padding: bool) -> Result<Expo
                 .collect();
             (
                 Some(uvs),
-                Some(encode_png(&rgba, color.width, color.height)?),
+                Some(crate::gdalio::encode_png(&rgba, color.width, color.height)?),
             )
         }
     };
@@ -131,15 +130,6 @@ pub fn build(bundle: &Bundle, max_error: f32, keep_padding: bool) -> Result<Expo
         origin: [origin_x, origin_y],
         texture_png,
     })
-}
-
-fn encode_png(rgba: &[u8], width: usize, height: usize) -> Result<Vec<u8>> {
-    let mut out = Vec::new();
-    let mut encoder = png::Encoder::new(&mut out, width as u32, height as u32);
-    encoder.set_color(png::ColorType::Rgba);
-    encoder.set_depth(png::BitDepth::Eight);
-    encoder.write_header()?.write_image_data(rgba)?;
-    Ok(out)
 }
 
 /// glTF 2.0 binary container.
@@ -260,12 +250,4 @@ pub fn to_obj(mesh: &ExportMesh, material: Option<&str>) -> Vec<u8> {
         }
     }
     out
-}
-
-/// Write `bytes` to `path` through a partial file renamed into place.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let partial = crate::gdalio::partial_path(path);
-    std::fs::write(&partial, bytes).with_context(|| format!("{}: cannot write", path.display()))?;
-    std::fs::rename(&partial, path)
-        .with_context(|| format!("{}: cannot move into place", path.display()))
 }

@@ -122,14 +122,8 @@ pub fn render_bundle(
 
 /// Write an RGBA8 PNG through a partial file.
 pub fn write_png(path: &Path, frame: &Frame) -> Result<()> {
-    let mut bytes = Vec::new();
-    let mut encoder = png::Encoder::new(&mut bytes, frame.width as u32, frame.height as u32);
-    encoder.set_color(png::ColorType::Rgba);
-    encoder.set_depth(png::BitDepth::Eight);
-    encoder
-        .write_header()?
-        .write_image_data(frame.rgba_bytes())?;
-    crate::mesh::write_atomic(path, &bytes)
+    let bytes = crate::gdalio::encode_png(frame.rgba_bytes(), frame.width, frame.height)?;
+    crate::gdalio::write_atomic(path, &bytes)
 }
 
 /// Options from the command line.

@@ -334,7 +334,6 @@ mod refinement {
                         );
                     }
                 }
-                assert!(culled.len() <= free.len());
             }
         }
     }

@@ -113,7 +113,8 @@ pub struct Terrain<'a> {
     /// without imagery (a grey ramp by height, shaded) — one cache line
     /// answers a sample.
     sampled: Vec<(f32, u32)>,
-    heights_fixed: Vec<i64>,
+    /// Heights in 16.16 fixed point, built on the first fixed-point render.
+    heights_fixed: std::sync::OnceLock<Vec<i32>>,
     mask: &'a [u8],
     color: Option<ColorSource>,
     /// Per-vertex light factor, when hillshade is baked in.
@@ -142,10 +143,7 @@ impl<'a> Terrain<'a> {
                 .zip(mask)
                 .map(|(&h, &m)| (if m == 1 { h } else { f32::NAN }, 0))
                 .collect(),
-            heights_fixed: heights
-                .iter()
-                .map(|&h| (h as f64 * 65536.0) as i64)
-                .collect(),
+            heights_fixed: std::sync::OnceLock::new(),
             mask,
             color,
             shade: None,
@@ -284,6 +282,16 @@ impl<'a> Terrain<'a> {
         Some(top * (1.0 - v) + bottom * v)
     }
 
+    /// The heights in 16.16 fixed point (|h| < 32768 m fits an i32).
+    fn fixed_heights(&self) -> &[i32] {
+        self.heights_fixed.get_or_init(|| {
+            self.heights
+                .iter()
+                .map(|&h| (h as f64 * 65536.0) as i32)
+                .collect()
+        })
+    }
+
     /// Height at a 16.16 fixed-point grid position (`x`, `y` in cells of the
     /// terrain frame), in 16.16 metres.
     #[inline]
@@ -301,8 +309,9 @@ impl<'a> Terrain<'a> {
         if self.mask[nearest] != 1 {
             return None;
         }
+        let fixed = self.fixed_heights();
         if !subvoxel {
-            return Some(self.heights_fixed[nearest]);
+            return Some(fixed[nearest] as i64);
         }
         let max = ((self.side - 2) as i64) << 16;
         let (c, r) = (c.clamp(0, max + 0xffff), r.clamp(0, max + 0xffff));
@@ -317,11 +326,7 @@ impl<'a> Terrain<'a> {
         let w = self.weights[p][q];
         let i = r0 * self.side + c0;
         let v = [i, i + 1, i + self.side, i + self.side + 1];
-        Some(
-            (0..4)
-                .map(|k| (w[k] * self.heights_fixed[v[k]] as f64) as i64)
-                .sum(),
-        )
+        Some((0..4).map(|k| (w[k] * fixed[v[k]] as f64) as i64).sum())
     }
 
     /// Colour at (x, y) from colour level `level`, RGBA packed little-endian.

@@ -120,18 +120,23 @@ pub fn vertex_kind(side: usize, c: usize, r: usize) -> Option<(usize, bool)> {
     Some((h, lc != lr))
 }
 
+/// Offsets of the children of an edge (`edge`) or centre vertex of scale
+/// `h`: the diagonal neighbours at h/2, or the edge midpoints at h. An edge
+/// vertex of scale 1 has none (all offsets zero).
+fn child_offsets(h: usize, edge: bool) -> [(i64, i64); 4] {
+    let (q, hi) = ((h / 2) as i64, h as i64);
+    if edge {
+        [(-q, -q), (q, -q), (-q, q), (q, q)]
+    } else {
+        [(-hi, 0), (hi, 0), (0, -hi), (0, hi)]
+    }
+}
+
 /// The children of vertex (c, r) on a `side` grid (see the module docs).
 pub fn children(side: usize, c: usize, r: usize) -> impl Iterator<Item = (usize, usize)> {
-    let offsets: [(i64, i64); 4] = match vertex_kind(side, c, r) {
-        Some((h, true)) if h >= 2 => {
-            let q = (h / 2) as i64;
-            [(-q, -q), (q, -q), (-q, q), (q, q)]
-        }
-        Some((h, false)) => {
-            let h = h as i64;
-            [(-h, 0), (h, 0), (0, -h), (0, h)]
-        }
-        _ => [(0, 0); 4],
+    let offsets = match vertex_kind(side, c, r) {
+        Some((h, edge)) => child_offsets(h, edge),
+        None => [(0, 0); 4],
     };
     let n = side as i64;
     offsets.into_iter().filter_map(move |(dc, dr)| {
@@ -284,12 +289,7 @@ fn finest_levels(heights: &[f32], side: usize, cell: f64, out: &mut [[f32; 2]]) 
 
 /// The edge (`edge`) or centre vertices of scale `h` ≥ 2, rows in parallel.
 fn coarse_level(heights: &[f32], side: usize, cell: f64, h: usize, edge: bool, out: SharedOut) {
-    let (q, hi) = ((h / 2) as i64, h as i64);
-    let children: [(i64, i64); 4] = if edge {
-        [(-q, -q), (q, -q), (-q, q), (q, q)]
-    } else {
-        [(-hi, 0), (hi, 0), (0, -hi), (0, hi)]
-    };
+    let children = child_offsets(h, edge);
     let (first_row, row_step) = if edge { (0, h) } else { (h, 2 * h) };
     let rows: Vec<usize> = (first_row..side).step_by(row_step).collect();
     rows.into_par_iter().for_each(|r| {

@@ -81,6 +81,8 @@ const ALL_INSIDE: u8 = 0b11_1111;
 pub struct Refiner {
     strip: Strip,
     parity: u8,
+    /// Whether this refinement records morphed heights.
+    morph: bool,
 }
 
 /// Everything the recursion reads, bundled to keep its signature short.
@@ -150,6 +152,7 @@ impl Refiner {
         self.strip.indices.clear();
         self.strip.morphed_z.clear();
         self.parity = 0;
+        self.morph = ctx.nu_min.is_some();
         let idx = |v: (i64, i64)| layout.index(side, v.0 as usize, v.1 as usize) as u32;
         self.push(idx(sw), z(sw.0, sw.1));
         self.push(idx(sw), z(sw.0, sw.1));
@@ -174,16 +177,17 @@ impl Refiner {
             self.append(idx(corner), 1, z(corner.0, corner.1));
         }
         self.strip.indices.remove(0);
-        self.strip.morphed_z.remove(0);
-        if ctx.nu_min.is_none() {
-            self.strip.morphed_z.clear();
+        if self.morph {
+            self.strip.morphed_z.remove(0);
         }
         &self.strip
     }
 
     fn push(&mut self, v: u32, z: f32) {
         self.strip.indices.push(v);
-        self.strip.morphed_z.push(z);
+        if self.morph {
+            self.strip.morphed_z.push(z);
+        }
     }
 
     /// Seed's `AnexaStrip`: add `v` unless it is one of the last two; when
@@ -196,7 +200,11 @@ impl Refiner {
             if parity != self.parity {
                 self.parity = parity;
             } else {
-                let z_before = self.strip.morphed_z[n - 2];
+                let z_before = if self.morph {
+                    self.strip.morphed_z[n - 2]
+                } else {
+                    0.0
+                };
                 self.push(before_last, z_before);
             }
             self.push(v, z);
