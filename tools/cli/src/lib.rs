@@ -11,3 +11,4 @@ pub mod progress;
 pub mod region;
 pub mod render;
 pub mod stitch;
+pub mod veg;

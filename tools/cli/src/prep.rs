@@ -318,12 +318,27 @@ fn stage_write(b: &mut Build) -> Result<()> {
     Ok(())
 }
 
-/// Map three bands to RGBA8: each band's `[low, high]` percentiles (of its
-/// valid cells) stretch linearly to 0..255, or values are clamped to 0..255
-/// when `stretch` is `None`. Alpha is 255 where the image has data.
+/// Map three bands to RGBA8 with [`stretch_ranges`] and [`to_u8`]. Alpha is
+/// 255 where the image has data.
 pub fn to_rgba8(raster: &Raster, stretch: Option<[f64; 2]>) -> Vec<u8> {
-    let n = raster.cells();
-    let ranges: Vec<(f64, f64)> = (0..3)
+    let ranges = stretch_ranges(raster, stretch);
+    let mut out = vec![0u8; raster.cells() * 4];
+    for i in 0..raster.cells() {
+        if !raster.is_valid(i) {
+            continue;
+        }
+        for (b, &range) in ranges.iter().take(3).enumerate() {
+            out[i * 4 + b] = to_u8(raster.band(b)[i], range);
+        }
+        out[i * 4 + 3] = 255;
+    }
+    out
+}
+
+/// Per band, the values mapped to 0 and 255: the `[low, high]` percentiles
+/// of its valid cells, or `(0, 255)` (values kept) when `stretch` is `None`.
+pub fn stretch_ranges(raster: &Raster, stretch: Option<[f64; 2]>) -> Vec<(f64, f64)> {
+    (0..raster.bands)
         .map(|b| match stretch {
             None => (0.0, 255.0),
             Some([lo, hi]) => {
@@ -343,19 +358,14 @@ pub fn to_rgba8(raster: &Raster, stretch: Option<[f64; 2]>) -> Vec<u8> {
                 }
             }
         })
-        .collect();
-    let mut out = vec![0u8; n * 4];
-    for i in 0..n {
-        if !raster.is_valid(i) {
-            continue;
-        }
-        for (b, &(lo, hi)) in ranges.iter().enumerate() {
-            let v = (raster.band(b)[i] - lo) / (hi - lo) * 255.0;
-            out[i * 4 + b] = v.round().clamp(0.0, 255.0) as u8;
-        }
-        out[i * 4 + 3] = 255;
-    }
-    out
+        .collect()
+}
+
+/// `value` mapped linearly from `range` to 0..255, rounded and clamped
+/// (no-data, NaN, gives 0).
+#[inline]
+pub fn to_u8(value: f64, (lo, hi): (f64, f64)) -> u8 {
+    ((value - lo) / (hi - lo) * 255.0).round().clamp(0.0, 255.0) as u8
 }
 
 /// Write the manifest and move the bundle into place.

@@ -17,6 +17,7 @@ pub mod grid;
 pub mod horizon;
 pub mod lp;
 pub mod raster;
+pub mod veg;
 
 mod error;
 pub use error::{Error, Result};

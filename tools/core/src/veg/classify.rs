@@ -1,0 +1,177 @@
+//! Learning class signatures from marked samples and classifying regions by
+//! the nearest learnt signature (the seed's buildDB workflow: signatures of
+//! the marked regions, then a search for compatible signatures everywhere).
+
+use super::haar::region_signature;
+use super::samples::Sample;
+use super::segment::Segmentation;
+use super::Image;
+use crate::{Error, Result};
+use rayon::prelude::*;
+
+/// The region covering most pixel centres of a sample (lowest index on ties).
+fn dominant_region(segmentation: &Segmentation, sample: &Sample) -> Option<usize> {
+    let (xs, ys): (Vec<f64>, Vec<f64>) = sample.polygon.iter().map(|p| (p[0], p[1])).unzip();
+    let lo = |v: &[f64], n: usize| {
+        (v.iter().cloned().fold(f64::MAX, f64::min).floor().max(0.0) as usize).min(n)
+    };
+    let hi = |v: &[f64], n: usize| {
+        (v.iter().cloned().fold(f64::MIN, f64::max).ceil().max(0.0) as usize).min(n)
+    };
+    let (w, h) = (segmentation.width, segmentation.height);
+    let mut counts = std::collections::BTreeMap::new();
+    for y in lo(&ys, h)..hi(&ys, h) {
+        for x in lo(&xs, w)..hi(&xs, w) {
+            if sample.contains(x as f64 + 0.5, y as f64 + 0.5) {
+                *counts
+                    .entry(segmentation.labels[y * w + x] as usize)
+                    .or_insert(0u64) += 1;
+            }
+        }
+    }
+    counts
+        .into_iter()
+        .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+        .map(|(k, _)| k)
+}
+
+/// Signatures learnt per class, standardised per feature.
+#[derive(Debug, Clone)]
+pub struct Classifier {
+    /// Class names in order of first appearance in the samples.
+    pub classes: Vec<String>,
+    /// Per feature: 1 / spread over all learnt signatures.
+    inverse_scale: Vec<f32>,
+    /// (class index, standardised signature).
+    examples: Vec<(usize, Vec<f32>)>,
+    /// Smallest window side a signature is taken over (pixels).
+    window_px: u32,
+}
+
+/// A region's class and how clearly it won, in `[0.5, 1]`: `d₂ / (d₁ + d₂)`
+/// with `d₁` the distance to the nearest signature and `d₂` to the nearest of
+/// any other class (1 when there is a single class).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Label {
+    pub class: usize,
+    pub score: f32,
+}
+
+impl Classifier {
+    /// Learn signatures: every region whose centroid lies in a sample, and
+    /// the region covering most of the sample, gives one signature of the
+    /// sample's class.
+    pub fn train(
+        image: &Image,
+        segmentation: &Segmentation,
+        samples: &[Sample],
+        window_px: u32,
+    ) -> Result<Classifier> {
+        if samples.is_empty() {
+            return Err(Error::Input("no samples to learn from".into()));
+        }
+        let mut classes: Vec<String> = Vec::new();
+        let mut raw: Vec<(usize, Vec<f32>)> = Vec::new();
+        for sample in samples {
+            let class = match classes.iter().position(|c| *c == sample.class) {
+                Some(k) => k,
+                None => {
+                    classes.push(sample.class.clone());
+                    classes.len() - 1
+                }
+            };
+            let mut inside: Vec<usize> = segmentation
+                .regions
+                .iter()
+                .enumerate()
+                .filter(|(_, r)| sample.contains(r.centroid[0] as f64, r.centroid[1] as f64))
+                .map(|(k, _)| k)
+                .collect();
+            if let Some(k) = dominant_region(segmentation, sample) {
+                if !inside.contains(&k) {
+                    inside.push(k);
+                }
+            }
+            for k in inside {
+                raw.push((class, region_signature(image, segmentation, k, window_px)));
+            }
+        }
+        let features = raw[0].1.len();
+        let n = raw.len() as f32;
+        let inverse_scale: Vec<f32> = (0..features)
+            .map(|f| {
+                let mean = raw.iter().map(|(_, s)| s[f]).sum::<f32>() / n;
+                let var = raw.iter().map(|(_, s)| (s[f] - mean).powi(2)).sum::<f32>() / n;
+                1.0 / var.sqrt().max(1e-3)
+            })
+            .collect();
+        let examples = raw
+            .into_iter()
+            .map(|(c, s)| {
+                (
+                    c,
+                    s.iter().zip(&inverse_scale).map(|(v, k)| v * k).collect(),
+                )
+            })
+            .collect();
+        Ok(Classifier {
+            classes,
+            inverse_scale,
+            examples,
+            window_px,
+        })
+    }
+
+    /// Number of learnt signatures per class.
+    pub fn signatures_per_class(&self) -> Vec<usize> {
+        let mut counts = vec![0; self.classes.len()];
+        for (c, _) in &self.examples {
+            counts[*c] += 1;
+        }
+        counts
+    }
+
+    /// Class of one signature.
+    pub fn classify(&self, signature: &[f32]) -> Label {
+        let mut nearest = vec![f32::INFINITY; self.classes.len()];
+        for (class, example) in &self.examples {
+            let d: f32 = example
+                .iter()
+                .zip(signature)
+                .zip(&self.inverse_scale)
+                .map(|((e, s), k)| (e - s * k).powi(2))
+                .sum();
+            nearest[*class] = nearest[*class].min(d);
+        }
+        let (best, d1) = nearest
+            .iter()
+            .enumerate()
+            .fold(
+                (0, f32::INFINITY),
+                |acc, (c, &d)| if d < acc.1 { (c, d) } else { acc },
+            );
+        let d2 = nearest
+            .iter()
+            .enumerate()
+            .filter(|(c, _)| *c != best)
+            .map(|(_, &d)| d)
+            .fold(f32::INFINITY, f32::min);
+        let (d1, d2) = (d1.sqrt(), d2.sqrt());
+        let score = if d2.is_infinite() || d1 + d2 == 0.0 {
+            1.0
+        } else {
+            d2 / (d1 + d2)
+        };
+        Label { class: best, score }
+    }
+
+    /// Classify every region of a segmentation.
+    pub fn classify_regions(&self, image: &Image, segmentation: &Segmentation) -> Vec<Label> {
+        segmentation
+            .regions
+            .par_iter()
+            .enumerate()
+            .map(|(k, _)| self.classify(&region_signature(image, segmentation, k, self.window_px)))
+            .collect()
+    }
+}

@@ -1,0 +1,132 @@
+//! Vegetation extraction from imagery (Savelli & Seixas; vegetation thesis,
+//! chapter 3): split-and-merge segmentation, Haar-wavelet signatures learnt
+//! from user-marked samples, classification of every region, and objects
+//! (crowns, or regions filled at a density) written as a vegetation database.
+//!
+//! - [`Image`]: the analysed bands as 8-bit values and the colour space the
+//!   homogeneity predicate works in.
+//! - [`segment`]: split-and-merge into homogeneous, 4-connected regions.
+//! - [`haar`]: the orthonormal 2-D Haar transform and region signatures.
+//! - [`samples`]: marked samples (semicolon CSV rectangles, GeoJSON polygons).
+//! - [`classify`]: nearest-signature classifier with a score.
+//! - [`detect`]: vegetation objects from classified regions.
+//! - [`db`]: the `id;x;y;class;size;score` database and its evaluation.
+
+pub mod baseline;
+pub mod classify;
+pub mod db;
+pub mod detect;
+pub mod eval;
+pub mod haar;
+pub mod samples;
+pub mod segment;
+
+use crate::{Error, Result};
+
+/// Most bands the analysis takes (e.g. R, G, B, NIR).
+pub const MAX_BANDS: usize = 4;
+
+/// Bands of an image as 8-bit values, pixel-interleaved, row-major. Deeper
+/// imagery is stretched to 8 bits before it gets here, so thresholds are in
+/// the same units for every input.
+#[derive(Debug, Clone)]
+pub struct Image {
+    pub width: usize,
+    pub height: usize,
+    pub bands: usize,
+    pub pixels: Vec<u8>,
+}
+
+impl Image {
+    pub fn new(width: usize, height: usize, bands: usize, pixels: Vec<u8>) -> Result<Image> {
+        if width == 0 || height == 0 {
+            return Err(Error::Input(format!("image is {width}×{height}: empty")));
+        }
+        if !(1..=MAX_BANDS).contains(&bands) {
+            return Err(Error::Input(format!(
+                "{bands} bands: the analysis takes 1 to {MAX_BANDS}"
+            )));
+        }
+        if pixels.len() != width * height * bands {
+            return Err(Error::Input(format!(
+                "{} values for a {width}×{height} image of {bands} bands",
+                pixels.len()
+            )));
+        }
+        Ok(Image {
+            width,
+            height,
+            bands,
+            pixels,
+        })
+    }
+
+    /// The pixel at `(x, y)` in the opponent colour space of [`opponent`].
+    #[inline]
+    pub fn colour(&self, x: usize, y: usize) -> [f32; MAX_BANDS] {
+        let at = (y * self.width + x) * self.bands;
+        opponent(&self.pixels[at..at + self.bands])
+    }
+}
+
+/// Map band values to an opponent colour space: channel 0 is the mean of the
+/// bands (brightness, in band units); channels 1.. are the normalised Helmert
+/// contrasts between bands (for R, G, B: (R−G)/√2 and (R+G−2B)/√6), an
+/// orthonormal basis of the colour differences.
+///
+/// Why this space: sunlit and shaded sides of one crown differ mostly in
+/// brightness, while crown, grass, soil and water differ in hue. Separating
+/// the two lets the homogeneity predicate tolerate shading more than hue
+/// change, and the contrasts being orthonormal makes a chroma threshold mean
+/// the same distance whatever the direction of the hue change.
+#[inline]
+pub fn opponent(bands: &[u8]) -> [f32; MAX_BANDS] {
+    let mut out = [0.0f32; MAX_BANDS];
+    let n = bands.len();
+    let mut prefix = 0.0f32;
+    for (k, &v) in bands.iter().enumerate() {
+        let v = v as f32;
+        if k > 0 {
+            // Helmert row k: (v_0 + … + v_{k−1} − k·v_k) / √(k(k+1)).
+            let kf = k as f32;
+            out[k] = (prefix - kf * v) / (kf * (kf + 1.0)).sqrt();
+        }
+        prefix += v;
+    }
+    out[0] = prefix / n as f32;
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn opponent_separates_brightness_from_hue() {
+        // Grey has no chroma at any brightness.
+        for v in [0u8, 77, 255] {
+            let c = opponent(&[v, v, v]);
+            assert_eq!(c[0], v as f32);
+            assert!(c[1].abs() < 1e-4 && c[2].abs() < 1e-4);
+        }
+        // Contrasts are orthonormal: a unit change of one band moves the
+        // chroma by a vector whose squared length plus (1/3)·(brightness
+        // change)²·3 is 1 (Helmert matrix rows are orthonormal).
+        let base = opponent(&[100, 100, 100]);
+        for b in 0..3 {
+            let mut px = [100u8; 3];
+            px[b] = 101;
+            let c = opponent(&px);
+            let chroma2: f32 = (1..3).map(|k| (c[k] - base[k]).powi(2)).sum();
+            let mean_part = (c[0] - base[0]).powi(2) * 3.0;
+            assert!((chroma2 + mean_part - 1.0).abs() < 1e-4);
+        }
+    }
+
+    #[test]
+    fn image_rejects_bad_shapes() {
+        assert!(Image::new(0, 3, 3, vec![]).is_err());
+        assert!(Image::new(2, 2, 5, vec![0; 20]).is_err());
+        assert!(Image::new(2, 2, 3, vec![0; 11]).is_err());
+    }
+}

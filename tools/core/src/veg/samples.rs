@@ -1,0 +1,235 @@
+//! Samples a user marks on the image: rectangles in a semicolon CSV
+//! (`class;xmin;ymin;xmax;ymax`, pixel coordinates) or GeoJSON polygons with
+//! a `class` property (coordinates in the image CRS).
+
+use crate::{Error, Result};
+
+/// One marked sample: a class and a polygon in pixel coordinates (x right,
+/// y down; pixel `i` spans `[i, i+1)`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sample {
+    pub class: String,
+    pub polygon: Vec<[f64; 2]>,
+}
+
+impl Sample {
+    /// Whether the point lies inside the polygon (even–odd rule).
+    pub fn contains(&self, x: f64, y: f64) -> bool {
+        let p = &self.polygon;
+        let mut inside = false;
+        let mut j = p.len() - 1;
+        for i in 0..p.len() {
+            let ([xi, yi], [xj, yj]) = (p[i], p[j]);
+            if (yi > y) != (yj > y) && x < (xj - xi) * (y - yi) / (yj - yi) + xi {
+                inside = !inside;
+            }
+            j = i;
+        }
+        inside
+    }
+
+    /// Mean of the polygon's vertices.
+    pub fn centre(&self) -> [f64; 2] {
+        let n = self.polygon.len() as f64;
+        let (sx, sy) = self
+            .polygon
+            .iter()
+            .fold((0.0, 0.0), |(sx, sy), p| (sx + p[0], sy + p[1]));
+        [sx / n, sy / n]
+    }
+}
+
+const CSV_COLUMNS: [&str; 5] = ["class", "xmin", "ymin", "xmax", "ymax"];
+
+/// Parse the CSV form. Blank lines and lines starting with `#` are skipped;
+/// a header line, if present, must name exactly the five columns. Every box
+/// must lie within the `width`×`height` image.
+pub fn parse_csv(text: &str, width: usize, height: usize) -> Result<Vec<Sample>> {
+    let mut samples = Vec::new();
+    let mut first = true;
+    for (number, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let fail = |message: String| Error::Input(format!("line {}: {message}", number + 1));
+        let fields: Vec<&str> = line.split(';').map(str::trim).collect();
+        if std::mem::take(&mut first) && fields.first() == Some(&"class") {
+            if fields != CSV_COLUMNS {
+                return Err(fail(format!(
+                    "unknown columns {:?}: expected class;xmin;ymin;xmax;ymax",
+                    fields
+                )));
+            }
+            continue;
+        }
+        if fields.len() != 5 {
+            return Err(fail(format!(
+                "{} fields: expected class;xmin;ymin;xmax;ymax",
+                fields.len()
+            )));
+        }
+        if fields[0].is_empty() {
+            return Err(fail("empty class".into()));
+        }
+        let mut numbers = [0.0f64; 4];
+        for (k, value) in numbers.iter_mut().enumerate() {
+            *value = fields[k + 1]
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| {
+                    fail(format!(
+                        "{} = {:?} is not a number",
+                        CSV_COLUMNS[k + 1],
+                        fields[k + 1]
+                    ))
+                })?;
+        }
+        let [x0, y0, x1, y1] = numbers;
+        if !(x0 < x1 && y0 < y1) {
+            return Err(fail(format!(
+                "empty box: needs xmin < xmax and ymin < ymax ({x0}, {y0}, {x1}, {y1})"
+            )));
+        }
+        if x0 < 0.0 || y0 < 0.0 || x1 > width as f64 || y1 > height as f64 {
+            return Err(fail(format!(
+                "box ({x0}, {y0}, {x1}, {y1}) lies outside the {width}×{height} image"
+            )));
+        }
+        samples.push(Sample {
+            class: fields[0].to_string(),
+            polygon: vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]],
+        });
+    }
+    if samples.is_empty() {
+        return Err(Error::Input("no samples".into()));
+    }
+    Ok(samples)
+}
+
+/// Parse the GeoJSON form: a FeatureCollection of Polygon or MultiPolygon
+/// features with a non-empty string property `class`. Outer rings are used
+/// (holes are ignored). `to_pixel` maps image-CRS coordinates to pixels.
+pub fn parse_geojson(
+    text: &str,
+    to_pixel: impl Fn(f64, f64) -> Option<[f64; 2]>,
+    width: usize,
+    height: usize,
+) -> Result<Vec<Sample>> {
+    let json: serde_json::Value =
+        serde_json::from_str(text).map_err(|e| Error::Input(format!("not JSON: {e}")))?;
+    let features = json
+        .get("features")
+        .and_then(|f| f.as_array())
+        .ok_or_else(|| Error::Input("not a GeoJSON FeatureCollection".into()))?;
+    let mut samples = Vec::new();
+    for (k, feature) in features.iter().enumerate() {
+        let fail = |message: &str| Error::Input(format!("feature {k}: {message}"));
+        let class = feature
+            .pointer("/properties/class")
+            .and_then(|c| c.as_str())
+            .map(str::trim)
+            .filter(|c| !c.is_empty())
+            .ok_or_else(|| fail("needs a non-empty string property \"class\""))?;
+        let geometry = feature
+            .get("geometry")
+            .ok_or_else(|| fail("has no geometry"))?;
+        let coordinates = geometry
+            .get("coordinates")
+            .ok_or_else(|| fail("geometry has no coordinates"))?;
+        let rings: Vec<&serde_json::Value> = match geometry.get("type").and_then(|t| t.as_str()) {
+            Some("Polygon") => vec![&coordinates[0]],
+            Some("MultiPolygon") => coordinates
+                .as_array()
+                .map(|polys| polys.iter().map(|p| &p[0]).collect())
+                .unwrap_or_default(),
+            other => {
+                return Err(fail(&format!(
+                    "geometry type {other:?}: samples must be Polygon or MultiPolygon"
+                )))
+            }
+        };
+        for ring in rings {
+            let points = ring
+                .as_array()
+                .filter(|r| r.len() >= 4)
+                .ok_or_else(|| fail("a ring needs at least 4 positions"))?;
+            let mut polygon = Vec::with_capacity(points.len());
+            for p in points {
+                let (x, y) = match (p[0].as_f64(), p[1].as_f64()) {
+                    (Some(x), Some(y)) => (x, y),
+                    _ => return Err(fail("a position is not a pair of numbers")),
+                };
+                let pixel = to_pixel(x, y).ok_or_else(|| fail("cannot map to pixels"))?;
+                if pixel[0] < 0.0
+                    || pixel[1] < 0.0
+                    || pixel[0] > width as f64
+                    || pixel[1] > height as f64
+                {
+                    return Err(fail(&format!(
+                        "({x}, {y}) lies outside the {width}×{height} image"
+                    )));
+                }
+                polygon.push(pixel);
+            }
+            samples.push(Sample {
+                class: class.to_string(),
+                polygon,
+            });
+        }
+    }
+    if samples.is_empty() {
+        return Err(Error::Input("no samples".into()));
+    }
+    Ok(samples)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn csv_parses_with_and_without_header() {
+        let s = parse_csv(
+            "class;xmin;ymin;xmax;ymax\ntree;1;2;10;12\n\n# c\nother;0;0;5;5\n",
+            20,
+            20,
+        )
+        .unwrap();
+        assert_eq!(s.len(), 2);
+        assert!(s[0].contains(5.0, 5.0) && !s[0].contains(0.5, 5.0));
+        assert_eq!(parse_csv("tree;1;2;10;12", 20, 20).unwrap().len(), 1);
+    }
+
+    #[test]
+    fn csv_errors_name_the_line_and_problem() {
+        let err = |t: &str| parse_csv(t, 20, 20).unwrap_err().to_string();
+        assert!(err("class;x;y;w;h\n").contains("unknown columns"));
+        assert!(err("tree;1;2;10;12\n;1;2;3;4").contains("line 2: empty class"));
+        assert!(err("tree;1;2;30;12").contains("outside the 20×20 image"));
+        assert!(err("tree;-1;2;3;4").contains("outside"));
+        assert!(err("tree;1;two;3;4").contains("ymin = \"two\" is not a number"));
+        assert!(err("tree;5;2;3;4").contains("empty box"));
+        assert!(err("tree;1;2;3").contains("4 fields"));
+        assert!(err("# nothing\n").contains("no samples"));
+    }
+
+    #[test]
+    fn geojson_polygons_map_to_pixels() {
+        let text = r#"{"type":"FeatureCollection","features":[
+            {"type":"Feature","properties":{"class":"forest"},
+             "geometry":{"type":"Polygon","coordinates":[[[100,200],[110,200],[110,190],[100,190],[100,200]]]}}]}"#;
+        // 1 unit per pixel, origin (100, 200), y down.
+        let s = parse_geojson(text, |x, y| Some([x - 100.0, 200.0 - y]), 20, 20).unwrap();
+        assert_eq!(s[0].class, "forest");
+        assert!(s[0].contains(5.0, 5.0));
+        let outside = parse_geojson(text, |x, y| Some([x, y]), 20, 20).unwrap_err();
+        assert!(outside.to_string().contains("outside"));
+        let no_class = text.replace("\"class\":\"forest\"", "\"kind\":\"forest\"");
+        assert!(parse_geojson(&no_class, |x, y| Some([x, y]), 20, 20)
+            .unwrap_err()
+            .to_string()
+            .contains("class"));
+    }
+}

@@ -1,0 +1,726 @@
+//! Split-and-merge segmentation (Horowitz & Pavlidis; as presented by Pitas,
+//! "Digital Image Processing Algorithms", and used by Savelli & Seixas): split
+//! the image as a quadtree while a block is not homogeneous, then merge
+//! adjacent regions while their union stays homogeneous.
+//!
+//! The homogeneity predicate is per channel of the opponent colour space of
+//! [`super::opponent`]: a region is homogeneous when the standard deviation of
+//! its brightness is at most `brightness_std` and that of every chroma channel
+//! at most `chroma_std` (both in 8-bit band units).
+//!
+//! Implementation: the quadtree is rooted on the image padded to a power of
+//! two; blocks are clipped to the image and empty ones dropped, so any size
+//! works. The image is split in 64×64 tiles in parallel, each with its own
+//! bottom-up pyramid of moments, then a pyramid over tile moments decides the
+//! blocks above tile size. Merging visits the region adjacency graph's edges
+//! in order of increasing mean difference and joins with union–find; ties are
+//! broken by leaf index, so the result is the same on any number of threads.
+
+use super::{Image, MAX_BANDS};
+use crate::{Error, Result};
+use rayon::prelude::*;
+
+/// Side of the tiles split in parallel (a power of two).
+const TILE: usize = 64;
+const TILE_LEVELS: usize = TILE.trailing_zeros() as usize + 1;
+
+/// Thresholds of the homogeneity predicate and of the final clean-up.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SegmentParams {
+    /// Largest standard deviation of brightness in a region (band units).
+    pub brightness_std: f32,
+    /// Largest standard deviation of each chroma channel (band units).
+    pub chroma_std: f32,
+    /// Regions of fewer pixels join their most similar neighbour.
+    pub min_region_px: u32,
+    /// Side of the smallest block the split makes (a power of two, ≤ 64):
+    /// blocks this small are leaves whatever their content.
+    pub min_block_px: u32,
+}
+
+impl Default for SegmentParams {
+    fn default() -> Self {
+        SegmentParams {
+            brightness_std: 12.0,
+            chroma_std: 6.0,
+            min_region_px: 16,
+            min_block_px: 2,
+        }
+    }
+}
+
+impl SegmentParams {
+    pub fn check(&self) -> Result<()> {
+        let ok = |v: f32| v.is_finite() && v >= 0.0;
+        if !ok(self.brightness_std) || !ok(self.chroma_std) {
+            return Err(Error::Input(format!(
+                "segmentation thresholds must be finite and ≥ 0 (brightness {}, chroma {})",
+                self.brightness_std, self.chroma_std
+            )));
+        }
+        if !(self.min_block_px.is_power_of_two() && self.min_block_px as usize <= TILE) {
+            return Err(Error::Input(format!(
+                "the smallest block must be a power of two up to {TILE} pixels, got {}",
+                self.min_block_px
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// One region of a segmentation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Region {
+    /// Area in pixels.
+    pub pixels: u32,
+    /// Bounding box `[x0, y0, x1, y1)` in pixels.
+    pub bbox: [u32; 4],
+    /// Centre of mass in pixel coordinates (pixel `i` spans `[i, i+1)`).
+    pub centroid: [f32; 2],
+    /// Mean and standard deviation per opponent channel.
+    pub mean: [f32; MAX_BANDS],
+    pub std: [f32; MAX_BANDS],
+}
+
+/// Regions partitioning an image.
+#[derive(Debug, Clone)]
+pub struct Segmentation {
+    pub width: usize,
+    pub height: usize,
+    /// Region index of every pixel, row-major.
+    pub labels: Vec<u32>,
+    pub regions: Vec<Region>,
+    /// Quadtree leaves before merging.
+    pub leaves: usize,
+}
+
+/// Count, sums and sums of squares of the opponent channels of some pixels.
+#[derive(Debug, Clone, Copy, Default)]
+struct Moments {
+    n: f64,
+    sum: [f64; MAX_BANDS],
+    sumsq: [f64; MAX_BANDS],
+}
+
+impl Moments {
+    fn pixel(colour: [f32; MAX_BANDS]) -> Moments {
+        let mut m = Moments {
+            n: 1.0,
+            ..Default::default()
+        };
+        for (c, &v) in colour.iter().enumerate() {
+            let v = v as f64;
+            m.sum[c] = v;
+            m.sumsq[c] = v * v;
+        }
+        m
+    }
+
+    fn add(&mut self, other: &Moments) {
+        self.n += other.n;
+        for c in 0..MAX_BANDS {
+            self.sum[c] += other.sum[c];
+            self.sumsq[c] += other.sumsq[c];
+        }
+    }
+
+    fn joined(mut self, other: &Moments) -> Moments {
+        self.add(other);
+        self
+    }
+
+    fn mean(&self, c: usize) -> f64 {
+        self.sum[c] / self.n
+    }
+
+    fn variance(&self, c: usize) -> f64 {
+        (self.sumsq[c] / self.n - self.mean(c).powi(2)).max(0.0)
+    }
+}
+
+/// The homogeneity predicate: variance per channel within its limit.
+struct Predicate {
+    channels: usize,
+    /// Pyramid level of the smallest block (log2 of its side).
+    min_level: usize,
+    limit_variance: [f64; MAX_BANDS],
+    /// 1 / limit std per channel: weights of the mean difference between regions.
+    inverse_std: [f64; MAX_BANDS],
+}
+
+impl Predicate {
+    fn new(params: &SegmentParams, channels: usize) -> Predicate {
+        let mut limit_variance = [0.0; MAX_BANDS];
+        let mut inverse_std = [0.0; MAX_BANDS];
+        for c in 0..channels {
+            let limit = if c == 0 {
+                params.brightness_std
+            } else {
+                params.chroma_std
+            } as f64;
+            limit_variance[c] = limit * limit;
+            inverse_std[c] = 1.0 / limit.max(0.5);
+        }
+        Predicate {
+            channels,
+            min_level: params.min_block_px.trailing_zeros() as usize,
+            limit_variance,
+            inverse_std,
+        }
+    }
+
+    fn homogeneous(&self, m: &Moments) -> bool {
+        (0..self.channels).all(|c| m.variance(c) <= self.limit_variance[c] + 1e-9)
+    }
+
+    /// Squared distance between region means in units of the thresholds.
+    fn difference(&self, a: &Moments, b: &Moments) -> f32 {
+        (0..self.channels)
+            .map(|c| ((a.mean(c) - b.mean(c)) * self.inverse_std[c]).powi(2))
+            .sum::<f64>() as f32
+    }
+}
+
+/// A quadtree leaf: a homogeneous block clipped to the image.
+#[derive(Debug, Clone, Copy)]
+struct Leaf {
+    x: u32,
+    y: u32,
+    w: u32,
+    h: u32,
+}
+
+/// What splitting one tile gives.
+struct TileSplit {
+    moments: Moments,
+    leaves: Vec<Leaf>,
+    leaf_moments: Vec<Moments>,
+}
+
+/// Which leaves cover a tile after the coarse levels are decided.
+#[derive(Clone, Copy)]
+enum TileCover {
+    /// The tile's own leaves, `start..end` in the global list.
+    Own(u32, u32),
+    /// One leaf larger than a tile covers it.
+    Coarse(u32),
+}
+
+/// Split-and-merge `image` into homogeneous 4-connected regions.
+pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
+    params.check()?;
+    let predicate = Predicate::new(params, image.bands);
+    let (w, h) = (image.width, image.height);
+
+    // Split: every tile in parallel, then the levels above tile size.
+    let tiles_x = w.div_ceil(TILE);
+    let tiles_y = h.div_ceil(TILE);
+    let tiles: Vec<TileSplit> = (0..tiles_x * tiles_y)
+        .into_par_iter()
+        .map_init(TileScratch::new, |scratch, t| {
+            scratch.split(
+                image,
+                &predicate,
+                (t % tiles_x) * TILE,
+                (t / tiles_x) * TILE,
+            )
+        })
+        .collect();
+    let (leaves, leaf_moments, cover) = split_coarse(&tiles, tiles_x, tiles_y, w, h, &predicate);
+    drop(tiles);
+    let mut labels = paint(&leaves, &cover, tiles_x, w, h);
+
+    // Merge along the region adjacency graph.
+    let mut edges = adjacency(&leaves, &labels, w, h);
+    edges.par_iter_mut().for_each(|e| {
+        e.0 = predicate
+            .difference(&leaf_moments[e.1 as usize], &leaf_moments[e.2 as usize])
+            .to_bits();
+    });
+    edges.par_sort_unstable();
+    let mut sets = DisjointSets::new(leaf_moments);
+    for &(_, a, b) in &edges {
+        sets.union_if(a, b, |m| predicate.homogeneous(m));
+    }
+    let min = params.min_region_px as f64;
+    for &(_, a, b) in &edges {
+        let (ra, rb) = (sets.find(a), sets.find(b));
+        if ra != rb && (sets.moments[ra as usize].n < min || sets.moments[rb as usize].n < min) {
+            sets.union_if(a, b, |_| true);
+        }
+    }
+
+    // Number regions in leaf order and describe them.
+    let mut region_of_root = vec![u32::MAX; leaves.len()];
+    let mut region_of_leaf = Vec::with_capacity(leaves.len());
+    let mut roots = Vec::new();
+    for leaf in 0..leaves.len() as u32 {
+        let root = sets.find(leaf) as usize;
+        if region_of_root[root] == u32::MAX {
+            region_of_root[root] = roots.len() as u32;
+            roots.push(root);
+        }
+        region_of_leaf.push(region_of_root[root]);
+    }
+    labels
+        .par_iter_mut()
+        .for_each(|l| *l = region_of_leaf[*l as usize]);
+    let mut regions: Vec<Region> = roots
+        .iter()
+        .map(|&root| {
+            let m = &sets.moments[root];
+            let mut mean = [0.0; MAX_BANDS];
+            let mut std = [0.0; MAX_BANDS];
+            for c in 0..image.bands {
+                mean[c] = m.mean(c) as f32;
+                std[c] = m.variance(c).sqrt() as f32;
+            }
+            Region {
+                pixels: 0,
+                bbox: [u32::MAX, u32::MAX, 0, 0],
+                centroid: [0.0; 2],
+                mean,
+                std,
+            }
+        })
+        .collect();
+    let mut centre_sums = vec![[0.0f64; 2]; regions.len()];
+    for (leaf, &r) in leaves.iter().zip(&region_of_leaf) {
+        let region = &mut regions[r as usize];
+        let area = (leaf.w * leaf.h) as f64;
+        region.pixels += leaf.w * leaf.h;
+        region.bbox[0] = region.bbox[0].min(leaf.x);
+        region.bbox[1] = region.bbox[1].min(leaf.y);
+        region.bbox[2] = region.bbox[2].max(leaf.x + leaf.w);
+        region.bbox[3] = region.bbox[3].max(leaf.y + leaf.h);
+        let sums = &mut centre_sums[r as usize];
+        sums[0] += area * (leaf.x as f64 + leaf.w as f64 / 2.0);
+        sums[1] += area * (leaf.y as f64 + leaf.h as f64 / 2.0);
+    }
+    for (region, sums) in regions.iter_mut().zip(&centre_sums) {
+        let n = region.pixels as f64;
+        region.centroid = [(sums[0] / n) as f32, (sums[1] / n) as f32];
+    }
+    Ok(Segmentation {
+        width: w,
+        height: h,
+        labels,
+        regions,
+        leaves: leaves.len(),
+    })
+}
+
+/// Per-thread buffers for splitting one tile: the moments pyramid.
+struct TileScratch {
+    levels: Vec<Vec<Moments>>,
+}
+
+impl TileScratch {
+    fn new() -> TileScratch {
+        TileScratch {
+            levels: (0..TILE_LEVELS)
+                .map(|k| vec![Moments::default(); (TILE >> k) * (TILE >> k)])
+                .collect(),
+        }
+    }
+
+    /// Split the tile whose top-left pixel is `(x0, y0)`.
+    fn split(&mut self, image: &Image, predicate: &Predicate, x0: usize, y0: usize) -> TileSplit {
+        let (tw, th) = (TILE.min(image.width - x0), TILE.min(image.height - y0));
+        let base = &mut self.levels[0];
+        for y in 0..TILE {
+            for x in 0..TILE {
+                base[y * TILE + x] = if x < tw && y < th {
+                    Moments::pixel(image.colour(x0 + x, y0 + y))
+                } else {
+                    Moments::default()
+                };
+            }
+        }
+        for k in 1..TILE_LEVELS {
+            let (lower, upper) = self.levels.split_at_mut(k);
+            let (child, parent) = (&lower[k - 1], &mut upper[0]);
+            let side = TILE >> k;
+            for y in 0..side {
+                for x in 0..side {
+                    let at = |dx: usize, dy: usize| &child[(2 * y + dy) * 2 * side + 2 * x + dx];
+                    parent[y * side + x] =
+                        at(0, 0).joined(at(1, 0)).joined(at(0, 1)).joined(at(1, 1));
+                }
+            }
+        }
+        let mut out = TileSplit {
+            moments: self.levels[TILE_LEVELS - 1][0],
+            leaves: Vec::new(),
+            leaf_moments: Vec::new(),
+        };
+        self.emit(predicate, TILE_LEVELS - 1, 0, 0, (x0, y0, tw, th), &mut out);
+        out
+    }
+
+    /// Top-down: a block is a leaf when homogeneous (or a single pixel).
+    fn emit(
+        &self,
+        predicate: &Predicate,
+        level: usize,
+        bx: usize,
+        by: usize,
+        tile: (usize, usize, usize, usize),
+        out: &mut TileSplit,
+    ) {
+        let m = &self.levels[level][by * (TILE >> level) + bx];
+        if m.n == 0.0 {
+            return;
+        }
+        if level <= predicate.min_level || predicate.homogeneous(m) {
+            let size = 1 << level;
+            let (x, y) = (bx * size, by * size);
+            out.leaves.push(Leaf {
+                x: (tile.0 + x) as u32,
+                y: (tile.1 + y) as u32,
+                w: size.min(tile.2 - x) as u32,
+                h: size.min(tile.3 - y) as u32,
+            });
+            out.leaf_moments.push(*m);
+            return;
+        }
+        for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+            self.emit(predicate, level - 1, 2 * bx + dx, 2 * by + dy, tile, out);
+        }
+    }
+}
+
+/// Decide the quadtree levels above tile size and gather every leaf in
+/// traversal order, with the leaves covering each tile.
+fn split_coarse(
+    tiles: &[TileSplit],
+    tiles_x: usize,
+    tiles_y: usize,
+    width: usize,
+    height: usize,
+    predicate: &Predicate,
+) -> (Vec<Leaf>, Vec<Moments>, Vec<TileCover>) {
+    let side = tiles_x.max(tiles_y).next_power_of_two();
+    let mut levels = vec![vec![Moments::default(); side * side]];
+    for ty in 0..tiles_y {
+        for tx in 0..tiles_x {
+            levels[0][ty * side + tx] = tiles[ty * tiles_x + tx].moments;
+        }
+    }
+    while levels.last().unwrap().len() > 1 {
+        let child = levels.last().unwrap();
+        let s = (child.len() as f64).sqrt() as usize / 2;
+        let parent: Vec<Moments> = (0..s * s)
+            .map(|i| {
+                let (x, y) = (i % s, i / s);
+                let at = |dx: usize, dy: usize| &child[(2 * y + dy) * 2 * s + 2 * x + dx];
+                at(0, 0).joined(at(1, 0)).joined(at(0, 1)).joined(at(1, 1))
+            })
+            .collect();
+        levels.push(parent);
+    }
+    let mut leaves = Vec::new();
+    let mut moments = Vec::new();
+    let mut cover = vec![TileCover::Own(0, 0); tiles_x * tiles_y];
+    let mut stack = vec![(levels.len() - 1, 0usize, 0usize)];
+    while let Some((level, bx, by)) = stack.pop() {
+        let m = &levels[level][by * (side >> level) + bx];
+        if m.n == 0.0 {
+            continue;
+        }
+        if level == 0 {
+            let t = by * tiles_x + bx;
+            let start = leaves.len() as u32;
+            leaves.extend_from_slice(&tiles[t].leaves);
+            moments.extend_from_slice(&tiles[t].leaf_moments);
+            cover[t] = TileCover::Own(start, leaves.len() as u32);
+        } else if predicate.homogeneous(m) {
+            let id = leaves.len() as u32;
+            let size = TILE << level;
+            let (x, y) = (bx * size, by * size);
+            leaves.push(Leaf {
+                x: x as u32,
+                y: y as u32,
+                w: size.min(width - x) as u32,
+                h: size.min(height - y) as u32,
+            });
+            moments.push(*m);
+            let tiles_per = 1 << level;
+            for ty in by * tiles_per..((by + 1) * tiles_per).min(tiles_y) {
+                for tx in bx * tiles_per..((bx + 1) * tiles_per).min(tiles_x) {
+                    cover[ty * tiles_x + tx] = TileCover::Coarse(id);
+                }
+            }
+        } else {
+            // Reverse Z order on the stack so blocks pop in Z order.
+            for (dx, dy) in [(1, 1), (0, 1), (1, 0), (0, 0)] {
+                stack.push((level - 1, 2 * bx + dx, 2 * by + dy));
+            }
+        }
+    }
+    (leaves, moments, cover)
+}
+
+/// The leaf index of every pixel.
+fn paint(leaves: &[Leaf], cover: &[TileCover], tiles_x: usize, w: usize, h: usize) -> Vec<u32> {
+    let mut labels = vec![0u32; w * h];
+    labels
+        .par_chunks_mut(TILE * w)
+        .enumerate()
+        .for_each(|(ty, band)| {
+            let y0 = ty * TILE;
+            let rows = band.len() / w;
+            let mut fill = |leaf: &Leaf, id: u32| {
+                let ys =
+                    (leaf.y as usize).max(y0)..(leaf.y as usize + leaf.h as usize).min(y0 + rows);
+                for y in ys {
+                    let row = &mut band[(y - y0) * w..(y - y0 + 1) * w];
+                    row[leaf.x as usize..(leaf.x + leaf.w) as usize].fill(id);
+                }
+            };
+            for tx in 0..tiles_x {
+                match cover[ty * tiles_x + tx] {
+                    TileCover::Own(start, end) => {
+                        for id in start..end {
+                            fill(&leaves[id as usize], id);
+                        }
+                    }
+                    TileCover::Coarse(id) => {
+                        let leaf = &leaves[id as usize];
+                        let x0 = tx * TILE;
+                        let part = Leaf {
+                            x: x0 as u32,
+                            y: leaf.y,
+                            w: TILE.min(w - x0) as u32,
+                            h: leaf.h,
+                        };
+                        fill(&part, id);
+                    }
+                }
+            }
+        });
+    labels
+}
+
+/// Pairs of 4-adjacent leaves `(0, a, b)`, found along each leaf's right and
+/// bottom borders; runs of one neighbour along a border give one pair.
+fn adjacency(leaves: &[Leaf], labels: &[u32], w: usize, h: usize) -> Vec<(u32, u32, u32)> {
+    leaves
+        .par_chunks(4096)
+        .enumerate()
+        .flat_map_iter(|(chunk, part)| {
+            let mut edges = Vec::new();
+            for (k, leaf) in part.iter().enumerate() {
+                let id = (chunk * 4096 + k) as u32;
+                let mut push = |other: u32, last: &mut u32| {
+                    if other != *last {
+                        *last = other;
+                        edges.push((0, id.min(other), id.max(other)));
+                    }
+                };
+                let (x1, y1) = ((leaf.x + leaf.w) as usize, (leaf.y + leaf.h) as usize);
+                if x1 < w {
+                    let mut last = u32::MAX;
+                    for y in leaf.y as usize..y1 {
+                        push(labels[y * w + x1], &mut last);
+                    }
+                }
+                if y1 < h {
+                    let mut last = u32::MAX;
+                    for x in leaf.x as usize..x1 {
+                        push(labels[y1 * w + x], &mut last);
+                    }
+                }
+            }
+            edges
+        })
+        .collect()
+}
+
+/// Union–find over leaves, keeping the moments of each set at its root.
+struct DisjointSets {
+    parent: Vec<u32>,
+    moments: Vec<Moments>,
+}
+
+impl DisjointSets {
+    fn new(moments: Vec<Moments>) -> DisjointSets {
+        DisjointSets {
+            parent: (0..moments.len() as u32).collect(),
+            moments,
+        }
+    }
+
+    fn find(&mut self, mut x: u32) -> u32 {
+        while self.parent[x as usize] != x {
+            let grand = self.parent[self.parent[x as usize] as usize];
+            self.parent[x as usize] = grand;
+            x = grand;
+        }
+        x
+    }
+
+    /// Join the sets of `a` and `b` when `accept` takes their joined moments.
+    fn union_if(&mut self, a: u32, b: u32, accept: impl Fn(&Moments) -> bool) {
+        let (ra, rb) = (self.find(a), self.find(b));
+        if ra == rb {
+            return;
+        }
+        let joined = self.moments[ra as usize].joined(&self.moments[rb as usize]);
+        if !accept(&joined) {
+            return;
+        }
+        // The larger set keeps its root; ties keep the lower index.
+        let (na, nb) = (self.moments[ra as usize].n, self.moments[rb as usize].n);
+        let (root, child) = if na > nb || (na == nb && ra < rb) {
+            (ra, rb)
+        } else {
+            (rb, ra)
+        };
+        self.parent[child as usize] = root;
+        self.moments[root as usize] = joined;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Pseudo-random noise of amplitude `noise` over blocks of given colours.
+    fn blocks(width: usize, height: usize, noise: u8) -> Image {
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut pixels = Vec::with_capacity(width * height * 3);
+        for y in 0..height {
+            for x in 0..width {
+                let base: [u8; 3] = match (x * 3 / width, y * 2 / height) {
+                    (0, _) => [40, 120, 40],
+                    (1, 0) => [200, 200, 200],
+                    _ => [90, 60, 30],
+                };
+                for b in base {
+                    state ^= state << 13;
+                    state ^= state >> 7;
+                    state ^= state << 17;
+                    let jitter = if noise == 0 {
+                        0
+                    } else {
+                        (state % noise as u64) as u8
+                    };
+                    pixels.push(b.saturating_add(jitter));
+                }
+            }
+        }
+        Image::new(width, height, 3, pixels).unwrap()
+    }
+
+    /// Every region is 4-connected, its stored area and bounding box match
+    /// its pixels, and labels cover the image.
+    pub(crate) fn assert_partition(s: &Segmentation) {
+        let (w, h) = (s.width, s.height);
+        assert_eq!(s.labels.len(), w * h);
+        let mut area = vec![0u32; s.regions.len()];
+        let mut first = vec![usize::MAX; s.regions.len()];
+        for (i, &l) in s.labels.iter().enumerate() {
+            area[l as usize] += 1;
+            first[l as usize] = first[l as usize].min(i);
+            let r = &s.regions[l as usize];
+            let (x, y) = ((i % w) as u32, (i / w) as u32);
+            assert!(r.bbox[0] <= x && x < r.bbox[2] && r.bbox[1] <= y && y < r.bbox[3]);
+        }
+        for (k, r) in s.regions.iter().enumerate() {
+            assert_eq!(r.pixels, area[k], "region {k} area");
+            // Flood fill from its first pixel reaches all of it.
+            let mut seen = vec![false; w * h];
+            let mut stack = vec![first[k]];
+            seen[first[k]] = true;
+            let mut reached = 0;
+            while let Some(i) = stack.pop() {
+                reached += 1;
+                for j in crate::raster::neighbours4(i, w, h) {
+                    if !seen[j] && s.labels[j] == k as u32 {
+                        seen[j] = true;
+                        stack.push(j);
+                    }
+                }
+            }
+            assert_eq!(reached, r.pixels, "region {k} is not 4-connected");
+        }
+    }
+
+    #[test]
+    fn flat_blocks_become_one_region_each_on_odd_sizes() {
+        for (w, h) in [(131, 77), (64, 64), (1, 1), (200, 3), (300, 260)] {
+            let image = blocks(w, h, 0);
+            let params = SegmentParams {
+                min_region_px: 1,
+                min_block_px: 1,
+                ..Default::default()
+            };
+            let s = segment(&image, &params).unwrap();
+            assert_partition(&s);
+            let distinct = if w >= 3 && h >= 2 { 3 } else { s.regions.len() };
+            assert_eq!(s.regions.len(), distinct, "{w}×{h}");
+        }
+    }
+
+    #[test]
+    fn noisy_blocks_are_partitioned_and_homogeneous() {
+        let image = blocks(257, 190, 10);
+        let params = SegmentParams {
+            min_region_px: 1,
+            ..Default::default()
+        };
+        let s = segment(&image, &params).unwrap();
+        assert_partition(&s);
+        // Uniform noise of 0..10 per band (chroma std ≈ 2.9) stays within the
+        // thresholds: three regions.
+        assert_eq!(s.regions.len(), 3);
+        for r in &s.regions {
+            assert!(r.std[0] <= params.brightness_std && r.std[1] <= params.chroma_std);
+        }
+        // A tight threshold makes many regions, still a partition.
+        let tight = SegmentParams {
+            brightness_std: 2.0,
+            chroma_std: 1.0,
+            min_region_px: 4,
+            min_block_px: 1,
+        };
+        let s = segment(&image, &tight).unwrap();
+        assert!(s.regions.len() > 3);
+        assert_partition(&s);
+        assert!(s.regions.iter().all(|r| r.pixels >= 4));
+    }
+
+    #[test]
+    fn same_result_on_any_number_of_threads() {
+        let image = blocks(300, 200, 60);
+        let params = SegmentParams::default();
+        let run = |threads| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| segment(&image, &params).unwrap())
+        };
+        let (a, b) = (run(1), run(3));
+        assert_eq!(a.labels, b.labels);
+        assert_eq!(a.regions, b.regions);
+    }
+
+    #[test]
+    fn bad_parameters_are_refused() {
+        let image = blocks(8, 8, 0);
+        for params in [
+            SegmentParams {
+                brightness_std: f32::NAN,
+                ..Default::default()
+            },
+            SegmentParams {
+                min_block_px: 3,
+                ..Default::default()
+            },
+        ] {
+            assert!(segment(&image, &params).is_err());
+        }
+    }
+}
