@@ -174,6 +174,9 @@ pub struct VegDetectArgs {
     /// Smallest window side (pixels) a region's signature covers.
     #[arg(long)]
     pub window: Option<u32>,
+    /// Nearest learnt signatures per class a region's distance averages.
+    #[arg(long)]
+    pub neighbours: Option<usize>,
     /// Class of counter-examples.
     #[arg(long)]
     pub negative: Option<String>,
@@ -219,7 +222,7 @@ impl VegDetectArgs {
             )*};
         }
         set!(brightness_std => brightness_std, chroma_std => chroma_std,
-             min_region => min_region_px, min_block => min_block_px, window => window_px, negative => negative_class,
+             min_region => min_region_px, min_block => min_block_px, window => window_px, neighbours => neighbours, negative => negative_class,
              mode => mode, crown_spacing => crown_spacing_m,
              crown_min_radius => crown_min_radius_m, density => density_per_ha);
         o

@@ -33,6 +33,8 @@ pub struct VegOptions {
     pub min_block_px: u32,
     /// Smallest side, in pixels, of the window a region's signature covers.
     pub window_px: u32,
+    /// Nearest learnt signatures per class a region's distance averages.
+    pub neighbours: usize,
     /// The class that marks counter-examples (never vegetation).
     pub negative_class: String,
     /// How regions become objects.
@@ -53,10 +55,11 @@ impl Default for VegOptions {
             chroma_std: s.chroma_std,
             min_region_px: s.min_region_px,
             min_block_px: s.min_block_px,
-            window_px: 16,
+            window_px: 8,
+            neighbours: 3,
             negative_class: "other".into(),
             mode: Mode::Auto,
-            crown_spacing_m: 2.0,
+            crown_spacing_m: 2.5,
             crown_min_radius_m: 0.5,
             density_per_ha: 100.0,
         }
@@ -284,7 +287,13 @@ pub fn extract(image: &VegImage, samples: &[Sample], options: &VegOptions) -> Re
         "split and merge"
     );
     let start = Instant::now();
-    let classifier = Classifier::train(&image.image, &segmentation, samples, options.window_px)?;
+    let classifier = Classifier::train(
+        &image.image,
+        &segmentation,
+        samples,
+        options.window_px,
+        options.neighbours,
+    )?;
     let labels = classifier.classify_regions(&image.image, &segmentation);
     let classify_ms = start.elapsed().as_secs_f64() * 1e3;
     let vegetation: Vec<bool> = classifier
@@ -443,7 +452,8 @@ pub fn write_labels(path: &Path, image: &VegImage, extraction: &Extraction) -> R
 }
 
 /// An RGBA picture for people: the image, vegetation regions tinted by class,
-/// region borders darkened, and each object as a ring of its size.
+/// region borders darkened, and each object of 3 pixels or more as a ring of
+/// its size (smaller ones, as in fill mode on coarse imagery, show as tint).
 pub fn overlay(image: &VegImage, extraction: &Extraction, negative: &str) -> Vec<u8> {
     const TINTS: [[u8; 3]; 6] = [
         [255, 220, 0],
@@ -484,7 +494,10 @@ pub fn overlay(image: &VegImage, extraction: &Extraction, negative: &str) -> Vec
             Some(g) => g.invert(o.x, o.y).unwrap_or((o.x, o.y)),
             None => (o.x, o.y),
         };
-        let r = (o.size / image.pixel_m / 2.0).max(1.5);
+        let r = o.size / image.pixel_m / 2.0;
+        if r < 1.5 {
+            continue;
+        }
         let steps = (r * 8.0).ceil() as usize;
         for s in 0..steps {
             let a = s as f64 / steps as f64 * std::f64::consts::TAU;

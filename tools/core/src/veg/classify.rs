@@ -46,11 +46,13 @@ pub struct Classifier {
     examples: Vec<(usize, Vec<f32>)>,
     /// Smallest window side a signature is taken over (pixels).
     window_px: u32,
+    /// How many nearest signatures of each class its distance averages.
+    neighbours: usize,
 }
 
 /// A region's class and how clearly it won, in `[0.5, 1]`: `d₂ / (d₁ + d₂)`
-/// with `d₁` the distance to the nearest signature and `d₂` to the nearest of
-/// any other class (1 when there is a single class).
+/// with `d₁` the winning class's distance and `d₂` the next class's (1 when
+/// there is a single class).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Label {
     pub class: usize,
@@ -66,6 +68,7 @@ impl Classifier {
         segmentation: &Segmentation,
         samples: &[Sample],
         window_px: u32,
+        neighbours: usize,
     ) -> Result<Classifier> {
         if samples.is_empty() {
             return Err(Error::Input("no samples to learn from".into()));
@@ -119,6 +122,7 @@ impl Classifier {
             inverse_scale,
             examples,
             window_px,
+            neighbours,
         })
     }
 
@@ -131,9 +135,14 @@ impl Classifier {
         counts
     }
 
-    /// Class of one signature.
+    /// Class of one signature: the class whose `neighbours` nearest learnt
+    /// signatures are nearest on average (a local-mean nearest-neighbour
+    /// rule; with one neighbour, plain nearest neighbour). Averaging a few
+    /// keeps one stray sample region, such as a shadow inside a crown's
+    /// rectangle, from claiming everything that resembles it. Distances are
+    /// Euclidean over features standardised by their spread in the samples.
     pub fn classify(&self, signature: &[f32]) -> Label {
-        let mut nearest = vec![f32::INFINITY; self.classes.len()];
+        let mut per_class: Vec<Vec<f32>> = vec![Vec::new(); self.classes.len()];
         for (class, example) in &self.examples {
             let d: f32 = example
                 .iter()
@@ -141,8 +150,16 @@ impl Classifier {
                 .zip(&self.inverse_scale)
                 .map(|((e, s), k)| (e - s * k).powi(2))
                 .sum();
-            nearest[*class] = nearest[*class].min(d);
+            per_class[*class].push(d.sqrt());
         }
+        let nearest: Vec<f32> = per_class
+            .iter_mut()
+            .map(|d| {
+                d.sort_by(f32::total_cmp);
+                let n = self.neighbours.min(d.len()).max(1);
+                d[..n].iter().sum::<f32>() / n as f32
+            })
+            .collect();
         let (best, d1) = nearest
             .iter()
             .enumerate()
@@ -156,7 +173,6 @@ impl Classifier {
             .filter(|(c, _)| *c != best)
             .map(|(_, &d)| d)
             .fold(f32::INFINITY, f32::min);
-        let (d1, d2) = (d1.sqrt(), d2.sqrt());
         let score = if d2.is_infinite() || d1 + d2 == 0.0 {
             1.0
         } else {

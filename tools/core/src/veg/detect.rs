@@ -74,7 +74,7 @@ pub fn detect(
             spacing_px,
             diameter_px,
         } => {
-            let s = spacing_px.max(0.5) as f64;
+            let s = spacing_px.max(1e-3) as f64;
             let (cols, rows) = ((w as f64 / s).ceil() as u64, (h as f64 / s).ceil() as u64);
             (0..rows)
                 .into_par_iter()

@@ -41,7 +41,7 @@ pub struct SegmentParams {
 impl Default for SegmentParams {
     fn default() -> Self {
         SegmentParams {
-            brightness_std: 12.0,
+            brightness_std: 28.0,
             chroma_std: 6.0,
             min_region_px: 16,
             min_block_px: 2,
