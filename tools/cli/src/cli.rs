@@ -64,7 +64,8 @@ pub enum Command {
     #[command(after_help = "Examples:
   relevo prep data/olinda/REGION.toml --out olinda.relevo
   relevo prep --dem srtm_ref.tif --out turkey.relevo --json
-  relevo prep --dem t1.tif t2.tif --image ortho.tif --bands 3,2,1 --crs EPSG:32633 --out r.relevo --force")]
+  relevo prep --dem t1.tif t2.tif --image ortho.tif --bands 3,2,1 --crs EPSG:32633 --out r.relevo --force
+  relevo prep --dem dem.tif --image ortho.tif --samples marks.csv --out r.relevo   # with vegetation")]
     Prep(PrepArgs),
     /// Export the mesh at an object-space tolerance as glTF (.glb) or OBJ.
     #[command(after_help = "Examples:
@@ -516,6 +517,9 @@ pub struct PrepArgs {
     /// Image bands shown as red, green, blue (quick form), e.g. 3,2,1.
     #[arg(long, value_delimiter = ',', value_name = "R,G,B")]
     pub bands: Option<Vec<usize>>,
+    /// Vegetation samples marked on the first image (quick form; see `veg detect`).
+    #[arg(long, requires = "image")]
+    pub samples: Option<PathBuf>,
     /// DEM encoding (quick form).
     #[arg(long, value_enum, default_value_t = EncodingArg::Plain)]
     pub encoding: EncodingArg,
@@ -791,6 +795,10 @@ fn run_prep(a: PrepArgs) -> Result<()> {
                     resampling: Resampling::Bilinear,
                     stretch: None,
                 }),
+                vegetation: a.samples.map(|samples| crate::region::VegetationSection {
+                    samples,
+                    options: Default::default(),
+                }),
             };
             region.check()?;
             region
@@ -995,7 +1003,12 @@ fn run_veg_detect(a: Box<VegDetectArgs>) -> Result<()> {
         Some(_) => bail!("--stretch takes LOW,HIGH percentiles with 0 <= LOW < HIGH <= 100"),
     };
     let image = veg::VegImage::read(&a.image, a.bands.as_deref(), stretch, a.pixel_size)?;
-    let samples = veg::read_samples(&a.samples, &image)?;
+    let samples = veg::read_samples(
+        &a.samples,
+        image.geotransform,
+        image.image.width,
+        image.image.height,
+    )?;
     let options = a.options();
     let extraction = veg::extract(&image, &samples, &options)
         .with_context(|| format!("{}", a.image.display()))?;

@@ -8,6 +8,7 @@ use crate::crs;
 use crate::gdalio::{self, GridSpec};
 use crate::region::Region;
 use crate::stitch::{stitch, Mosaic, StitchOptions};
+use crate::veg::{self, Extraction, VegImage};
 use anyhow::{bail, Context, Result};
 use gdal::raster::GdalDataType;
 use gdal::spatial_ref::SpatialRef;
@@ -35,6 +36,7 @@ const STAGES: &[(&str, Stage)] = &[
     ("grid", stage_grid),
     ("hierarchy", stage_hierarchy),
     ("drape", stage_drape),
+    ("vegetation", stage_vegetation),
     ("write", stage_write),
 ];
 
@@ -49,6 +51,8 @@ pub struct Summary {
     pub height_range_m: [f32; 2],
     pub fill: FillReport,
     pub color: Option<[usize; 2]>,
+    /// Vegetation objects found, when the region has samples.
+    pub vegetation: Option<usize>,
     pub timings: Vec<StageTiming>,
 }
 
@@ -64,6 +68,9 @@ struct Build<'a> {
     grid: Option<HeightGrid>,
     hierarchy: Option<Hierarchy>,
     color: Option<(Mosaic, [usize; 3])>,
+    /// The drape as RGBA8, as written to `color.rgba8`.
+    rgba: Vec<u8>,
+    vegetation: Option<(VegImage, Extraction)>,
     artifacts: BTreeMap<String, Artifact>,
     exports: BTreeMap<String, Artifact>,
 }
@@ -86,6 +93,8 @@ pub fn prep(region: &Region, out: &Path, force: bool) -> Result<Summary> {
         grid: None,
         hierarchy: None,
         color: None,
+        rgba: Vec::new(),
+        vegetation: None,
         artifacts: BTreeMap::new(),
         exports: BTreeMap::new(),
     };
@@ -228,7 +237,70 @@ fn stage_drape(b: &mut Build) -> Result<()> {
     };
     // With an extent but no resolution, stitch keeps the imagery's own cell size.
     let mosaic = stitch(&image.files, &opts)?;
+    let stretch = image.stretch.or(match mosaic.band_type {
+        GdalDataType::UInt8 => None,
+        _ => Some([2.0, 98.0]),
+    });
+    b.rgba = to_rgba8(&mosaic.raster, stretch);
     b.color = Some((mosaic, bands));
+    Ok(())
+}
+
+/// Extract vegetation from the drape, as the bundle shows it (8-bit RGB).
+/// Samples are marked on the first image file; they are carried through its
+/// georeferencing onto the drape.
+fn stage_vegetation(b: &mut Build) -> Result<()> {
+    let (Some(section), Some(image_section)) = (&b.region.vegetation, &b.region.image) else {
+        return Ok(());
+    };
+    let (mosaic, _) = b.color.as_ref().context("drape stage did not run")?;
+    let grid = &mosaic.grid;
+    let pixels: Vec<u8> = b
+        .rgba
+        .chunks_exact(4)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect();
+    let (cell_w, cell_h) = grid.geotransform.cell_size();
+    let image = VegImage {
+        image: relevo_core::veg::Image::new(grid.width, grid.height, 3, pixels)?,
+        crs_wkt: grid.crs_wkt.clone(),
+        geotransform: Some(grid.geotransform),
+        pixel_m: cell_w.abs().min(cell_h.abs()),
+    };
+
+    let first = gdalio::open(&image_section.files[0])?;
+    let Some(file_geo) = first.geotransform else {
+        bail!(
+            "{}: not georeferenced, so samples cannot be placed on the drape",
+            first.path.display()
+        );
+    };
+    let mut samples =
+        veg::read_samples(&section.samples, Some(file_geo), first.width, first.height)?;
+    let drape_srs = (!grid.crs_wkt.is_empty())
+        .then(|| SpatialRef::from_wkt(&grid.crs_wkt))
+        .transpose()?;
+    for sample in &mut samples {
+        let (mut xs, mut ys): (Vec<f64>, Vec<f64>) = sample
+            .polygon
+            .iter()
+            .map(|p| file_geo.apply(p[0], p[1]))
+            .unzip();
+        if let (Some(from), Some(to)) = (&first.srs, &drape_srs) {
+            crs::transform_points(from, to, &mut xs, &mut ys)?;
+        }
+        for (p, (x, y)) in sample.polygon.iter_mut().zip(xs.into_iter().zip(ys)) {
+            let (col, row) = grid
+                .geotransform
+                .invert(x, y)
+                .context("the drape's geotransform cannot be inverted")?;
+            *p = [col, row];
+        }
+    }
+    let extraction = veg::extract(&image, &samples, &section.options)
+        .with_context(|| section.samples.display().to_string())?;
+    tracing::info!(objects = extraction.objects.len(), "vegetation");
+    b.vegetation = Some((image, extraction));
     Ok(())
 }
 
@@ -283,16 +355,7 @@ fn stage_write(b: &mut Build) -> Result<()> {
     );
 
     if let Some((mosaic, _)) = &b.color {
-        let stretch = b
-            .region
-            .image
-            .as_ref()
-            .and_then(|i| i.stretch)
-            .or(match mosaic.band_type {
-                GdalDataType::UInt8 => None,
-                _ => Some([2.0, 98.0]),
-            });
-        let rgba = to_rgba8(&mosaic.raster, stretch);
+        let rgba = &b.rgba;
         let (w, h) = (mosaic.grid.width, mosaic.grid.height);
         b.artifacts.insert(
             "color".into(),
@@ -313,6 +376,30 @@ fn stage_write(b: &mut Build) -> Result<()> {
         b.exports.insert(
             "color_geotiff".into(),
             b.writer.record_file("exports/color.tif")?,
+        );
+    }
+    if let Some((image, extraction)) = &b.vegetation {
+        let dir = b.writer.dir().to_path_buf();
+        veg::write_csv(&dir.join("vegetation.csv"), &extraction.objects)?;
+        b.artifacts
+            .insert("vegetation".into(), b.writer.record_file("vegetation.csv")?);
+        veg::write_gpkg(
+            &dir.join("exports/vegetation.gpkg"),
+            &extraction.objects,
+            &image.crs_wkt,
+        )?;
+        b.exports.insert(
+            "vegetation_geopackage".into(),
+            b.writer.record_file("exports/vegetation.gpkg")?,
+        );
+        veg::write_labels(
+            &dir.join("exports/vegetation_labels.tif"),
+            image,
+            extraction,
+        )?;
+        b.exports.insert(
+            "vegetation_labels".into(),
+            b.writer.record_file("exports/vegetation_labels.tif")?,
         );
     }
     Ok(())
@@ -437,6 +524,7 @@ fn finish(b: Build, timings: Vec<StageTiming>) -> Result<Summary> {
         height_range_m,
         fill: b.fill,
         color: color.map(|c| [c.width, c.height]),
+        vegetation: b.vegetation.as_ref().map(|(_, e)| e.objects.len()),
         timings,
     })
 }

@@ -31,6 +31,7 @@ pub struct Region {
     #[serde(default)]
     pub grid: GridSection,
     pub image: Option<ImageSection>,
+    pub vegetation: Option<VegetationSection>,
 }
 
 fn one() -> f64 {
@@ -94,6 +95,17 @@ pub struct ImageSection {
     pub stretch: Option<[f64; 2]>,
 }
 
+/// Vegetation extraction on the draped imagery.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VegetationSection {
+    /// Marked samples: a semicolon CSV of rectangles in pixel coordinates of
+    /// the first image file, or GeoJSON polygons in its CRS.
+    pub samples: PathBuf,
+    #[serde(default)]
+    pub options: crate::veg::VegOptions,
+}
+
 /// A no-data value as written in TOML: a number, or the string "nan".
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 #[serde(untagged)]
@@ -143,6 +155,9 @@ impl Region {
         if let Some(image) = &mut region.image {
             image.files.iter_mut().for_each(resolve);
         }
+        if let Some(vegetation) = &mut region.vegetation {
+            resolve(&mut vegetation.samples);
+        }
         region.check().with_context(|| path.display().to_string())?;
         Ok(region)
     }
@@ -174,6 +189,9 @@ impl Region {
                     );
                 }
             }
+        }
+        if self.vegetation.is_some() && self.image.is_none() {
+            bail!("[vegetation] needs [image]: vegetation is extracted from the imagery");
         }
         Ok(())
     }

@@ -220,18 +220,23 @@ impl VegImage {
     }
 }
 
-/// Read a samples file: `.geojson`/`.json` polygons in the image CRS, else
-/// the semicolon CSV of pixel rectangles. Errors name the file.
-pub fn read_samples(path: &Path, image: &VegImage) -> Result<Vec<Sample>> {
+/// Read a samples file for a `width`×`height` image georeferenced by
+/// `geotransform`: `.geojson`/`.json` polygons in the image CRS, else the
+/// semicolon CSV of pixel rectangles. Errors name the file.
+pub fn read_samples(
+    path: &Path,
+    geotransform: Option<GeoTransform>,
+    w: usize,
+    h: usize,
+) -> Result<Vec<Sample>> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("{}: cannot read samples", path.display()))?;
-    let (w, h) = (image.image.width, image.image.height);
     let is_json = matches!(
         path.extension().and_then(|e| e.to_str()),
         Some("geojson" | "json")
     );
     let parsed = if is_json {
-        let geo = image.geotransform.unwrap_or(GeoTransform::IDENTITY);
+        let geo = geotransform.unwrap_or(GeoTransform::IDENTITY);
         samples::parse_geojson(&text, |x, y| geo.invert(x, y).map(|(c, r)| [c, r]), w, h)
     } else {
         samples::parse_csv(&text, w, h)

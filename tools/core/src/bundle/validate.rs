@@ -133,5 +133,48 @@ pub fn validate(bundle: &Bundle) -> Vec<String> {
             Some(_) => {}
         }
     }
+    if let Some(a) = m.artifacts.get("vegetation") {
+        problems.extend(vegetation_problems(bundle, &a.file));
+    }
+    problems
+}
+
+/// The vegetation database parses, numbers its objects 1, 2, …, and keeps
+/// them on the colour image with positive sizes and scores in [0, 1].
+fn vegetation_problems(bundle: &Bundle, file: &str) -> Vec<String> {
+    let path = bundle.dir.join(file);
+    let objects = match std::fs::read_to_string(&path)
+        .map_err(|e| e.to_string())
+        .and_then(|text| crate::veg::db::from_csv(&text).map_err(|e| e.to_string()))
+    {
+        Ok(objects) => objects,
+        Err(e) => return vec![format!("vegetation: {e}")],
+    };
+    let bounds = bundle
+        .manifest
+        .color
+        .as_ref()
+        .map(|c| c.geotransform.bounds(c.width, c.height));
+    let mut problems = Vec::new();
+    for (k, o) in objects.iter().enumerate() {
+        // The database keeps millimetres: allow that much rounding.
+        let outside = bounds.is_some_and(|[x0, y0, x1, y1]| {
+            let e = 1e-3;
+            !(x0 - e <= o.x && o.x <= x1 + e && y0 - e <= o.y && o.y <= y1 + e)
+        });
+        let problem = if o.id != k as u64 + 1 {
+            Some(format!("id {} where {} was due", o.id, k + 1))
+        } else if outside {
+            Some(format!("({}, {}) lies outside the colour image", o.x, o.y))
+        } else if !(o.size > 0.0 && (0.0..=1.0).contains(&o.score)) {
+            Some(format!("size {} or score {} out of range", o.size, o.score))
+        } else {
+            None
+        };
+        if let Some(p) = problem {
+            problems.push(format!("vegetation: object {}: {p}", k + 1));
+            break;
+        }
+    }
     problems
 }
