@@ -360,7 +360,7 @@ fn stage_write(b: &mut Build) -> Result<()> {
         b.artifacts.insert(
             "color".into(),
             b.writer
-                .write_array("color.rgba8", Dtype::U8, &[h, w, 4], &rgba)?,
+                .write_array("color.rgba8", Dtype::U8, &[h, w, 4], rgba)?,
         );
         let bands: Vec<f64> = (0..4)
             .flat_map(|c| rgba.iter().skip(c).step_by(4).map(|&v| v as f64))
