@@ -501,3 +501,158 @@ pub fn render(data: &Path, runs: usize, json_lines: bool) -> Result<()> {
     }
     Ok(())
 }
+
+/// Vegetation figures: detection accuracy on the annotated NEON crops beside
+/// the excess-green baseline, then split-and-merge and detection speed on
+/// images up to `max_side`² beside scikit-image's felzenszwalb (when Python
+/// with scikit-image is installed).
+pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: bool) -> Result<()> {
+    use crate::veg::{extract, read_samples, VegImage, VegOptions};
+    use relevo_core::veg::{baseline, eval, segment};
+
+    let options = VegOptions::default();
+    let crops = [
+        (
+            "yellowstone",
+            "trees/2019_YELL_2_541000_4977000_image_crop",
+            "data/trees/yellowstone_samples.csv",
+        ),
+        (
+            "soap_061",
+            "trees/SOAP_061",
+            "data/trees/soap_061_samples.csv",
+        ),
+    ];
+    let mut yellowstone = None;
+    for (name, stem, samples) in crops {
+        let image = VegImage::read(&data.join(format!("{stem}.png")), None, None, Some(0.1))?;
+        let (w, h) = (image.image.width, image.image.height);
+        let samples = read_samples(&repo.join(samples), None, w, h)?;
+        let truth = eval::parse_voc(&std::fs::read_to_string(data.join(format!("{stem}.xml")))?)?;
+        let result = extract(&image, &samples, &options)?;
+        let ours: Vec<(f64, f64, f32)> =
+            result.objects.iter().map(|o| (o.x, o.y, o.score)).collect();
+        let e = eval::evaluate(&ours, &truth);
+        // Baseline components must be at least a crown of the smallest radius.
+        let min_area = (std::f64::consts::PI * (options.crown_min_radius_m / 0.1).powi(2)) as usize;
+        let b = eval::evaluate(&baseline::excess_green(&image.image, min_area), &truth);
+        emit(
+            json_lines,
+            json!({"bench": "veg-accuracy", "image": name, "boxes": truth.len(),
+                   "haar": e, "excess_green": b}),
+            format!(
+                "veg accuracy {name} ({} boxes): Haar P {:.3} R {:.3} F1 {:.3} ({} objects) | excess green P {:.3} R {:.3} F1 {:.3} ({} objects)",
+                truth.len(), e.precision, e.recall, e.f1, e.detections,
+                b.precision, b.recall, b.f1, b.detections
+            ),
+        );
+        if name == "yellowstone" {
+            yellowstone = Some((image, samples));
+        }
+    }
+
+    // Speed: the Yellowstone crop, and the crop mirrored into larger tiles.
+    let (crop, samples) = yellowstone.context("no Yellowstone crop")?;
+    let scratch = tempfile_dir()?;
+    let script = repo.join("tools/py/felzenszwalb_bench.py");
+    let mut sides = vec![0usize];
+    sides.extend(
+        [2500usize, 5000, 10000]
+            .into_iter()
+            .filter(|&s| s <= max_side),
+    );
+    for side in sides {
+        let image = if side == 0 {
+            crop.image.clone()
+        } else {
+            mirror_tile(&crop.image, side)
+        };
+        let (w, h) = (image.width, image.height);
+        let mpx = (w * h) as f64 / 1e6;
+        let veg_image = VegImage {
+            image,
+            crs_wkt: String::new(),
+            geotransform: None,
+            pixel_m: 0.1,
+        };
+        let params = segment::SegmentParams {
+            brightness_std: options.brightness_std,
+            chroma_std: options.chroma_std,
+            min_region_px: options.min_region_px,
+            min_block_px: options.min_block_px,
+        };
+        let segment_ms = median_ms(runs, || {
+            std::hint::black_box(segment::segment(&veg_image.image, &params)?);
+            Ok(())
+        })?;
+        let mut detect_ms = Vec::new();
+        let mut classify_ms = Vec::new();
+        let mut place_ms = Vec::new();
+        let mut total_ms = Vec::new();
+        let mut objects = 0;
+        for _ in 0..runs {
+            let start = Instant::now();
+            let r = extract(&veg_image, &samples, &options)?;
+            total_ms.push(start.elapsed().as_secs_f64() * 1e3);
+            detect_ms.push(r.report.classify_ms + r.report.detect_ms);
+            classify_ms.push(r.report.classify_ms);
+            place_ms.push(r.report.detect_ms);
+            objects = r.objects.len();
+        }
+        let (detect_ms, total_ms) = (median(&detect_ms), median(&total_ms));
+        let (classify_ms, place_ms) = (median(&classify_ms), median(&place_ms));
+        let felzenszwalb = {
+            let raw = scratch.join("image.u8");
+            std::fs::write(&raw, &veg_image.image.pixels)?;
+            let out = Command::new("python3")
+                .arg(&script)
+                .arg(&raw)
+                .args([w, h, veg_image.image.bands, runs.min(3)].map(|v| v.to_string()))
+                .output();
+            let _ = std::fs::remove_file(&raw);
+            match out {
+                Ok(o) if o.status.success() => {
+                    serde_json::from_slice::<serde_json::Value>(&o.stdout).ok()
+                }
+                _ => None,
+            }
+        };
+        let fz_ms = felzenszwalb.as_ref().and_then(|v| v["ms"].as_f64());
+        emit(
+            json_lines,
+            json!({"bench": "veg-speed", "width": w, "height": h, "mpx": mpx,
+                   "threads": rayon::current_num_threads(),
+                   "segment_ms": segment_ms, "segment_mpx_s": mpx / segment_ms * 1e3,
+                   "detect_ms": detect_ms, "detect_mpx_s": mpx / detect_ms * 1e3,
+                   "learn_classify_ms": classify_ms, "place_ms": place_ms,
+                   "total_ms": total_ms, "objects": objects,
+                   "felzenszwalb": felzenszwalb,
+                   "felzenszwalb_mpx_s": fz_ms.map(|ms| mpx / ms * 1e3)}),
+            format!(
+                "veg speed {w}×{h} ({mpx:.1} Mpx): split-and-merge {segment_ms:.0} ms ({:.1} Mpx/s), classify+place {detect_ms:.0} ms ({:.1} Mpx/s; {classify_ms:.0} + {place_ms:.0}), whole detection {total_ms:.0} ms, {objects} objects | skimage felzenszwalb {}",
+                mpx / segment_ms * 1e3,
+                mpx / detect_ms * 1e3,
+                fz_ms.map_or("not installed (pip install scikit-image)".into(), |ms| format!("{ms:.0} ms ({:.1} Mpx/s)", mpx / ms * 1e3)),
+            ),
+        );
+    }
+    Ok(())
+}
+
+/// A `side`×`side` image tiled from `image`, every other copy mirrored so
+/// that tiles join without seams.
+fn mirror_tile(image: &relevo_core::veg::Image, side: usize) -> relevo_core::veg::Image {
+    let (w, h, b) = (image.width, image.height, image.bands);
+    let mut pixels = vec![0u8; side * side * b];
+    for (y, row) in pixels.chunks_mut(side * b).enumerate() {
+        let (ty, sy) = (y / h, y % h);
+        let sy = if ty % 2 == 1 { h - 1 - sy } else { sy };
+        for x in 0..side {
+            let (tx, sx) = (x / w, x % w);
+            let sx = if tx % 2 == 1 { w - 1 - sx } else { sx };
+            let at = (sy * w + sx) * b;
+            row[x * b..(x + 1) * b].copy_from_slice(&image.pixels[at..at + b]);
+        }
+    }
+    relevo_core::veg::Image::new(side, side, b, pixels).expect("tiled image")
+}

@@ -253,6 +253,18 @@ pub enum BenchCommand {
   relevo bench render
   relevo bench render --json --runs 3")]
     Render(BenchArgs),
+    /// Vegetation: F1 on the annotated crowns beside an excess-green baseline;
+    /// split-and-merge and detection speed beside scikit-image's felzenszwalb.
+    #[command(after_help = "Examples:
+  relevo bench veg
+  relevo bench veg --json --runs 3 --max-side 10000")]
+    Veg {
+        #[command(flatten)]
+        common: BenchArgs,
+        /// Side of the largest tiled test image (up to 10000).
+        #[arg(long, default_value_t = 10000)]
+        max_side: usize,
+    },
 }
 
 #[derive(Args, Debug)]
@@ -582,6 +594,10 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Bench(BenchCommand::Render(a)) => {
             crate::bench::render(&a.data, a.runs.max(1), a.json)
         }
+        Command::Bench(BenchCommand::Veg {
+            common: a,
+            max_side,
+        }) => crate::bench::veg(&a.repo, &a.data, a.runs.max(1), max_side, a.json),
         Command::Bench(BenchCommand::Hierarchy {
             common: a,
             max_side,

@@ -142,22 +142,37 @@ impl Classifier {
     /// rectangle, from claiming everything that resembles it. Distances are
     /// Euclidean over features standardised by their spread in the samples.
     pub fn classify(&self, signature: &[f32]) -> Label {
-        let mut per_class: Vec<Vec<f32>> = vec![Vec::new(); self.classes.len()];
+        // The `k` smallest distances per class, kept sorted by insertion.
+        let k = self.neighbours.max(1);
+        let mut smallest = vec![f32::INFINITY; self.classes.len() * k];
+        let mut found = vec![0usize; self.classes.len()];
+        let standard: Vec<f32> = signature
+            .iter()
+            .zip(&self.inverse_scale)
+            .map(|(s, scale)| s * scale)
+            .collect();
         for (class, example) in &self.examples {
-            let d: f32 = example
+            let d = example
                 .iter()
-                .zip(signature)
-                .zip(&self.inverse_scale)
-                .map(|((e, s), k)| (e - s * k).powi(2))
-                .sum();
-            per_class[*class].push(d.sqrt());
+                .zip(&standard)
+                .map(|(e, s)| (e - s) * (e - s))
+                .sum::<f32>();
+            let list = &mut smallest[class * k..(class + 1) * k];
+            if d < list[k - 1] {
+                let at = list.partition_point(|&v| v <= d);
+                list.copy_within(at..k - 1, at + 1);
+                list[at] = d;
+            }
+            found[*class] += 1;
         }
-        let nearest: Vec<f32> = per_class
-            .iter_mut()
-            .map(|d| {
-                d.sort_by(f32::total_cmp);
-                let n = self.neighbours.min(d.len()).max(1);
-                d[..n].iter().sum::<f32>() / n as f32
+        let nearest: Vec<f32> = (0..self.classes.len())
+            .map(|c| {
+                let n = found[c].min(k).max(1);
+                smallest[c * k..c * k + n]
+                    .iter()
+                    .map(|d| d.sqrt())
+                    .sum::<f32>()
+                    / n as f32
             })
             .collect();
         let (best, d1) = nearest

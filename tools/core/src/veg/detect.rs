@@ -1,11 +1,14 @@
 //! Vegetation objects from classified regions.
 //!
 //! - Crowns (fine imagery, about 1 m per pixel or finer): the pixels of
-//!   vegetation regions form a mask; crown centres are the maxima of the
-//!   Euclidean distance to the mask's edge, kept greedily from the largest
-//!   with at least `spacing_px` between centres. The distance at a centre is
-//!   the radius of the largest disc of vegetation around it, so the object's
-//!   size is that disc's diameter.
+//!   vegetation regions form a mask; seen from above, a crown's sunlit top is
+//!   its brightest part, so crown centres are the local maxima of brightness
+//!   smoothed over about a quarter of the crown spacing, inside the mask
+//!   (local-maximum filtering: Wulder, Niemann & Goodenough, "Local maximum
+//!   filtering for the extraction of tree locations and basal area from high
+//!   spatial resolution imagery", 2000). They are kept greedily from the
+//!   brightest with at least `spacing_px` between centres. An object's size
+//!   is the diameter of the largest disc of vegetation around its centre.
 //! - Fill (coarse imagery, e.g. 30 m Landsat, where a pixel holds many trees):
 //!   each vegetation pixel area receives objects from a jittered grid of
 //!   `spacing_px`, the jitter a hash of the grid cell, so the same region
@@ -13,7 +16,6 @@
 
 use super::classify::Label;
 use super::segment::Segmentation;
-use crate::raster::distance::distance_to_seeds;
 use rayon::prelude::*;
 
 /// How vegetation regions become objects.
@@ -99,7 +101,6 @@ pub fn detect(
                 .into_par_iter()
                 .map(|i| !is_vegetation(i % w, i / w))
                 .collect();
-            let radius = distance_to_seeds(&outside, w, h);
             // Sunlit tops: smoothed brightness, only inside vegetation.
             let brightness: Vec<f32> = (0..w * h)
                 .into_par_iter()
@@ -112,19 +113,25 @@ pub fn detect(
                 .zip(&outside)
                 .map(|(&v, &out)| if out { f32::MIN } else { v })
                 .collect();
+            // Candidates: maxima of their (2r+1)² window (each is first a
+            // 3×3 maximum, a cheap test that few pixels pass) with a disc of
+            // vegetation of at least the smallest radius around them.
             let r = (spacing_px.max(1.0) / 2.0).ceil() as usize;
-            let peak = window_max(&value, w, h, r);
+            let limit = (2.0 * spacing_px).ceil().max(2.0) as usize;
             let min_radius = min_radius_px.max(1.0);
-            let mut candidates: Vec<usize> = (0..w * h)
+            let mut candidates: Vec<(usize, f32)> = (0..w * h)
                 .into_par_iter()
-                .filter(|&i| radius[i] >= min_radius && value[i] >= peak[i])
+                .filter(|&i| !outside[i] && is_window_max(&value, w, h, i, 1))
+                .filter(|&i| is_window_max(&value, w, h, i, r))
+                .map(|i| (i, vegetation_radius(&outside, w, h, i, limit)))
+                .filter(|&(_, radius)| radius >= min_radius)
                 .collect();
-            candidates.sort_by(|&a, &b| value[b].total_cmp(&value[a]).then(a.cmp(&b)));
+            candidates.sort_by(|a, b| value[b.0].total_cmp(&value[a.0]).then(a.0.cmp(&b.0)));
             let kept = suppress(&candidates, w, spacing_px.max(1.0));
             kept.into_iter()
-                .map(|i| {
+                .map(|(i, radius)| {
                     let (x, y) = (i % w, i / w);
-                    object(x as f64 + 0.5, y as f64 + 0.5, 2.0 * radius[i])
+                    object(x as f64 + 0.5, y as f64 + 0.5, 2.0 * radius)
                 })
                 .collect()
         }
@@ -192,15 +199,15 @@ fn running_mean(at: impl Fn(usize) -> f32, n: usize, r: usize, mut put: impl FnM
     }
 }
 
-/// Keep candidates (pixel indices, best first) at least `spacing` apart.
-fn suppress(candidates: &[usize], w: usize, spacing: f32) -> Vec<usize> {
+/// Keep candidates (pixel index and radius, best first) at least `spacing` apart.
+fn suppress(candidates: &[(usize, f32)], w: usize, spacing: f32) -> Vec<(usize, f32)> {
     let cell = spacing as f64;
     let key = |x: f64, y: f64| ((x / cell) as i64, (y / cell) as i64);
     let mut grid: std::collections::HashMap<(i64, i64), Vec<(f64, f64)>> =
         std::collections::HashMap::new();
     let mut kept = Vec::new();
     let limit = cell * cell;
-    for &i in candidates {
+    for &(i, radius) in candidates {
         let (x, y) = ((i % w) as f64, (i / w) as f64);
         let (cx, cy) = key(x, y);
         let close = (cx - 1..=cx + 1).any(|gx| {
@@ -214,34 +221,48 @@ fn suppress(candidates: &[usize], w: usize, spacing: f32) -> Vec<usize> {
         });
         if !close {
             grid.entry((cx, cy)).or_default().push((x, y));
-            kept.push(i);
+            kept.push((i, radius));
         }
     }
     kept
 }
 
-/// Maximum over the `(2r+1)²` window around each cell (separable).
-fn window_max(values: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
-    let mut rows = vec![0.0f32; w * h];
-    rows.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
-        let line = &values[y * w..(y + 1) * w];
-        for (x, o) in out.iter_mut().enumerate() {
-            *o = line[x.saturating_sub(r)..(x + r + 1).min(w)]
-                .iter()
-                .fold(f32::MIN, |a, &b| a.max(b));
+/// Whether cell `i` holds the maximum of the `(2r+1)²` window around it
+/// (clipped at the edges; ties allowed).
+fn is_window_max(values: &[f32], w: usize, h: usize, i: usize, r: usize) -> bool {
+    let (x, y) = (i % w, i / w);
+    let v = values[i];
+    (y.saturating_sub(r)..(y + r + 1).min(h)).all(|yy| {
+        values[yy * w + x.saturating_sub(r)..yy * w + (x + r + 1).min(w)]
+            .iter()
+            .all(|&u| u <= v)
+    })
+}
+
+/// Distance from cell `i` to the nearest `outside` cell centre, searched in
+/// growing square rings up to `limit` cells (returned when none is nearer):
+/// the radius of the largest disc of vegetation around the cell.
+fn vegetation_radius(outside: &[bool], w: usize, h: usize, i: usize, limit: usize) -> f32 {
+    if outside[i] {
+        return 0.0;
+    }
+    let (x, y) = ((i % w) as i64, (i / w) as i64);
+    let mut best = (limit * limit) as i64;
+    for d in 1..=limit as i64 {
+        if d * d >= best {
+            break;
         }
-    });
-    let mut out = vec![0.0f32; w * h];
-    out.par_chunks_mut(w).enumerate().for_each(|(y, line)| {
-        let (y0, y1) = (y.saturating_sub(r), (y + r + 1).min(h));
-        line.copy_from_slice(&rows[y0 * w..(y0 + 1) * w]);
-        for yy in y0 + 1..y1 {
-            for (o, &v) in line.iter_mut().zip(&rows[yy * w..(yy + 1) * w]) {
-                *o = o.max(v);
+        for k in -d..=d {
+            for (dx, dy) in [(k, -d), (k, d), (-d, k), (d, k)] {
+                let (xx, yy) = (x + dx, y + dy);
+                let inside = xx >= 0 && yy >= 0 && xx < w as i64 && yy < h as i64;
+                if inside && outside[yy as usize * w + xx as usize] {
+                    best = best.min(dx * dx + dy * dy);
+                }
             }
         }
-    });
-    out
+    }
+    (best as f32).sqrt()
 }
 
 /// SplitMix64 (Steele, Lea & Flood 2014): a well-mixed hash of a grid cell.
@@ -250,4 +271,46 @@ fn splitmix64(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
     z ^ (z >> 31)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn vegetation_radius_is_the_distance_transform() {
+        use crate::raster::distance::distance_to_seeds;
+        let (w, h) = (41, 29);
+        let outside: Vec<bool> = (0..w * h)
+            .map(|i| (i * 7919) % 23 == 0 || (i % w) * (i / w) % 37 == 5)
+            .collect();
+        let exact = distance_to_seeds(&outside, w, h);
+        for (i, &want) in exact.iter().enumerate() {
+            let r = vegetation_radius(&outside, w, h, i, 60);
+            assert!((r - want).abs() < 1e-4, "cell {i}: {r} vs {want}");
+        }
+        // Beyond the limit the search stops at the limit.
+        assert_eq!(vegetation_radius(&[false; 100], 10, 10, 55, 3), 3.0);
+    }
+
+    #[test]
+    fn window_maximum() {
+        let values = [1.0, 2.0, 1.0, 0.0, 5.0, 0.0, 1.0, 2.0, 1.0];
+        assert!(is_window_max(&values, 3, 3, 4, 1));
+        assert!(!is_window_max(&values, 3, 3, 1, 1));
+        assert!(is_window_max(&values, 3, 3, 1, 0));
+    }
+
+    #[test]
+    fn box_blur_is_the_clipped_window_mean() {
+        let values: Vec<f32> = (0..20 * 9).map(|i| (i % 13) as f32).collect();
+        let r = 2;
+        let blurred = box_blur(&values, 20, 9, r);
+        // At the left edge the row window is clipped to 3 values; the
+        // column window is whole (5 rows).
+        let (x, y) = (0usize, 4usize);
+        let row_mean = |yy: usize| (0..=2).map(|xx| values[yy * 20 + xx]).sum::<f32>() / 3.0;
+        let expected = (y - 2..=y + 2).map(row_mean).sum::<f32>() / 5.0;
+        assert!((blurred[y * 20 + x] - expected).abs() < 1e-5);
+    }
 }

@@ -24,22 +24,26 @@ const LEVELS: usize = PATCH.trailing_zeros() as usize;
 /// Features per channel: the mean and three sub-bands per level.
 pub const FEATURES_PER_CHANNEL: usize = 1 + 3 * LEVELS;
 
-/// Forward transform of the `n`×`n` row-major block in place (`n` a power of two).
+/// Longest line the transforms take.
+const MAX_SIDE: usize = 256;
+
+/// Forward transform of the `n`×`n` row-major block in place (`n` a power of
+/// two, at most 256).
 pub fn forward(block: &mut [f32], n: usize) {
-    assert!(n.is_power_of_two() && block.len() == n * n);
-    let mut scratch = vec![0.0f32; n];
+    assert!(n.is_power_of_two() && n <= MAX_SIDE && block.len() == n * n);
+    let mut scratch = [0.0f32; MAX_SIDE];
+    let mut column = [0.0f32; MAX_SIDE];
     let mut size = n;
     while size > 1 {
         for row in 0..size {
             step(&mut block[row * n..row * n + size], &mut scratch);
         }
-        let mut column = vec![0.0f32; size];
         for col in 0..size {
-            for (r, v) in column.iter_mut().enumerate() {
+            for (r, v) in column[..size].iter_mut().enumerate() {
                 *v = block[r * n + col];
             }
-            step(&mut column, &mut scratch);
-            for (r, v) in column.iter().enumerate() {
+            step(&mut column[..size], &mut scratch);
+            for (r, v) in column[..size].iter().enumerate() {
                 block[r * n + col] = *v;
             }
         }
@@ -49,17 +53,17 @@ pub fn forward(block: &mut [f32], n: usize) {
 
 /// Inverse of [`forward`].
 pub fn inverse(block: &mut [f32], n: usize) {
-    assert!(n.is_power_of_two() && block.len() == n * n);
-    let mut scratch = vec![0.0f32; n];
+    assert!(n.is_power_of_two() && n <= MAX_SIDE && block.len() == n * n);
+    let mut scratch = [0.0f32; MAX_SIDE];
+    let mut column = [0.0f32; MAX_SIDE];
     let mut size = 2;
     while size <= n {
-        let mut column = vec![0.0f32; size];
         for col in 0..size {
-            for (r, v) in column.iter_mut().enumerate() {
+            for (r, v) in column[..size].iter_mut().enumerate() {
                 *v = block[r * n + col];
             }
-            unstep(&mut column, &mut scratch);
-            for (r, v) in column.iter().enumerate() {
+            unstep(&mut column[..size], &mut scratch);
+            for (r, v) in column[..size].iter().enumerate() {
                 block[r * n + col] = *v;
             }
         }
@@ -162,8 +166,8 @@ pub fn signature(image: &Image, window: [u32; 4], only: Option<(&[u32], u32)>) -
     let (ww, wh) = (x1 - x0, y1 - y0);
     let stride_x = (ww / (4 * PATCH)).max(1);
     let stride_y = (wh / (4 * PATCH)).max(1);
-    let mut sums = vec![[0.0f32; MAX_BANDS]; PATCH * PATCH];
-    let mut counts = vec![0u32; PATCH * PATCH];
+    let mut sums = [[0.0f32; MAX_BANDS]; PATCH * PATCH];
+    let mut counts = [0u32; PATCH * PATCH];
     for y in (y0..y1).step_by(stride_y) {
         let cy = (y - y0) * PATCH / wh;
         for x in (x0..x1).step_by(stride_x) {
@@ -192,7 +196,7 @@ pub fn signature(image: &Image, window: [u32; 4], only: Option<(&[u32], u32)>) -
         }
     }
     let mut out = Vec::with_capacity(image.bands * FEATURES_PER_CHANNEL);
-    let mut block = vec![0.0f32; PATCH * PATCH];
+    let mut block = [0.0f32; PATCH * PATCH];
     for c in 0..image.bands {
         for cy in 0..PATCH {
             for cx in 0..PATCH {

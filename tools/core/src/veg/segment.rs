@@ -242,7 +242,14 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
     for &(_, a, b) in &edges {
         sets.union_if(a, b, |m| predicate.homogeneous(m));
     }
+    // Regions still too small join their most similar neighbour. Sets only
+    // grow, so edges between two large sets can be dropped first.
     let min = params.min_region_px as f64;
+    let roots = sets.roots();
+    edges.retain(|&(_, a, b)| {
+        let (ra, rb) = (roots[a as usize] as usize, roots[b as usize] as usize);
+        ra != rb && (sets.moments[ra].n < min || sets.moments[rb].n < min)
+    });
     for &(_, a, b) in &edges {
         let (ra, rb) = (sets.find(a), sets.find(b));
         if ra != rb && (sets.moments[ra as usize].n < min || sets.moments[rb as usize].n < min) {
@@ -253,19 +260,19 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
     // Number regions in leaf order and describe them.
     let mut region_of_root = vec![u32::MAX; leaves.len()];
     let mut region_of_leaf = Vec::with_capacity(leaves.len());
-    let mut roots = Vec::new();
+    let mut region_roots = Vec::new();
     for leaf in 0..leaves.len() as u32 {
         let root = sets.find(leaf) as usize;
         if region_of_root[root] == u32::MAX {
-            region_of_root[root] = roots.len() as u32;
-            roots.push(root);
+            region_of_root[root] = region_roots.len() as u32;
+            region_roots.push(root);
         }
         region_of_leaf.push(region_of_root[root]);
     }
     labels
         .par_iter_mut()
         .for_each(|l| *l = region_of_leaf[*l as usize]);
-    let mut regions: Vec<Region> = roots
+    let mut regions: Vec<Region> = region_roots
         .iter()
         .map(|&root| {
             let m = &sets.moments[root];
@@ -419,8 +426,9 @@ fn split_coarse(
             .collect();
         levels.push(parent);
     }
-    let mut leaves = Vec::new();
-    let mut moments = Vec::new();
+    let most: usize = tiles.iter().map(|t| t.leaves.len()).sum();
+    let mut leaves = Vec::with_capacity(most);
+    let mut moments = Vec::with_capacity(most);
     let mut cover = vec![TileCover::Own(0, 0); tiles_x * tiles_y];
     let mut stack = vec![(levels.len() - 1, 0usize, 0usize)];
     while let Some((level, bx, by)) = stack.pop() {
@@ -549,6 +557,13 @@ impl DisjointSets {
             parent: (0..moments.len() as u32).collect(),
             moments,
         }
+    }
+
+    /// The root of every element.
+    fn roots(&mut self) -> Vec<u32> {
+        (0..self.parent.len() as u32)
+            .map(|x| self.find(x))
+            .collect()
     }
 
     fn find(&mut self, mut x: u32) -> u32 {
