@@ -457,8 +457,9 @@ pub fn write_labels(path: &Path, image: &VegImage, extraction: &Extraction) -> R
 }
 
 /// An RGBA picture for people: the image, vegetation regions tinted by class,
-/// region borders darkened, and each object of 3 pixels or more as a ring of
-/// its size (smaller ones, as in fill mode on coarse imagery, show as tint).
+/// region borders darkened, and each object as a red ring of its size (a
+/// single red pixel when smaller than 3 pixels, as in fill mode on coarse
+/// imagery).
 pub fn overlay(image: &VegImage, extraction: &Extraction, negative: &str) -> Vec<u8> {
     const TINTS: [[u8; 3]; 6] = [
         [255, 220, 0],
@@ -501,6 +502,10 @@ pub fn overlay(image: &VegImage, extraction: &Extraction, negative: &str) -> Vec
         };
         let r = o.size / image.pixel_m / 2.0;
         if r < 1.5 {
+            if px >= 0.0 && py >= 0.0 && (px as usize) < w && (py as usize) < h {
+                let i = (py as usize * w + px as usize) * 4;
+                rgba[i..i + 3].copy_from_slice(&[255, 0, 0]);
+            }
             continue;
         }
         let steps = (r * 8.0).ceil() as usize;
