@@ -190,6 +190,16 @@ fn region_file_errors() {
             "[dem]\nfiles = [\"a.tif\"]\nsrc_nodata = \"none\"\n",
             "src_nodata",
         ),
+        (
+            "vegnoimage.toml",
+            "[dem]\nfiles = [\"a.tif\"]\n[vegetation]\nsamples = \"s.csv\"\n",
+            "[vegetation] needs [image]",
+        ),
+        (
+            "vegoption.toml",
+            "[dem]\nfiles = [\"a.tif\"]\n[image]\nfiles = [\"b.tif\"]\n[vegetation]\nsamples = \"s.csv\"\n[vegetation.options]\nthreshold = 3\n",
+            "unknown field `threshold`",
+        ),
     ];
     let names: Vec<&str> = cases.iter().map(|c| c.0).collect();
     for (name, text, _) in &cases {

@@ -9,21 +9,39 @@ use std::path::Path;
 
 const YELLOWSTONE: &str = "trees/2019_YELL_2_541000_4977000_image_crop";
 
+/// Run `relevo veg detect IMAGE --samples SAMPLES --out OUT EXTRA…`.
+fn veg_detect(image: &Path, samples: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
+    let mut args: Vec<std::ffi::OsString> = vec!["veg".into(), "detect".into(), image.into()];
+    args.extend([
+        "--samples".into(),
+        samples.into(),
+        "--out".into(),
+        out.into(),
+    ]);
+    args.extend(extra.iter().map(Into::into));
+    relevo(args)
+}
+
+/// [`veg_detect`], asserting success; returns stdout.
+fn veg_detect_ok(image: &Path, samples: &Path, out: &Path, extra: &[&str]) -> String {
+    let result = veg_detect(image, samples, out, extra);
+    assert!(
+        result.status.success(),
+        "{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+    String::from_utf8_lossy(&result.stdout).to_string()
+}
+
 /// Detect with the committed samples and the documented flags, then score.
 fn detect_and_score(image: &str, samples: &str, out: &Path) -> serde_json::Value {
     let png = shared(&format!("{image}.png"));
-    relevo_ok([
-        "veg".as_ref(),
-        "detect".as_ref(),
-        png.as_os_str(),
-        "--pixel-size".as_ref(),
-        "0.1".as_ref(),
-        "--samples".as_ref(),
-        repo(samples).as_os_str(),
-        "--out".as_ref(),
-        out.as_os_str(),
-        "--force".as_ref(),
-    ]);
+    veg_detect_ok(
+        &png,
+        &repo(samples),
+        out,
+        &["--pixel-size", "0.1", "--force"],
+    );
     let json = relevo_ok([
         "veg".as_ref(),
         "eval".as_ref(),
@@ -130,24 +148,22 @@ fn coarse_imagery_fills_vegetation_at_the_density() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("forest.csv");
     let labels = dir.path().join("labels.tif");
-    let text = relevo_ok([
-        "veg".as_ref(),
-        "detect".as_ref(),
-        repo("data/olinda/L7_ETMs.tif").as_os_str(),
-        "--bands".as_ref(),
-        "3,2,1".as_ref(),
-        "--stretch".as_ref(),
-        "1,99".as_ref(),
-        "--samples".as_ref(),
-        repo("data/olinda/samples.csv").as_os_str(),
-        "--density".as_ref(),
-        "10".as_ref(),
-        "--labels".as_ref(),
-        labels.as_os_str(),
-        "--out".as_ref(),
-        out.as_os_str(),
-        "--json".as_ref(),
-    ]);
+    let text = veg_detect_ok(
+        &repo("data/olinda/L7_ETMs.tif"),
+        &repo("data/olinda/samples.csv"),
+        &out,
+        &[
+            "--bands",
+            "3,2,1",
+            "--stretch",
+            "1,99",
+            "--density",
+            "10",
+            "--json",
+            "--labels",
+            labels.to_str().unwrap(),
+        ],
+    );
     let report: serde_json::Value = serde_json::from_str(&text).unwrap();
     assert_eq!(report["placement"]["mode"], "fill");
     let forest_px = report["classes"][0]["pixels"].as_f64().unwrap();
@@ -195,15 +211,7 @@ fn bad_samples_are_refused_with_the_file_and_line() {
         let samples = dir.path().join(format!("bad.{ext}"));
         std::fs::write(&samples, text).unwrap();
         let out = dir.path().join("db.csv");
-        let result = relevo([
-            "veg".as_ref(),
-            "detect".as_ref(),
-            png.as_os_str(),
-            "--samples".as_ref(),
-            samples.as_os_str(),
-            "--out".as_ref(),
-            out.as_os_str(),
-        ]);
+        let result = veg_detect(&png, &samples, &out, &[]);
         let stderr = String::from_utf8_lossy(&result.stderr);
         assert!(!result.status.success(), "{text:?} was accepted");
         assert!(stderr.contains(message), "{text:?}: {stderr}");
@@ -301,16 +309,7 @@ fn sixteen_bit_and_four_band_inputs_with_geojson_samples() {
     let samples = dir.path().join("samples.geojson");
     std::fs::write(&samples, geojson.to_string()).unwrap();
     let out = dir.path().join("db.csv");
-    let text = relevo_ok([
-        "veg".as_ref(),
-        "detect".as_ref(),
-        crop.as_os_str(),
-        "--samples".as_ref(),
-        samples.as_os_str(),
-        "--out".as_ref(),
-        out.as_os_str(),
-        "--json".as_ref(),
-    ]);
+    let text = veg_detect_ok(&crop, &samples, &out, &["--json"]);
     let report: serde_json::Value = serde_json::from_str(&text).unwrap();
     assert_eq!(report["pixel_m"], 30.0);
     assert_eq!(report["placement"]["mode"], "fill");
@@ -330,31 +329,56 @@ fn sixteen_bit_and_four_band_inputs_with_geojson_samples() {
         "vegetation;100;100;140;140\nother;300;300;340;340\n",
     )
     .unwrap();
-    let text = relevo_ok([
-        "veg".as_ref(),
-        "detect".as_ref(),
-        rgbn.as_os_str(),
-        "--bands".as_ref(),
-        "1,2,3,4".as_ref(),
-        "--samples".as_ref(),
-        samples.as_os_str(),
-        "--out".as_ref(),
-        dir.path().join("rgbn_db.csv").as_os_str(),
-        "--json".as_ref(),
-    ]);
+    let text = veg_detect_ok(
+        &rgbn,
+        &samples,
+        &dir.path().join("rgbn_db.csv"),
+        &["--bands", "1,2,3,4", "--json"],
+    );
     let report: serde_json::Value = serde_json::from_str(&text).unwrap();
     assert_eq!(report["width"], 515);
     assert!(report["regions"].as_u64().unwrap() > 1);
-    let out = relevo([
-        "veg".as_ref(),
-        "detect".as_ref(),
-        rgbn.as_os_str(),
-        "--bands".as_ref(),
-        "1,2,3,4,4".as_ref(),
-        "--samples".as_ref(),
-        samples.as_os_str(),
-        "--out".as_ref(),
-        dir.path().join("x.csv").as_os_str(),
-    ]);
+    let out = veg_detect(
+        &rgbn,
+        &samples,
+        &dir.path().join("x.csv"),
+        &["--bands", "1,2,3,4,4"],
+    );
     assert!(String::from_utf8_lossy(&out.stderr).contains("choose 1 to 4 bands"));
+}
+
+/// The quick form of `prep` takes samples too; the bundle then holds the
+/// database and its exports, and validates.
+#[test]
+fn prep_quick_form_with_samples_writes_vegetation() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("olinda.relevo");
+    relevo_ok([
+        "prep".as_ref(),
+        "--dem".as_ref(),
+        repo("data/olinda/olinda_dem_utm25s.tif").as_os_str(),
+        "--image".as_ref(),
+        repo("data/olinda/L7_ETMs.tif").as_os_str(),
+        "--bands".as_ref(),
+        "3,2,1".as_ref(),
+        "--samples".as_ref(),
+        repo("data/olinda/samples.csv").as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    relevo_ok(["validate".as_ref(), out.as_os_str()]);
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(
+        manifest["artifacts"]["vegetation"]["file"],
+        "vegetation.csv"
+    );
+    assert!(manifest["exports"]["vegetation_geopackage"].is_object());
+    let db = relevo_core::veg::db::from_csv(
+        &std::fs::read_to_string(out.join("vegetation.csv")).unwrap(),
+    )
+    .unwrap();
+    // Default density 100 per hectare over some thousands of hectares.
+    assert!(db.len() > 10_000, "{}", db.len());
+    assert!(db.iter().all(|o| o.class == "forest"));
 }
