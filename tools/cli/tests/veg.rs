@@ -234,28 +234,24 @@ fn eval_reads_csv_boxes_and_refuses_bad_files() {
     .unwrap();
     let boxes = dir.path().join("boxes.csv");
     std::fs::write(&boxes, "xmin,ymin,xmax,ymax\n0,0,10,10\n20,20,30,30\n").unwrap();
-    let arg = |p: &Path| p.as_os_str().to_owned();
-    let json = relevo_ok([
-        "veg".into(),
-        "eval".into(),
-        "--detections".into(),
-        arg(&db),
-        "--truth".into(),
-        arg(&boxes),
-        "--json".into(),
-    ]);
-    let e: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let eval = || {
+        relevo([
+            "veg".as_ref(),
+            "eval".as_ref(),
+            "--detections".as_ref(),
+            db.as_os_str(),
+            "--truth".as_ref(),
+            boxes.as_os_str(),
+            "--json".as_ref(),
+        ])
+    };
+    let out = eval();
+    assert!(out.status.success());
+    let e: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(e["true_positives"], 1);
     assert_eq!(e["f1"], 0.5);
     std::fs::write(&boxes, "0,0,10\n").unwrap();
-    let out = relevo([
-        "veg".into(),
-        "eval".into(),
-        "--detections".into(),
-        arg(&db),
-        "--truth".into(),
-        arg(&boxes),
-    ]);
+    let out = eval();
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("boxes.csv: line 1"));
 }
