@@ -240,42 +240,55 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
     edges.par_sort_unstable();
     let mut sets = DisjointSets::new(leaf_moments);
     for &(_, a, b) in &edges {
-        sets.union_if(a, b, |m| predicate.homogeneous(m));
+        sets.union_if(a, b, |x, y| predicate.homogeneous(&x.joined(y)));
     }
-    // Regions still too small join their most similar neighbour. Sets only
-    // grow, so edges between two large sets can be dropped first.
+    // Regions still too small join their most similar neighbour. This needs
+    // only pixel counts: a compact forest over the merged regions keeps the
+    // joins cache-friendly. Sets only grow, so edges between two large sets
+    // are dropped first.
     let min = params.min_region_px as f64;
-    let roots = sets.roots();
-    edges.retain(|&(_, a, b)| {
-        let (ra, rb) = (roots[a as usize] as usize, roots[b as usize] as usize);
-        ra != rb && (sets.moments[ra].n < min || sets.moments[rb].n < min)
-    });
+    let merged = sets.roots();
+    let moments = sets.data;
+    let mut small = DisjointSets {
+        parent: merged.clone(),
+        data: moments.iter().map(|m| m.n as u32).collect(),
+    };
+    let edges: Vec<(u32, u32, u32)> = edges
+        .into_par_iter()
+        .filter(|&(_, a, b)| {
+            let (ra, rb) = (merged[a as usize] as usize, merged[b as usize] as usize);
+            ra != rb && (moments[ra].n < min || moments[rb].n < min)
+        })
+        .collect();
     for &(_, a, b) in &edges {
-        let (ra, rb) = (sets.find(a), sets.find(b));
-        if ra != rb && (sets.moments[ra as usize].n < min || sets.moments[rb as usize].n < min) {
-            sets.union_if(a, b, |_| true);
-        }
+        small.union_if(a, b, |x, y| (*x as f64) < min || (*y as f64) < min);
     }
 
-    // Number regions in leaf order and describe them.
+    // Number regions in leaf order and describe them; their moments are the
+    // sums of the merged regions they hold, in index order.
     let mut region_of_root = vec![u32::MAX; leaves.len()];
     let mut region_of_leaf = Vec::with_capacity(leaves.len());
-    let mut region_roots = Vec::new();
+    let mut region_count = 0;
     for leaf in 0..leaves.len() as u32 {
-        let root = sets.find(leaf) as usize;
+        let root = small.find(leaf) as usize;
         if region_of_root[root] == u32::MAX {
-            region_of_root[root] = region_roots.len() as u32;
-            region_roots.push(root);
+            region_of_root[root] = region_count;
+            region_count += 1;
         }
         region_of_leaf.push(region_of_root[root]);
+    }
+    let mut region_moments = vec![Moments::default(); region_count as usize];
+    for (k, m) in moments.iter().enumerate() {
+        if merged[k] == k as u32 {
+            region_moments[region_of_leaf[k] as usize].add(m);
+        }
     }
     labels
         .par_iter_mut()
         .for_each(|l| *l = region_of_leaf[*l as usize]);
-    let mut regions: Vec<Region> = region_roots
+    let mut regions: Vec<Region> = region_moments
         .iter()
-        .map(|&root| {
-            let m = &sets.moments[root];
+        .map(|m| {
             let mut mean = [0.0; MAX_BANDS];
             let mut std = [0.0; MAX_BANDS];
             for c in 0..image.bands {
@@ -545,24 +558,55 @@ fn adjacency(leaves: &[Leaf], labels: &[u32], w: usize, h: usize) -> Vec<(u32, u
         .collect()
 }
 
-/// Union–find over leaves, keeping the moments of each set at its root.
-struct DisjointSets {
-    parent: Vec<u32>,
-    moments: Vec<Moments>,
+/// What a set carries at its root: its size in pixels and how two combine.
+trait SetData: Copy + Send + Sync {
+    fn pixels(&self) -> f64;
+    fn joined(&self, other: &Self) -> Self;
 }
 
-impl DisjointSets {
-    fn new(moments: Vec<Moments>) -> DisjointSets {
+impl SetData for Moments {
+    fn pixels(&self) -> f64 {
+        self.n
+    }
+    fn joined(&self, other: &Self) -> Self {
+        Moments::joined(*self, other)
+    }
+}
+
+/// A bare pixel count, for joins that need no statistics.
+impl SetData for u32 {
+    fn pixels(&self) -> f64 {
+        *self as f64
+    }
+    fn joined(&self, other: &Self) -> Self {
+        self + other
+    }
+}
+
+/// Union–find over leaves, keeping each set's data at its root.
+struct DisjointSets<T> {
+    parent: Vec<u32>,
+    data: Vec<T>,
+}
+
+impl<T: SetData> DisjointSets<T> {
+    fn new(data: Vec<T>) -> DisjointSets<T> {
         DisjointSets {
-            parent: (0..moments.len() as u32).collect(),
-            moments,
+            parent: (0..data.len() as u32).collect(),
+            data,
         }
     }
 
-    /// The root of every element.
-    fn roots(&mut self) -> Vec<u32> {
+    /// The root of every element (in parallel, without path compression).
+    fn roots(&self) -> Vec<u32> {
         (0..self.parent.len() as u32)
-            .map(|x| self.find(x))
+            .into_par_iter()
+            .map(|mut x| {
+                while self.parent[x as usize] != x {
+                    x = self.parent[x as usize];
+                }
+                x
+            })
             .collect()
     }
 
@@ -575,25 +619,29 @@ impl DisjointSets {
         x
     }
 
-    /// Join the sets of `a` and `b` when `accept` takes their joined moments.
-    fn union_if(&mut self, a: u32, b: u32, accept: impl Fn(&Moments) -> bool) {
+    /// Join the sets of `a` and `b` when `accept` takes their data.
+    fn union_if(&mut self, a: u32, b: u32, accept: impl Fn(&T, &T) -> bool) {
         let (ra, rb) = (self.find(a), self.find(b));
         if ra == rb {
             return;
         }
-        let joined = self.moments[ra as usize].joined(&self.moments[rb as usize]);
-        if !accept(&joined) {
+        let (da, db) = (&self.data[ra as usize], &self.data[rb as usize]);
+        if !accept(da, db) {
             return;
         }
+        let joined = da.joined(db);
         // The larger set keeps its root; ties keep the lower index.
-        let (na, nb) = (self.moments[ra as usize].n, self.moments[rb as usize].n);
+        let (na, nb) = (
+            self.data[ra as usize].pixels(),
+            self.data[rb as usize].pixels(),
+        );
         let (root, child) = if na > nb || (na == nb && ra < rb) {
             (ra, rb)
         } else {
             (rb, ra)
         };
         self.parent[child as usize] = root;
-        self.moments[root as usize] = joined;
+        self.data[root as usize] = joined;
     }
 }
 
