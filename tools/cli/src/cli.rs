@@ -158,13 +158,13 @@ pub struct VegDetectArgs {
     #[arg(long, value_delimiter = ',', value_name = "LOW,HIGH")]
     pub stretch: Option<Vec<f64>>,
     /// Ground size of a pixel in metres, for images that are not georeferenced.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub pixel_size: Option<f64>,
     /// Largest brightness standard deviation in a region (8-bit units).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub brightness_std: Option<f32>,
     /// Largest chroma standard deviation in a region (8-bit units).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub chroma_std: Option<f32>,
     /// Regions smaller than this (pixels) join their most similar neighbour.
     #[arg(long)]
@@ -185,13 +185,13 @@ pub struct VegDetectArgs {
     #[arg(long, value_enum)]
     pub mode: Option<crate::veg::Mode>,
     /// Smallest distance between crown centres, metres.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub crown_spacing: Option<f64>,
     /// Smallest crown radius kept, metres.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub crown_min_radius: Option<f64>,
     /// Fill mode: objects per hectare.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub density: Option<f64>,
     /// The database (semicolon CSV).
     #[arg(long, short)]
@@ -1012,6 +1012,7 @@ fn run_veg_detect(a: Box<VegDetectArgs>) -> Result<()> {
         if path.exists() && !a.force {
             bail!("{}: exists; pass --force to replace it", path.display());
         }
+        check_folder(path)?;
     }
     let stretch = match a.stretch.as_deref() {
         None => None,

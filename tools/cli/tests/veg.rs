@@ -378,3 +378,37 @@ fn prep_quick_form_with_samples_writes_vegetation() {
     assert!(db.len() > 10_000, "{}", db.len());
     assert!(db.iter().all(|o| o.class == "forest"));
 }
+
+#[test]
+fn bad_options_and_outputs_are_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = shared("trees/SOAP_061.png");
+    let samples = repo("data/trees/soap_061_samples.csv");
+    let out = dir.path().join("db.csv");
+    for (extra, message) in [
+        (
+            vec!["--crown-spacing", "-1"],
+            "crown_spacing_m must be positive",
+        ),
+        (vec!["--brightness-std", "-3"], "thresholds must be finite"),
+        (vec!["--min-block", "3"], "power of two"),
+        (vec!["--pixel-size", "0"], "--pixel-size must be positive"),
+        (vec!["--bands", "5"], "no band 5"),
+        (vec!["--stretch", "99,1"], "--stretch takes LOW,HIGH"),
+        (
+            vec!["--gpkg", "/nonexistent/x.gpkg"],
+            "folder /nonexistent does not exist",
+        ),
+    ] {
+        let result = veg_detect(&png, &samples, &out, &extra);
+        let stderr = String::from_utf8_lossy(&result.stderr);
+        assert!(!result.status.success(), "{extra:?} was accepted");
+        assert!(stderr.contains(message), "{extra:?}: {stderr}");
+        assert!(!out.exists(), "{extra:?} left {}", out.display());
+    }
+    // An existing database is kept unless --force.
+    std::fs::write(&out, "keep").unwrap();
+    let result = veg_detect(&png, &samples, &out, &["--pixel-size", "0.1"]);
+    assert!(String::from_utf8_lossy(&result.stderr).contains("exists; pass --force"));
+    assert_eq!(std::fs::read_to_string(&out).unwrap(), "keep");
+}
