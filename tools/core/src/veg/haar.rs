@@ -166,28 +166,38 @@ pub fn signature(image: &Image, window: [u32; 4], only: Option<(&[u32], u32)>) -
     let (ww, wh) = (x1 - x0, y1 - y0);
     let stride_x = (ww / (4 * PATCH)).max(1);
     let stride_y = (wh / (4 * PATCH)).max(1);
+    // Patch column of every sampled column (at most 8·PATCH of them).
+    let mut cell_x = [0usize; 8 * PATCH];
+    for (k, x) in (x0..x1).step_by(stride_x).enumerate() {
+        cell_x[k] = (x - x0) * PATCH / ww;
+    }
     let mut sums = [[0.0f32; MAX_BANDS]; PATCH * PATCH];
     let mut counts = [0u32; PATCH * PATCH];
     for y in (y0..y1).step_by(stride_y) {
-        let cy = (y - y0) * PATCH / wh;
-        for x in (x0..x1).step_by(stride_x) {
-            let cx = (x - x0) * PATCH / ww;
+        let row = (y - y0) * PATCH / wh * PATCH;
+        for (k, x) in (x0..x1).step_by(stride_x).enumerate() {
             if let Some((labels, region)) = only {
                 if labels[y * image.width + x] != region {
                     continue;
                 }
             }
             let colour = image.colour(x, y);
-            let cell = &mut sums[cy * PATCH + cx];
+            let at = row + cell_x[k];
+            let cell = &mut sums[at];
             for c in 0..image.bands {
                 cell[c] += colour[c];
             }
-            counts[cy * PATCH + cx] += 1;
+            counts[at] += 1;
         }
     }
-    // A window narrower than the patch leaves cells empty: repeat the nearest
-    // filled cell along the axis (nearest-neighbour upsampling).
-    let filled = |c: usize, n: usize| (c * n / PATCH).min(n - 1) * PATCH / n.max(1);
+    // A window narrower than the patch leaves cells empty: they repeat the
+    // cell holding the nearest pixel along each axis (nearest-neighbour
+    // upsampling).
+    let source = |n: usize| -> [usize; PATCH] {
+        let n = n.min(PATCH);
+        std::array::from_fn(|c| (c * n / PATCH).min(n - 1) * PATCH / n)
+    };
+    let (source_x, source_y) = (source(ww), source(wh));
     let total: u32 = counts.iter().sum();
     let mut mean = [0.0f32; MAX_BANDS];
     for cell in &sums {
@@ -202,7 +212,7 @@ pub fn signature(image: &Image, window: [u32; 4], only: Option<(&[u32], u32)>) -
             for cx in 0..PATCH {
                 let mut at = cy * PATCH + cx;
                 if counts[at] == 0 && only.is_none() {
-                    at = filled(cy, wh.min(PATCH)) * PATCH + filled(cx, ww.min(PATCH));
+                    at = source_y[cy] * PATCH + source_x[cx];
                 }
                 block[cy * PATCH + cx] = if counts[at] == 0 {
                     mean[c]
