@@ -1132,6 +1132,18 @@ fn run_info(path: &Path, json: bool) -> Result<()> {
             c.width, c.height, c.bands
         );
     }
+    if let Some(a) = m.artifacts.get("vegetation") {
+        let path = bundle.dir.join(&a.file);
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("{}: cannot read", path.display()))?;
+        let objects = relevo_core::veg::db::from_csv(&text)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        let mut per_class = std::collections::BTreeMap::new();
+        for o in &objects {
+            *per_class.entry(o.class.as_str()).or_insert(0usize) += 1;
+        }
+        println!("  vegetation   {} objects {per_class:?}", objects.len());
+    }
     for (name, a) in m.artifacts.iter().chain(&m.exports) {
         println!(
             "  {name:<12} {} {:?} {:?} {} bytes",
