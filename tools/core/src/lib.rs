@@ -8,6 +8,11 @@
 //! - [`raster`]: in-memory multiband rasters with no-data, mosaicking,
 //!   hole filling and elevation tile encodings.
 //! - [`grid`]: the square (2^n+1)² height grid with its data mask.
+//! - [`lp`]: the Lindstrom–Pascucci hierarchy, extraction and refinement.
+//! - [`camera`]: the camera shared by the CPU and GPU renderers.
+//! - [`horizon`]: the floating-horizon raycaster and its depth buffer.
+//! - [`veg`]: vegetation from imagery: split-and-merge, Haar signatures,
+//!   classification from samples, objects, the vegetation database.
 //! - [`bundle`]: the `NAME.relevo/` directory: manifest, artifacts, validation.
 
 pub mod bundle;

@@ -10,7 +10,9 @@
 //! - [`samples`]: marked samples (semicolon CSV rectangles, GeoJSON polygons).
 //! - [`classify`]: nearest-signature classifier with a score.
 //! - [`detect`]: vegetation objects from classified regions.
-//! - [`db`]: the `id;x;y;class;size;score` database and its evaluation.
+//! - [`db`]: the `id;x;y;class;size;score` database.
+//! - [`eval`]: precision, recall and F1 against truth boxes.
+//! - [`baseline`]: excess-green detection, to measure against.
 
 pub mod baseline;
 pub mod classify;
