@@ -120,8 +120,26 @@ impl Source {
         height: usize,
         nodata: Option<f64>,
     ) -> Result<Raster> {
-        let mut data = Vec::with_capacity(width * height * self.bands);
-        for b in 1..=self.bands {
+        let all: Vec<usize> = (1..=self.bands).collect();
+        self.read_bands_window(&all, col, row, width, height, nodata)
+    }
+
+    /// Read the given bands (1-based, in that order) of the whole file.
+    pub fn read_bands(&self, bands: &[usize], nodata: Option<f64>) -> Result<Raster> {
+        self.read_bands_window(bands, 0, 0, self.width, self.height, nodata)
+    }
+
+    fn read_bands_window(
+        &self,
+        bands: &[usize],
+        col: usize,
+        row: usize,
+        width: usize,
+        height: usize,
+        nodata: Option<f64>,
+    ) -> Result<Raster> {
+        let mut data = Vec::with_capacity(width * height * bands.len());
+        for &b in bands {
             let band = self.dataset.rasterband(b)?;
             let buffer: Buffer<f64> = band
                 .read_as(
@@ -153,7 +171,7 @@ impl Source {
                 _ => v,
             }));
         }
-        Ok(Raster::from_data(width, height, self.bands, data))
+        Ok(Raster::from_data(width, height, bands.len(), data))
     }
 }
 

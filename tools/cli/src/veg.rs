@@ -157,17 +157,12 @@ impl VegImage {
                 source.bands
             );
         }
-        let raster = source.read(source.nodata)?;
+        let selected = source.read_bands(&bands, source.nodata)?;
         let stretch = match (stretch, source.band_type) {
             (Some(s), _) => Some(s),
             (None, GdalDataType::UInt8) => None,
             (None, _) => Some([2.0, 98.0]),
         };
-        let selected: Vec<f64> = bands
-            .iter()
-            .flat_map(|&b| raster.band(b - 1).iter().copied())
-            .collect();
-        let selected = Raster::from_data(raster.width, raster.height, bands.len(), selected);
         let ranges = crate::prep::stretch_ranges(&selected, stretch);
         let n = selected.cells();
         let mut pixels = vec![0u8; n * bands.len()];
@@ -176,7 +171,7 @@ impl VegImage {
                 pixels[i * bands.len() + b] = crate::prep::to_u8(*v, range);
             }
         }
-        let image = Image::new(raster.width, raster.height, bands.len(), pixels)
+        let image = Image::new(selected.width, selected.height, bands.len(), pixels)
             .map_err(|e| anyhow!("{}: {e}", path.display()))?;
         let crs_wkt = match &source.srs {
             Some(srs) => crate::crs::to_wkt(srs)?,
