@@ -590,6 +590,7 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
             crs_wkt: String::new(),
             geotransform: None,
             pixel_m: 0.1,
+            valid: None,
         };
         let params = segment::SegmentParams {
             brightness_std: options.brightness_std,

@@ -529,6 +529,14 @@ pub struct PrepArgs {
     /// Image bands shown as red, green, blue (quick form), e.g. 3,2,1.
     #[arg(long, value_delimiter = ',', value_name = "R,G,B")]
     pub bands: Option<Vec<usize>>,
+    /// Percentiles LOW,HIGH of each image band stretched to 0..255 (quick form).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        value_name = "LOW,HIGH",
+        requires = "image"
+    )]
+    pub stretch: Option<Vec<f64>>,
     /// Vegetation samples marked on the first image (quick form; see `veg detect`).
     #[arg(long, requires = "image")]
     pub samples: Option<PathBuf>,
@@ -786,6 +794,11 @@ fn run_prep(a: PrepArgs) -> Result<()> {
     if a.bands.as_ref().is_some_and(|b| b.len() != 3) {
         bail!("--bands takes three bands R,G,B, e.g. 3,2,1");
     }
+    let stretch = match a.stretch.as_deref() {
+        None => None,
+        Some(&[lo, hi]) => Some([lo, hi]),
+        Some(_) => bail!("--stretch takes two percentiles LOW,HIGH"),
+    };
     let region = match &a.region {
         Some(path) => Region::load(path)?,
         None => {
@@ -809,7 +822,7 @@ fn run_prep(a: PrepArgs) -> Result<()> {
                     src_nodata: None,
                     overlap: Overlap::Blend,
                     resampling: Resampling::Bilinear,
-                    stretch: None,
+                    stretch,
                 }),
                 vegetation: a.samples.map(|samples| crate::region::VegetationSection {
                     samples,

@@ -261,11 +261,13 @@ fn stage_vegetation(b: &mut Build) -> Result<()> {
         .flat_map(|p| [p[0], p[1], p[2]])
         .collect();
     let (cell_w, cell_h) = grid.geotransform.cell_size();
+    let valid: Vec<bool> = b.rgba.chunks_exact(4).map(|p| p[3] == 255).collect();
     let image = VegImage {
         image: relevo_core::veg::Image::new(grid.width, grid.height, 3, pixels)?,
         crs_wkt: grid.crs_wkt.clone(),
         geotransform: Some(grid.geotransform),
         pixel_m: cell_w.abs().min(cell_h.abs()),
+        valid: valid.iter().any(|v| !v).then_some(valid),
     };
 
     let first = gdalio::open(&image_section.files[0])?;
@@ -296,6 +298,7 @@ fn stage_vegetation(b: &mut Build) -> Result<()> {
                 .context("the drape's geotransform cannot be inverted")?;
             *p = [col, row];
         }
+        tracing::debug!(class = %sample.class, polygon = ?sample.polygon, "sample on the drape");
     }
     let extraction = veg::extract(&image, &samples, &section.options)
         .with_context(|| section.samples.display().to_string())?;

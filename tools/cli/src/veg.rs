@@ -125,6 +125,8 @@ pub struct VegImage {
     pub geotransform: Option<GeoTransform>,
     /// Ground size of a pixel in metres.
     pub pixel_m: f64,
+    /// Pixels with data in every band; `None` when all have.
+    pub valid: Option<Vec<bool>>,
 }
 
 impl VegImage {
@@ -165,6 +167,7 @@ impl VegImage {
         };
         let ranges = crate::prep::stretch_ranges(&selected, stretch);
         let n = selected.cells();
+        let valid = (selected.valid_count() < n).then(|| selected.valid_mask());
         let mut pixels = vec![0u8; n * bands.len()];
         for (b, &range) in ranges.iter().enumerate() {
             for (i, v) in selected.band(b).iter().enumerate() {
@@ -203,6 +206,7 @@ impl VegImage {
             crs_wkt,
             geotransform: source.geotransform,
             pixel_m,
+            valid,
         })
     }
 
@@ -254,6 +258,8 @@ pub struct Report {
     pub width: usize,
     pub height: usize,
     pub pixel_m: f64,
+    /// 1st to 99th percentile of brightness, in 8-bit units.
+    pub brightness_span: f32,
     pub placement: Placement,
     pub leaves: usize,
     pub regions: usize,
@@ -277,6 +283,14 @@ pub struct ClassReport {
 /// Segment, learn from the samples, classify every region and place objects.
 pub fn extract(image: &VegImage, samples: &[Sample], options: &VegOptions) -> Result<Extraction> {
     let placement = options.placement(image.pixel_m)?;
+    let brightness_span = image.image.brightness_span();
+    if brightness_span < 128.0 {
+        tracing::warn!(
+            brightness_span,
+            "the image is low in contrast (1st to 99th percentile of brightness span {brightness_span:.0} of 255): \
+             thresholds are in 8-bit units, so regions will be few and large; stretch it (--stretch, image.stretch)"
+        );
+    }
     let start = Instant::now();
     let segmentation = segment(&image.image, &options.segment_params())?;
     let segment_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -308,7 +322,14 @@ pub fn extract(image: &VegImage, samples: &[Sample], options: &VegOptions) -> Re
         );
     }
     let start = Instant::now();
-    let found = detect(&image.image, &segmentation, &labels, &vegetation, placement);
+    let found = detect(
+        &image.image,
+        &segmentation,
+        &labels,
+        &vegetation,
+        image.valid.as_deref(),
+        placement,
+    );
     let detect_ms = start.elapsed().as_secs_f64() * 1e3;
     let objects: Vec<VegObject> = found
         .iter()
@@ -351,6 +372,7 @@ pub fn extract(image: &VegImage, samples: &[Sample], options: &VegOptions) -> Re
         width: image.image.width,
         height: image.image.height,
         pixel_m: image.pixel_m,
+        brightness_span,
         placement,
         leaves: segmentation.leaves,
         regions: segmentation.regions.len(),

@@ -357,6 +357,8 @@ fn prep_quick_form_with_samples_writes_vegetation() {
         repo("data/olinda/L7_ETMs.tif").as_os_str(),
         "--bands".as_ref(),
         "3,2,1".as_ref(),
+        "--stretch".as_ref(),
+        "1,99".as_ref(),
         "--samples".as_ref(),
         repo("data/olinda/samples.csv").as_os_str(),
         "--out".as_ref(),
@@ -411,4 +413,111 @@ fn bad_options_and_outputs_are_refused_before_any_work() {
     let result = veg_detect(&png, &samples, &out, &["--pixel-size", "0.1"]);
     assert!(String::from_utf8_lossy(&result.stderr).contains("exists; pass --force"));
     assert_eq!(std::fs::read_to_string(&out).unwrap(), "keep");
+}
+
+/// Imagery in another CRS than the DEM: `prep` warps the drape and carries
+/// the samples (pixels of the image file) through both CRSs, so the forest
+/// found is about the same as from the image in the DEM's own CRS.
+#[test]
+fn prep_carries_samples_across_crs() {
+    use gdal::spatial_ref::{AxisMappingStrategy, CoordTransform, SpatialRef};
+    let dir = tempfile::tempdir().unwrap();
+    let original = repo("data/olinda/L7_ETMs.tif");
+    let geographic = dir.path().join("l7_wgs84.tif");
+    common::gdal_tool(
+        "gdalwarp",
+        &[
+            "-q",
+            "-t_srs",
+            "EPSG:4326",
+            "-r",
+            "bilinear",
+            "-dstnodata",
+            "0",
+            original.to_str().unwrap(),
+            geographic.to_str().unwrap(),
+        ],
+    );
+    // The sample rectangles, moved to the warped image's pixels.
+    let from = read(&original).geotransform;
+    let to = read(&geographic).geotransform;
+    let utm = SpatialRef::from_wkt(&gdal::Dataset::open(&original).unwrap().projection()).unwrap();
+    let mut wgs84 = SpatialRef::from_epsg(4326).unwrap();
+    wgs84.set_axis_mapping_strategy(AxisMappingStrategy::TraditionalGisOrder);
+    let t = CoordTransform::new(&utm, &wgs84).unwrap();
+    let text = std::fs::read_to_string(repo("data/olinda/samples.csv")).unwrap();
+    let mut moved = String::from("class;xmin;ymin;xmax;ymax\n");
+    for line in text
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with("class"))
+    {
+        let f: Vec<&str> = line.split(';').collect();
+        let v: Vec<f64> = f[1..].iter().map(|x| x.parse().unwrap()).collect();
+        let mut xs: Vec<f64> = [v[0], v[2], v[0], v[2]]
+            .map(|c| from[0] + c * from[1])
+            .to_vec();
+        let mut ys: Vec<f64> = [v[1], v[1], v[3], v[3]]
+            .map(|r| from[3] + r * from[5])
+            .to_vec();
+        t.transform_coords(&mut xs, &mut ys, &mut [0.0; 4]).unwrap();
+        let cols: Vec<f64> = xs.iter().map(|x| (x - to[0]) / to[1]).collect();
+        let rows: Vec<f64> = ys.iter().map(|y| (y - to[3]) / to[5]).collect();
+        let min = |v: &[f64]| v.iter().cloned().fold(f64::MAX, f64::min).floor().max(0.0);
+        let max = |v: &[f64]| v.iter().cloned().fold(f64::MIN, f64::max).ceil();
+        moved += &format!(
+            "{};{};{};{};{}\n",
+            f[0],
+            min(&cols),
+            min(&rows),
+            max(&cols),
+            max(&rows)
+        );
+    }
+    let samples = dir.path().join("samples.csv");
+    std::fs::write(&samples, moved).unwrap();
+
+    let bundle = |image: &Path, samples: &Path, name: &str| {
+        let out = dir.path().join(name);
+        relevo_ok([
+            "prep".as_ref(),
+            "--dem".as_ref(),
+            repo("data/olinda/olinda_dem_utm25s.tif").as_os_str(),
+            "--image".as_ref(),
+            image.as_os_str(),
+            "--bands".as_ref(),
+            "3,2,1".as_ref(),
+            "--stretch".as_ref(),
+            "1,99".as_ref(),
+            "--samples".as_ref(),
+            samples.as_os_str(),
+            "--out".as_ref(),
+            out.as_os_str(),
+        ]);
+        relevo_ok(["validate".as_ref(), out.as_os_str()]);
+        read(&out.join("exports/vegetation_labels.tif"))
+    };
+    let same = bundle(&original, &repo("data/olinda/samples.csv"), "utm.relevo");
+    let across = bundle(&geographic, &samples, "wgs84.relevo");
+    // Both drapes are on the bundle's UTM grid (cells of nearly the same
+    // size): compare the class at every pixel centre of the first.
+    let (g, h) = (same.geotransform, across.geotransform);
+    let (mut agree, mut total) = (0usize, 0usize);
+    for row in 0..same.height {
+        for col in 0..same.width {
+            let x = g[0] + (col as f64 + 0.5) * g[1];
+            let y = g[3] + (row as f64 + 0.5) * g[5];
+            let (c2, r2) = (((x - h[0]) / h[1]) as usize, ((y - h[3]) / h[5]) as usize);
+            if c2 < across.width && r2 < across.height {
+                let forest = |l: &common::Read, i: usize| l.bands[1][i] == 1.0;
+                total += 1;
+                agree += (forest(&same, row * same.width + col)
+                    == forest(&across, r2 * across.width + c2)) as usize;
+            }
+        }
+    }
+    let agreement = agree as f64 / total as f64;
+    assert!(
+        agreement > 0.8,
+        "forest agrees on {agreement:.3} of the pixels"
+    );
 }

@@ -49,18 +49,20 @@ pub struct Object {
     pub score: f32,
 }
 
-/// Objects for every pixel whose region's class is in `vegetation`, sorted
-/// by row then column.
+/// Objects for every pixel whose region's class is in `vegetation` (and
+/// that has data, where `valid` is given), sorted by row then column.
 pub fn detect(
     image: &super::Image,
     segmentation: &Segmentation,
     labels: &[Label],
     vegetation: &[bool],
+    valid: Option<&[bool]>,
     placement: Placement,
 ) -> Vec<Object> {
     let (w, h) = (segmentation.width, segmentation.height);
     let label_at = |x: usize, y: usize| labels[segmentation.labels[y * w + x] as usize];
-    let is_vegetation = |x: usize, y: usize| vegetation[label_at(x, y).class];
+    let is_vegetation =
+        |x: usize, y: usize| vegetation[label_at(x, y).class] && valid.is_none_or(|v| v[y * w + x]);
     let object = |x: f64, y: f64, size_px: f32| {
         let label = label_at(x as usize, y as usize);
         Object {
@@ -291,6 +293,49 @@ mod tests {
         }
         // Beyond the limit the search stops at the limit.
         assert_eq!(vegetation_radius(&[false; 100], 10, 10, 55, 3), 3.0);
+    }
+
+    #[test]
+    fn fill_is_deterministic_at_the_density_and_skips_pixels_without_data() {
+        use super::super::segment::{Region, Segmentation};
+        use super::super::Image;
+        let (w, h) = (40, 30);
+        let image = Image::new(w, h, 1, vec![100; w * h]).unwrap();
+        let segmentation = Segmentation {
+            width: w,
+            height: h,
+            labels: vec![0; w * h],
+            regions: vec![Region {
+                pixels: (w * h) as u32,
+                bbox: [0, 0, w as u32, h as u32],
+                centroid: [20.0, 15.0],
+                mean: [100.0, 0.0, 0.0, 0.0],
+                std: [0.0; 4],
+            }],
+            leaves: 1,
+        };
+        let labels = [Label {
+            class: 0,
+            score: 0.9,
+        }];
+        let fill = Placement::Fill {
+            spacing_px: 2.0,
+            diameter_px: 2.0,
+        };
+        let all = detect(&image, &segmentation, &labels, &[true], None, fill);
+        // One object per 2×2 pixels.
+        assert_eq!(all.len(), w * h / 4);
+        assert_eq!(
+            all,
+            detect(&image, &segmentation, &labels, &[true], None, fill)
+        );
+        // No data in the left half: objects only on the right.
+        let valid: Vec<bool> = (0..w * h).map(|i| i % w >= 20).collect();
+        let right = detect(&image, &segmentation, &labels, &[true], Some(&valid), fill);
+        assert!(right.iter().all(|o| o.x >= 20.0));
+        assert_eq!(right.len(), all.iter().filter(|o| o.x >= 20.0).count());
+        // A class that is not vegetation gets nothing.
+        assert!(detect(&image, &segmentation, &labels, &[false], None, fill).is_empty());
     }
 
     #[test]

@@ -63,6 +63,29 @@ impl Image {
         })
     }
 
+    /// Span between the 1st and 99th percentiles of brightness (the mean of
+    /// the bands), in 8-bit units: how much of the range the image uses.
+    pub fn brightness_span(&self) -> f32 {
+        let mut histogram = [0u64; 256];
+        for px in self.pixels.chunks_exact(self.bands) {
+            let sum: u32 = px.iter().map(|&v| v as u32).sum();
+            histogram[(sum / self.bands as u32) as usize] += 1;
+        }
+        let n = (self.width * self.height) as u64;
+        let level = |fraction: f64| {
+            let target = (fraction * n as f64).ceil() as u64;
+            let mut seen = 0;
+            histogram
+                .iter()
+                .position(|&c| {
+                    seen += c;
+                    seen >= target.max(1)
+                })
+                .unwrap_or(255) as f32
+        };
+        level(0.99) - level(0.01)
+    }
+
     /// The pixel at `(x, y)` in the opponent colour space of [`opponent`].
     #[inline]
     pub fn colour(&self, x: usize, y: usize) -> [f32; MAX_BANDS] {
@@ -123,6 +146,16 @@ mod tests {
             let mean_part = (c[0] - base[0]).powi(2) * 3.0;
             assert!((chroma2 + mean_part - 1.0).abs() < 1e-4);
         }
+    }
+
+    #[test]
+    fn brightness_span_of_a_ramp() {
+        let pixels: Vec<u8> = (0..=255u8).flat_map(|v| [v, v, v]).collect();
+        let ramp = Image::new(256, 1, 3, pixels).unwrap();
+        // 1 % of 256 values from each end: about 3 levels.
+        assert!((ramp.brightness_span() - 250.0).abs() <= 3.0);
+        let flat = Image::new(4, 4, 1, vec![9; 16]).unwrap();
+        assert_eq!(flat.brightness_span(), 0.0);
     }
 
     #[test]
