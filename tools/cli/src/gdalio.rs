@@ -107,37 +107,22 @@ impl Source {
     /// Read every band into memory as f64, turning `nodata` into NaN.
     /// Reads the whole file, so a truncated or corrupt file fails here.
     pub fn read(&self, nodata: Option<f64>) -> Result<Raster> {
-        self.read_window(0, 0, self.width, self.height, nodata)
+        self.read_window(0, 0, self.width, self.height, None, nodata)
     }
 
-    /// Read the `width`×`height` window at (`col`, `row`) of every band as f64,
-    /// turning `nodata` into NaN.
+    /// Read the `width`×`height` window at (`col`, `row`) as f64, turning
+    /// `nodata` into NaN: the given bands (1-based, in that order), or all.
     pub fn read_window(
         &self,
         col: usize,
         row: usize,
         width: usize,
         height: usize,
+        bands: Option<&[usize]>,
         nodata: Option<f64>,
     ) -> Result<Raster> {
         let all: Vec<usize> = (1..=self.bands).collect();
-        self.read_bands_window(&all, col, row, width, height, nodata)
-    }
-
-    /// Read the given bands (1-based, in that order) of the whole file.
-    pub fn read_bands(&self, bands: &[usize], nodata: Option<f64>) -> Result<Raster> {
-        self.read_bands_window(bands, 0, 0, self.width, self.height, nodata)
-    }
-
-    fn read_bands_window(
-        &self,
-        bands: &[usize],
-        col: usize,
-        row: usize,
-        width: usize,
-        height: usize,
-        nodata: Option<f64>,
-    ) -> Result<Raster> {
+        let bands = bands.unwrap_or(&all);
         let mut data = Vec::with_capacity(width * height * bands.len());
         for &b in bands {
             let band = self.dataset.rasterband(b)?;

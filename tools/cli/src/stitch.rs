@@ -439,7 +439,7 @@ fn copy_aligned(
         return Ok(out);
     }
     let (w, h) = ((c1 - c0) as usize, (r1 - r0) as usize);
-    let part = source.read_window(c0 as usize, r0 as usize, w, h, nodata)?;
+    let part = source.read_window(c0 as usize, r0 as usize, w, h, None, nodata)?;
     let (oc, or) = ((c0 - dc) as usize, (r0 - dr) as usize);
     for b in 0..source.bands {
         let src = part.band(b);

@@ -159,7 +159,14 @@ impl VegImage {
                 source.bands
             );
         }
-        let selected = source.read_bands(&bands, source.nodata)?;
+        let selected = source.read_window(
+            0,
+            0,
+            source.width,
+            source.height,
+            Some(&bands),
+            source.nodata,
+        )?;
         let stretch = match (stretch, source.band_type) {
             (Some(s), _) => Some(s),
             (None, GdalDataType::UInt8) => None,
