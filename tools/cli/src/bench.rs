@@ -592,16 +592,24 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
             pixel_m: 0.1,
             valid: None,
         };
-        let params = segment::SegmentParams {
-            brightness_std: options.brightness_std,
-            chroma_std: options.chroma_std,
-            min_region_px: options.min_region_px,
-            min_block_px: options.min_block_px,
-        };
+        let params = options.segment_params();
+        let mut steps = Vec::new();
         let segment_ms = median_ms(runs, || {
-            std::hint::black_box(segment::segment(&veg_image.image, &params)?);
+            steps.push(segment::segment(&veg_image.image, &params)?.steps);
             Ok(())
         })?;
+        // The phases of the run whose total is nearest the median.
+        let total = |s: &segment::SegmentSteps| {
+            s.split_ms + s.adjacency_ms + s.merge_ms + s.small_regions_ms + s.describe_ms
+        };
+        let steps = *steps
+            .iter()
+            .min_by(|a, b| {
+                (total(a) - segment_ms)
+                    .abs()
+                    .total_cmp(&(total(b) - segment_ms).abs())
+            })
+            .context("no run")?;
         let mut detect_ms = Vec::new();
         let mut classify_ms = Vec::new();
         let mut place_ms = Vec::new();
@@ -645,15 +653,21 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
             json!({"bench": "veg-speed", "width": w, "height": h, "mpx": mpx,
                    "threads": rayon::current_num_threads(),
                    "segment_ms": segment_ms, "segment_mpx_s": mpx / segment_ms * 1e3,
+                   "segment_steps": steps,
                    "detect_ms": detect_ms, "detect_mpx_s": mpx / detect_ms * 1e3,
                    "learn_classify_ms": classify_ms, "place_ms": place_ms,
                    "total_ms": total_ms, "objects": objects,
                    "felzenszwalb": felzenszwalb,
                    "felzenszwalb_mpx_s": fz_ms.map(|ms| mpx / ms * 1e3)}),
             format!(
-                "veg speed {w}×{h} ({mpx:.1} Mpx): split-and-merge {segment_ms:.0} ms ({:.1} Mpx/s), classify+place {detect_ms:.0} ms ({:.1} Mpx/s; {classify_ms:.0} + {place_ms:.0}), whole detection {total_ms:.0} ms, {objects} objects | skimage felzenszwalb {}",
+                "veg speed {w}×{h} ({mpx:.1} Mpx): split-and-merge {segment_ms:.0} ms ({:.1} Mpx/s), classify+place {detect_ms:.0} ms ({:.1} Mpx/s; {classify_ms:.0} + {place_ms:.0}), whole detection {total_ms:.0} ms, {objects} objects | split-and-merge phases: split {:.0}, adjacency+sort {:.0}, merge {:.0}, small regions {:.0}, describe {:.0} ms | skimage felzenszwalb {}",
                 mpx / segment_ms * 1e3,
                 mpx / detect_ms * 1e3,
+                steps.split_ms,
+                steps.adjacency_ms,
+                steps.merge_ms,
+                steps.small_regions_ms,
+                steps.describe_ms,
                 fz_ms.map_or("not run (above 25 Mpx, or scikit-image not installed)".into(), |ms| format!("{ms:.0} ms ({:.1} Mpx/s)", mpx / ms * 1e3)),
             ),
         );

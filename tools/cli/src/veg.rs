@@ -77,7 +77,8 @@ pub enum Mode {
 }
 
 impl VegOptions {
-    fn segment_params(&self) -> SegmentParams {
+    /// The split-and-merge thresholds among these options.
+    pub fn segment_params(&self) -> SegmentParams {
         SegmentParams {
             brightness_std: self.brightness_std,
             chroma_std: self.chroma_std,

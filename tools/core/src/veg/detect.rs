@@ -313,6 +313,7 @@ mod tests {
                 std: [0.0; 4],
             }],
             leaves: 1,
+            steps: Default::default(),
         };
         let labels = [Label {
             class: 0,

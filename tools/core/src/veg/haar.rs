@@ -141,7 +141,7 @@ pub fn region_signature(
 
 /// The window a region is described by: its bounding box grown about its
 /// centre to at least `min_side` pixels each way, clipped to the image.
-pub fn window(region: &Region, min_side: u32, width: usize, height: usize) -> [u32; 4] {
+fn window(region: &Region, min_side: u32, width: usize, height: usize) -> [u32; 4] {
     let grow = |lo: u32, hi: u32, limit: usize| {
         let side = (hi - lo).max(min_side).min(limit as u32);
         let centre = (lo + hi) / 2;

@@ -27,16 +27,6 @@ impl Sample {
         }
         inside
     }
-
-    /// Mean of the polygon's vertices.
-    pub fn centre(&self) -> [f64; 2] {
-        let n = self.polygon.len() as f64;
-        let (sx, sy) = self
-            .polygon
-            .iter()
-            .fold((0.0, 0.0), |(sx, sy), p| (sx + p[0], sy + p[1]));
-        [sx / n, sy / n]
-    }
 }
 
 const CSV_COLUMNS: [&str; 5] = ["class", "xmin", "ymin", "xmax", "ymax"];

@@ -92,6 +92,23 @@ pub struct Segmentation {
     pub regions: Vec<Region>,
     /// Quadtree leaves before merging.
     pub leaves: usize,
+    /// Where the time went.
+    pub steps: SegmentSteps,
+}
+
+/// Wall time of each phase of [`segment`], in milliseconds.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct SegmentSteps {
+    /// Splitting the tiles, the levels above them, gathering and painting leaves.
+    pub split_ms: f64,
+    /// Finding adjacent leaves, weighting and sorting the edges.
+    pub adjacency_ms: f64,
+    /// Joining regions whose union stays homogeneous (union–find).
+    pub merge_ms: f64,
+    /// Joining regions smaller than the minimum to a neighbour.
+    pub small_regions_ms: f64,
+    /// Numbering and describing the regions.
+    pub describe_ms: f64,
 }
 
 /// Count, sums and sums of squares of the opponent channels of some pixels.
@@ -211,6 +228,12 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
     params.check()?;
     let predicate = Predicate::new(params, image.bands);
     let (w, h) = (image.width, image.height);
+    let mut clock = std::time::Instant::now();
+    let mut lap = || {
+        let ms = clock.elapsed().as_secs_f64() * 1e3;
+        clock = std::time::Instant::now();
+        ms
+    };
 
     // Split: every tile in parallel, then the levels above tile size.
     let tiles_x = w.div_ceil(TILE);
@@ -229,6 +252,7 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
     let (leaves, leaf_moments, cover) = split_coarse(&tiles, tiles_x, tiles_y, w, h, &predicate);
     drop(tiles);
     let mut labels = paint(&leaves, &cover, tiles_x, w, h);
+    let split_ms = lap();
 
     // Merge along the region adjacency graph.
     let mut edges = adjacency(&leaves, &labels, w, h);
@@ -238,10 +262,12 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
             .to_bits();
     });
     edges.par_sort_unstable();
+    let adjacency_ms = lap();
     let mut sets = DisjointSets::new(leaf_moments);
     for &(_, a, b) in &edges {
         sets.union_if(a, b, |x, y| predicate.homogeneous(&x.joined(y)));
     }
+    let merge_ms = lap();
     // Regions still too small join their most similar neighbour. This needs
     // only pixel counts: a compact forest over the merged regions keeps the
     // joins cache-friendly. Sets only grow, so edges between two large sets
@@ -263,6 +289,7 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
     for &(_, a, b) in &edges {
         small.union_if(a, b, |x, y| (*x as f64) < min || (*y as f64) < min);
     }
+    let small_regions_ms = lap();
 
     // Number regions in leaf order and describe them; their moments are the
     // sums of the merged regions they hold, in index order.
@@ -321,12 +348,20 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
         let n = region.pixels as f64;
         region.centroid = [(sums[0] / n) as f32, (sums[1] / n) as f32];
     }
+    let steps = SegmentSteps {
+        split_ms,
+        adjacency_ms,
+        merge_ms,
+        small_regions_ms,
+        describe_ms: lap(),
+    };
     Ok(Segmentation {
         width: w,
         height: h,
         labels,
         regions,
         leaves: leaves.len(),
+        steps,
     })
 }
 
