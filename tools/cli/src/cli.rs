@@ -155,8 +155,8 @@ pub struct VegDetectArgs {
     #[arg(long, value_delimiter = ',')]
     pub bands: Option<Vec<usize>>,
     /// Percentiles LOW,HIGH stretched to 0..255 (default: none for 8-bit, 2,98 otherwise).
-    #[arg(long, value_delimiter = ',', value_name = "LOW,HIGH")]
-    pub stretch: Option<Vec<f64>>,
+    #[arg(long, value_name = "LOW,HIGH", value_parser = parse_percentiles)]
+    pub stretch: Option<[f64; 2]>,
     /// Ground size of a pixel in metres, for images that are not georeferenced.
     #[arg(long, allow_negative_numbers = true)]
     pub pixel_size: Option<f64>,
@@ -337,6 +337,19 @@ pub struct RenderArgs {
 pub enum RenderMode {
     Raycast,
     Distorted,
+}
+
+/// `LOW,HIGH` percentiles with 0 ≤ LOW < HIGH ≤ 100.
+fn parse_percentiles(text: &str) -> Result<[f64; 2], String> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("{text:?} is not two numbers"))?;
+    match values[..] {
+        [lo, hi] if (0.0..100.0).contains(&lo) && lo < hi && hi <= 100.0 => Ok([lo, hi]),
+        _ => Err("--stretch takes LOW,HIGH percentiles with 0 <= LOW < HIGH <= 100".into()),
+    }
 }
 
 fn parse_size(text: &str) -> Result<[u32; 2], String> {
@@ -530,13 +543,8 @@ pub struct PrepArgs {
     #[arg(long, value_delimiter = ',', value_name = "R,G,B")]
     pub bands: Option<Vec<usize>>,
     /// Percentiles LOW,HIGH of each image band stretched to 0..255 (quick form).
-    #[arg(
-        long,
-        value_delimiter = ',',
-        value_name = "LOW,HIGH",
-        requires = "image"
-    )]
-    pub stretch: Option<Vec<f64>>,
+    #[arg(long, value_name = "LOW,HIGH", value_parser = parse_percentiles, requires = "image")]
+    pub stretch: Option<[f64; 2]>,
     /// Vegetation samples marked on the first image (quick form; see `veg detect`).
     #[arg(long, requires = "image")]
     pub samples: Option<PathBuf>,
@@ -794,11 +802,6 @@ fn run_prep(a: PrepArgs) -> Result<()> {
     if a.bands.as_ref().is_some_and(|b| b.len() != 3) {
         bail!("--bands takes three bands R,G,B, e.g. 3,2,1");
     }
-    let stretch = match a.stretch.as_deref() {
-        None => None,
-        Some(&[lo, hi]) => Some([lo, hi]),
-        Some(_) => bail!("--stretch takes two percentiles LOW,HIGH"),
-    };
     let region = match &a.region {
         Some(path) => Region::load(path)?,
         None => {
@@ -822,7 +825,7 @@ fn run_prep(a: PrepArgs) -> Result<()> {
                     src_nodata: None,
                     overlap: Overlap::Blend,
                     resampling: Resampling::Bilinear,
-                    stretch,
+                    stretch: a.stretch,
                 }),
                 vegetation: a.samples.map(|samples| crate::region::VegetationSection {
                     samples,
@@ -1027,12 +1030,7 @@ fn run_veg_detect(a: Box<VegDetectArgs>) -> Result<()> {
         }
         check_folder(path)?;
     }
-    let stretch = match a.stretch.as_deref() {
-        None => None,
-        Some(&[lo, hi]) if (0.0..100.0).contains(&lo) && lo < hi && hi <= 100.0 => Some([lo, hi]),
-        Some(_) => bail!("--stretch takes LOW,HIGH percentiles with 0 <= LOW < HIGH <= 100"),
-    };
-    let image = veg::VegImage::read(&a.image, a.bands.as_deref(), stretch, a.pixel_size)?;
+    let image = veg::VegImage::read(&a.image, a.bands.as_deref(), a.stretch, a.pixel_size)?;
     let samples = veg::read_samples(
         &a.samples,
         image.geotransform,

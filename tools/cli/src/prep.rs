@@ -237,11 +237,10 @@ fn stage_drape(b: &mut Build) -> Result<()> {
     };
     // With an extent but no resolution, stitch keeps the imagery's own cell size.
     let mosaic = stitch(&image.files, &opts)?;
-    let stretch = image.stretch.or(match mosaic.band_type {
-        GdalDataType::UInt8 => None,
-        _ => Some([2.0, 98.0]),
-    });
-    b.rgba = to_rgba8(&mosaic.raster, stretch);
+    b.rgba = to_rgba8(
+        &mosaic.raster,
+        stretch_or_default(image.stretch, mosaic.band_type),
+    );
     b.color = Some((mosaic, bands));
     Ok(())
 }
@@ -423,6 +422,15 @@ pub fn to_rgba8(raster: &Raster, stretch: Option<[f64; 2]>) -> Vec<u8> {
         out[i * 4 + 3] = 255;
     }
     out
+}
+
+/// The stretch asked for, or by default none for 8-bit data (values kept)
+/// and the 2nd to 98th percentiles for deeper data.
+pub fn stretch_or_default(stretch: Option<[f64; 2]>, band_type: GdalDataType) -> Option<[f64; 2]> {
+    stretch.or(match band_type {
+        GdalDataType::UInt8 => None,
+        _ => Some([2.0, 98.0]),
+    })
 }
 
 /// Per band, the values mapped to 0 and 255: the `[low, high]` percentiles

@@ -168,14 +168,11 @@ impl VegImage {
             Some(&bands),
             source.nodata,
         )?;
-        let stretch = match (stretch, source.band_type) {
-            (Some(s), _) => Some(s),
-            (None, GdalDataType::UInt8) => None,
-            (None, _) => Some([2.0, 98.0]),
-        };
+        let stretch = crate::prep::stretch_or_default(stretch, source.band_type);
         let ranges = crate::prep::stretch_ranges(&selected, stretch);
         let n = selected.cells();
-        let valid = (selected.valid_count() < n).then(|| selected.valid_mask());
+        let mask = selected.valid_mask();
+        let valid = mask.contains(&false).then_some(mask);
         let mut pixels = vec![0u8; n * bands.len()];
         for (b, &range) in ranges.iter().enumerate() {
             for (i, v) in selected.band(b).iter().enumerate() {
