@@ -4,10 +4,10 @@ use clap::Parser;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
-    let cli = relevo::cli::Cli::parse();
-    relevo::cli::init_logging(cli.verbose, cli.quiet);
-    relevo::gdalio::init();
-    match relevo::cli::run(cli) {
+    let cli = relevo::commands::Cli::parse();
+    relevo::commands::init_logging(cli.verbose, cli.quiet);
+    relevo::ingest::gdalio::init();
+    match relevo::commands::run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
             eprintln!("error: {error:#}");

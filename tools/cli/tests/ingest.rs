@@ -2,7 +2,7 @@
 
 mod common;
 use common::*;
-use relevo::stitch::{place, StitchOptions};
+use relevo::ingest::stitch::{place, StitchOptions};
 use relevo_core::raster::mosaic::{feather_weights, mosaic, seam_visibility, Overlap};
 use std::path::PathBuf;
 

@@ -75,12 +75,8 @@ fn hierarchy_is_nested_on_real_dems() {
         ]);
         let bundle = Bundle::open(&out).unwrap();
         let heights = bundle.array::<f32>("height").unwrap();
-        let lp = bundle.array::<f32>("lp").unwrap();
-        let h = Hierarchy {
-            side: bundle.manifest.grid.side,
-            cell_size_m: bundle.manifest.grid.cell_size_m,
-            error_radius: bytemuck::cast_slice(&lp).to_vec(),
-        };
+        let lp = bundle.lp().unwrap();
+        let h = lp.hierarchy().into_owned();
         assert_eq!(
             h.nesting_violations(&heights, 10),
             Vec::<String>::new(),
@@ -107,7 +103,7 @@ mod refinement {
     struct Terrain {
         name: String,
         heights: Vec<f32>,
-        h: Hierarchy,
+        h: Hierarchy<'static>,
     }
 
     /// Real DEMs prepared into bundles (reprojected, filled, padded).
@@ -137,12 +133,8 @@ mod refinement {
             relevo_ok(args);
             let b = Bundle::open(&path).unwrap();
             let heights = b.array::<f32>("height").unwrap().to_vec();
-            let lp = b.array::<f32>("lp").unwrap();
-            let h = Hierarchy {
-                side: b.manifest.grid.side,
-                cell_size_m: b.manifest.grid.cell_size_m,
-                error_radius: bytemuck::cast_slice(&lp).to_vec(),
-            };
+            let lp = b.lp().unwrap();
+            let h = lp.hierarchy().into_owned();
             out.push(Terrain {
                 name: dem.into(),
                 heights,

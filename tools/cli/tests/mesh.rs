@@ -4,7 +4,6 @@ mod common;
 use common::*;
 use relevo_core::bundle::Bundle;
 use relevo_core::lp::extract::extract;
-use relevo_core::lp::Hierarchy;
 use serde_json::Value;
 use std::path::Path;
 use std::process::Command;
@@ -76,12 +75,8 @@ fn the_mask_is_honoured_and_the_data_is_covered() {
     let b = Bundle::open(&sample_bundle(d.path())).unwrap();
     let side = b.manifest.grid.side;
     let mask = b.array::<u8>("mask").unwrap();
-    let lp = b.array::<f32>("lp").unwrap();
-    let h = Hierarchy {
-        side,
-        cell_size_m: b.manifest.grid.cell_size_m,
-        error_radius: bytemuck::cast_slice(&lp).to_vec(),
-    };
+    let lp = b.lp().unwrap();
+    let h = lp.hierarchy().into_owned();
     for max_error in [0.0, 1.0, 5.0, 1000.0] {
         let m = extract(&h, max_error, Some(&mask));
         let mut area2 = 0i64;

@@ -3,9 +3,9 @@
 
 mod common;
 use common::*;
-use relevo::render::{camera, color_source, View};
 use relevo_core::bundle::Bundle;
 use relevo_core::horizon::{distance_of_depth, pick, Terrain};
+use relevo_core::scene::{camera, View};
 use std::path::{Path, PathBuf};
 
 fn bundle_of(dem: &str, dir: &Path) -> PathBuf {
@@ -88,17 +88,13 @@ fn depth_of_real_terrain_matches_the_exact_surface() {
         .chunks(4)
         .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
         .collect();
-    let heights = b.array::<f32>("height").unwrap();
-    let mask = b.array::<u8>("mask").unwrap();
+    let heights = b.heights().unwrap();
+    let mask = b.mask().unwrap();
     let g = &b.manifest.grid;
-    let terrain = Terrain::new(
-        g.side,
-        g.cell_size_m,
-        &heights,
-        &mask,
-        color_source(&b).unwrap(),
-    );
-    let cam = camera(&b, &view).unwrap();
+    let frame = b.frame();
+    let color = b.drape().unwrap().and_then(|d| d.color_source(&frame));
+    let terrain = Terrain::new(g.side, g.cell_size_m, &heights, &mask, color);
+    let cam = camera(&frame, &view).unwrap();
     let spacing = g.cell_size_m / 8.0;
     let (mut errors, mut disagree) = (Vec::new(), 0);
     for py in 0..135 {

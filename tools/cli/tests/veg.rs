@@ -411,7 +411,8 @@ fn bad_options_and_outputs_are_refused_before_any_work() {
     // An existing database is kept unless --force.
     std::fs::write(&out, "keep").unwrap();
     let result = veg_detect(&png, &samples, &out, &["--pixel-size", "0.1"]);
-    assert!(String::from_utf8_lossy(&result.stderr).contains("exists; pass --force"));
+    assert!(String::from_utf8_lossy(&result.stderr)
+        .contains("already exists (pass --force to replace it)"));
     assert_eq!(std::fs::read_to_string(&out).unwrap(), "keep");
 }
 

@@ -1,4 +1,5 @@
-//! Affine georeferencing of a grid.
+//! Affine georeferencing of a grid, and the terrain frame every renderer
+//! and exporter works in.
 
 use serde::{Deserialize, Serialize};
 
@@ -74,6 +75,73 @@ impl GeoTransform {
     }
 }
 
+/// The terrain frame of a (2^n+1)² height grid and its conversions to and
+/// from world (CRS) coordinates. One definition serves the raycaster, the
+/// mesh exporter, vegetation placement and the viewer.
+///
+/// Vertex (c, r) of the grid (column, row; row 0 is north) stands at the
+/// centre of cell (c, r) of `geotransform`, and at x = c·cell (east),
+/// y = (side − 1 − r)·cell (north) in the terrain frame, whose origin is the
+/// south-west vertex. Heights (z) are metres in both frames.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TerrainFrame {
+    /// Vertices per side, 2^n + 1.
+    pub side: usize,
+    /// Horizontal vertex spacing, metres.
+    pub cell_size_m: f64,
+    /// Grid cell → world coordinates.
+    pub geotransform: GeoTransform,
+}
+
+impl TerrainFrame {
+    /// Fractional grid position (column, row) of terrain point (x, y).
+    #[inline]
+    pub fn vertex_from_terrain(&self, x: f64, y: f64) -> (f64, f64) {
+        (
+            x / self.cell_size_m,
+            (self.side - 1) as f64 - y / self.cell_size_m,
+        )
+    }
+
+    /// Terrain-frame (x, y) of fractional grid position (column, row).
+    #[inline]
+    pub fn terrain_from_vertex(&self, col: f64, row: f64) -> (f64, f64) {
+        (
+            col * self.cell_size_m,
+            ((self.side - 1) as f64 - row) * self.cell_size_m,
+        )
+    }
+
+    /// World (east, north) of terrain point (x, y).
+    pub fn world_from_terrain(&self, x: f64, y: f64) -> (f64, f64) {
+        let (col, row) = self.vertex_from_terrain(x, y);
+        self.world_from_vertex(col, row)
+    }
+
+    /// Terrain (x, y) of world point (east, north); `None` when the
+    /// geotransform cannot be inverted.
+    pub fn terrain_from_world(&self, east: f64, north: f64) -> Option<(f64, f64)> {
+        let (col, row) = self.vertex_from_world(east, north)?;
+        Some(self.terrain_from_vertex(col, row))
+    }
+
+    /// World (east, north) of fractional grid position (column, row).
+    pub fn world_from_vertex(&self, col: f64, row: f64) -> (f64, f64) {
+        self.geotransform.apply(col + 0.5, row + 0.5)
+    }
+
+    /// Fractional grid position of world point (east, north).
+    pub fn vertex_from_world(&self, east: f64, north: f64) -> Option<(f64, f64)> {
+        let (col, row) = self.geotransform.invert(east, north)?;
+        Some((col - 0.5, row - 0.5))
+    }
+
+    /// World (east, north) of the terrain frame's origin, the south-west vertex.
+    pub fn world_origin(&self) -> (f64, f64) {
+        self.world_from_vertex(0.0, (self.side - 1) as f64)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -84,6 +152,26 @@ mod tests {
         let (x, y) = g.apply(12.25, 40.5);
         let (c, r) = g.invert(x, y).unwrap();
         assert!((c - 12.25).abs() < 1e-9 && (r - 40.5).abs() < 1e-9);
+    }
+
+    #[test]
+    fn terrain_frame_round_trips_and_puts_vertices_at_cell_centres() {
+        let frame = TerrainFrame {
+            side: 129,
+            cell_size_m: 30.0,
+            geotransform: GeoTransform::north_up(288_000.0, 9_115_000.0, 30.0, 30.0),
+        };
+        // The north-west vertex is the centre of the top-left cell.
+        assert_eq!(frame.world_from_vertex(0.0, 0.0), (288_015.0, 9_114_985.0));
+        assert_eq!(
+            frame.world_origin(),
+            (288_015.0, 9_114_985.0 - 128.0 * 30.0)
+        );
+        assert_eq!(frame.world_from_terrain(0.0, 0.0), frame.world_origin());
+        let (x, y) = frame.terrain_from_world(289_000.25, 9_111_000.5).unwrap();
+        let (e, n) = frame.world_from_terrain(x, y);
+        assert!((e - 289_000.25).abs() < 1e-6 && (n - 9_111_000.5).abs() < 1e-6);
+        assert_eq!(frame.terrain_from_vertex(2.0, 128.0), (60.0, 0.0));
     }
 
     #[test]

@@ -183,6 +183,53 @@ fn bilinear(values: &[f64], width: usize, height: usize, x: f64, y: f64) -> f64 
     top * (1.0 - fy) + bottom * fy
 }
 
+/// A deterministic synthetic heightfield for tests and benchmarks of the
+/// algorithms at sizes no committed DEM has: a fractal (diamond-square with hash-based
+/// offsets, Hurst exponent about 0.75), `side` = 2^n + 1, heights in metres.
+pub fn fractal_heights(side: usize, seed: u64) -> Vec<f32> {
+    let mut z = vec![0.0f64; side * side];
+    let hash = |c: usize, r: usize| {
+        let mut x = seed ^ ((c as u64) << 32 | r as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        x ^= x >> 29;
+        x = x.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        x ^= x >> 32;
+        (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    let mut step = side - 1;
+    let mut amplitude = 1500.0;
+    while step > 1 {
+        let half = step / 2;
+        for r in (half..side).step_by(step) {
+            for c in (half..side).step_by(step) {
+                let corners = z[(r - half) * side + c - half]
+                    + z[(r - half) * side + c + half]
+                    + z[(r + half) * side + c - half]
+                    + z[(r + half) * side + c + half];
+                z[r * side + c] = corners / 4.0 + amplitude * hash(c, r);
+            }
+        }
+        for r in (0..side).step_by(half) {
+            let start = if (r / half) % 2 == 0 { half } else { 0 };
+            for c in (start..side).step_by(step) {
+                let mut sum = 0.0;
+                let mut n = 0.0;
+                for (dc, dr) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
+                    let (nc, nr) = (c as i64 + dc * half as i64, r as i64 + dr * half as i64);
+                    if nc >= 0 && nr >= 0 && nc < side as i64 && nr < side as i64 {
+                        sum += z[nr as usize * side + nc as usize];
+                        n += 1.0;
+                    }
+                }
+                z[r * side + c] = sum / n + amplitude * hash(c, r);
+            }
+        }
+        step = half;
+        // Roughness of real relief: amplitude falls by 2^-0.75 per octave.
+        amplitude *= 0.6;
+    }
+    z.into_iter().map(|v| v as f32).collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

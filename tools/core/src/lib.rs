@@ -4,13 +4,16 @@
 //! decoded into memory, and everything that touches files outside a bundle
 //! lives in the `relevo` command-line crate.
 //!
-//! - [`geo`]: affine geotransforms between grid cells and world coordinates.
+//! - [`geo`]: affine geotransforms between grid cells and world coordinates,
+//!   and the terrain frame with its named conversions.
 //! - [`raster`]: in-memory multiband rasters with no-data, mosaicking,
 //!   hole filling and elevation tile encodings.
 //! - [`grid`]: the square (2^n+1)² height grid with its data mask.
 //! - [`lp`]: the Lindstrom–Pascucci hierarchy, extraction and refinement.
 //! - [`camera`]: the camera shared by the CPU and GPU renderers.
 //! - [`horizon`]: the floating-horizon raycaster and its depth buffer.
+//! - [`scene`]: cameras in world coordinates, the camera string, the
+//!   raycast of a bundle.
 //! - [`veg`]: vegetation from imagery: split-and-merge, Haar signatures,
 //!   classification from samples, objects, the vegetation database.
 //! - [`bundle`]: the `NAME.relevo/` directory: manifest, artifacts, validation.
@@ -22,6 +25,7 @@ pub mod grid;
 pub mod horizon;
 pub mod lp;
 pub mod raster;
+pub mod scene;
 pub mod veg;
 
 mod error;

@@ -8,6 +8,7 @@
 
 mod hash;
 mod manifest;
+pub mod names;
 mod reader;
 mod validate;
 mod writer;
@@ -17,7 +18,7 @@ pub use manifest::{
     Artifact, ColorInfo, Crs, Dtype, GridInfo, InputFile, Manifest, StageTiming, FORMAT,
     FORMAT_VERSION,
 };
-pub use reader::{Array, Bundle};
+pub use reader::{Array, Bundle, Drape, LpArray};
 pub use validate::validate;
 pub use writer::BundleWriter;
 

@@ -1,10 +1,17 @@
-use super::{Artifact, Manifest, FORMAT, FORMAT_VERSION, MANIFEST_FILE};
+use super::names::{self, ArtifactName};
+use super::{Artifact, ColorInfo, Manifest, FORMAT, FORMAT_VERSION, MANIFEST_FILE};
+use crate::geo::TerrainFrame;
+use crate::horizon::ColorSource;
+use crate::lp::Hierarchy;
+use crate::veg::db::{self, VegObject};
 use crate::{Error, Result};
 use memmap2::Mmap;
 use std::marker::PhantomData;
 use std::path::{Path, PathBuf};
 
-/// An opened bundle: its directory and parsed manifest.
+/// An opened bundle: its directory and parsed manifest. Arrays are mapped
+/// on request through the typed accessors ([`Bundle::heights`],
+/// [`Bundle::hierarchy`], …), each checking its shape against the grid.
 #[derive(Debug, Clone)]
 pub struct Bundle {
     pub dir: PathBuf,
@@ -25,6 +32,39 @@ impl<T: bytemuck::Pod> std::ops::Deref for Array<T> {
             Some(map) => bytemuck::cast_slice(map),
             None => &[],
         }
+    }
+}
+
+/// The mapped `lp` array; [`LpArray::hierarchy`] views it without a copy.
+pub struct LpArray {
+    pairs: Array<[f32; 2]>,
+    frame: TerrainFrame,
+}
+
+impl LpArray {
+    /// The hierarchy over the mapped `[error, radius]` pairs.
+    pub fn hierarchy(&self) -> Hierarchy<'_> {
+        Hierarchy::borrowed(self.frame.side, self.frame.cell_size_m, &self.pairs)
+    }
+}
+
+/// The drape image: mapped RGBA8 texels and where they lie.
+pub struct Drape {
+    pub rgba: Array<u8>,
+    pub info: ColorInfo,
+}
+
+impl Drape {
+    /// The raycaster's colour source over the grid of `frame`; `None` when
+    /// the image's geotransform cannot be inverted.
+    pub fn color_source(&self, frame: &TerrainFrame) -> Option<ColorSource> {
+        ColorSource::new(
+            &self.rgba,
+            self.info.width,
+            self.info.height,
+            &self.info.geotransform,
+            frame,
+        )
     }
 }
 
@@ -58,6 +98,67 @@ impl Bundle {
         })
     }
 
+    /// The terrain frame of the height grid.
+    pub fn frame(&self) -> TerrainFrame {
+        let g = &self.manifest.grid;
+        TerrainFrame {
+            side: g.side,
+            cell_size_m: g.cell_size_m,
+            geotransform: g.geotransform,
+        }
+    }
+
+    /// Heights in metres, row-major, `side`×`side`.
+    pub fn heights(&self) -> Result<Array<f32>> {
+        let side = self.manifest.grid.side;
+        self.grid_array(names::HEIGHT, &[side, side])
+    }
+
+    /// The data mask (1 data, 0 padding or void), row-major, `side`×`side`.
+    pub fn mask(&self) -> Result<Array<u8>> {
+        let side = self.manifest.grid.side;
+        self.grid_array(names::MASK, &[side, side])
+    }
+
+    /// The Lindstrom–Pascucci errors and radii, mapped.
+    pub fn lp(&self) -> Result<LpArray> {
+        let side = self.manifest.grid.side;
+        if !self.manifest.artifacts.contains_key(names::LP.key) {
+            return Err(Error::invalid(
+                self.dir.join(MANIFEST_FILE),
+                "the bundle has no LP hierarchy (rebuild it with `relevo prep`)",
+            ));
+        }
+        Ok(LpArray {
+            pairs: self.grid_array(names::LP, &[side, side, 2])?,
+            frame: self.frame(),
+        })
+    }
+
+    /// The drape image, when the bundle has one.
+    pub fn drape(&self) -> Result<Option<Drape>> {
+        let Some(info) = &self.manifest.color else {
+            return Ok(None);
+        };
+        let rgba = self.grid_array(names::COLOR, &[info.height, info.width, 4])?;
+        Ok(Some(Drape {
+            rgba,
+            info: info.clone(),
+        }))
+    }
+
+    /// The vegetation database, when the bundle has one.
+    pub fn vegetation(&self) -> Result<Option<Vec<VegObject>>> {
+        let Some(artifact) = self.manifest.artifacts.get(names::VEGETATION.key) else {
+            return Ok(None);
+        };
+        let path = self.dir.join(&artifact.file);
+        let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+        db::from_csv(&text)
+            .map(Some)
+            .map_err(|e| Error::invalid(&path, e.to_string()))
+    }
+
     /// The manifest entry of artifact `name`.
     pub fn artifact(&self, name: &str) -> Result<&Artifact> {
         self.manifest.artifacts.get(name).ok_or_else(|| {
@@ -68,26 +169,60 @@ impl Bundle {
         })
     }
 
-    /// Map artifact `name` as an array of `T`, checking dtype size and length.
+    /// Map `name` checking that its recorded shape is `shape`.
+    fn grid_array<T: bytemuck::Pod>(
+        &self,
+        name: ArtifactName,
+        shape: &[usize],
+    ) -> Result<Array<T>> {
+        let artifact = self.artifact(name.key)?;
+        if artifact.shape != shape {
+            return Err(Error::invalid(
+                self.dir.join(&artifact.file),
+                format!(
+                    "{}: shape {:?}, expected {shape:?} for this grid",
+                    name.key, artifact.shape
+                ),
+            ));
+        }
+        self.array(name.key)
+    }
+
+    /// Map artifact `name` as an array of `T` (one element, or a fixed group
+    /// of elements such as `[f32; 2]`), checking dtype size and length.
     pub fn array<T: bytemuck::Pod>(&self, name: &str) -> Result<Array<T>> {
         let artifact = self.artifact(name)?;
         let path = self.dir.join(&artifact.file);
-        if artifact.dtype.size() != Some(std::mem::size_of::<T>()) {
-            return Err(Error::invalid(
-                &path,
-                format!("dtype {:?} cannot be read as this type", artifact.dtype),
-            ));
-        }
+        let element = match artifact.dtype.size() {
+            Some(e) if std::mem::size_of::<T>() % e == 0 => e,
+            _ => {
+                return Err(Error::invalid(
+                    &path,
+                    format!("dtype {:?} cannot be read as this type", artifact.dtype),
+                ))
+            }
+        };
         let file = std::fs::File::open(&path).map_err(|e| Error::io(&path, e))?;
         let len = file.metadata().map_err(|e| Error::io(&path, e))?.len();
-        let expected = artifact.shape.iter().product::<usize>() * std::mem::size_of::<T>();
-        if len != expected as u64 {
+        let expected = artifact
+            .shape
+            .iter()
+            .try_fold(element, |n, &d| n.checked_mul(d));
+        if expected.map(|e| e as u64) != Some(len) {
             return Err(Error::invalid(
                 &path,
                 format!(
-                    "{len} bytes, but shape {:?} needs {expected}",
-                    artifact.shape
+                    "{len} bytes, but shape {:?} of {:?} needs {}",
+                    artifact.shape,
+                    artifact.dtype,
+                    expected.map_or("more than addressable".into(), |e| e.to_string())
                 ),
+            ));
+        }
+        if len as usize % std::mem::size_of::<T>() != 0 {
+            return Err(Error::invalid(
+                &path,
+                format!("{len} bytes do not divide into elements of this type"),
             ));
         }
         // SAFETY: the map is read-only; a bundle is not modified while read.

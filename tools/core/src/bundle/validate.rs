@@ -1,6 +1,5 @@
-use super::{sha256_file, Bundle};
+use super::{names, sha256_file, Bundle};
 use crate::grid::pow2_plus_1_at_least;
-use crate::lp::Hierarchy;
 
 /// Check a bundle against its manifest: every file present with the recorded
 /// size and SHA-256, array shapes consistent with their byte length, and the
@@ -47,7 +46,7 @@ pub fn validate(bundle: &Bundle) -> Vec<String> {
     if side < 3 || pow2_plus_1_at_least(side) != side {
         problems.push(format!("grid side {side} is not 2^n+1"));
     }
-    for name in ["height", "mask"] {
+    for name in [names::HEIGHT.key, names::MASK.key] {
         match m.artifacts.get(name) {
             None => problems.push(format!("missing artifact {name:?}")),
             Some(a) if a.shape != [side, side] => problems.push(format!(
@@ -60,7 +59,7 @@ pub fn validate(bundle: &Bundle) -> Vec<String> {
     if !problems.is_empty() {
         return problems;
     }
-    let (heights, mask) = match (bundle.array::<f32>("height"), bundle.array::<u8>("mask")) {
+    let (heights, mask) = match (bundle.heights(), bundle.mask()) {
         (Ok(h), Ok(k)) => (h, k),
         (Err(e), _) | (_, Err(e)) => return vec![e.to_string()],
     };
@@ -91,27 +90,24 @@ pub fn validate(bundle: &Bundle) -> Vec<String> {
             heights[bad]
         ));
     }
-    if let Some(lp) = m.artifacts.get("lp") {
+    if let Some(lp) = m.artifacts.get(names::LP.key) {
         if lp.shape != [side, side, 2] {
             problems.push(format!(
                 "lp: shape {:?}, expected [{side}, {side}, 2]",
                 lp.shape
             ));
         } else {
-            match bundle.array::<f32>("lp") {
+            match bundle.lp() {
                 Err(e) => problems.push(e.to_string()),
-                Ok(values) => {
+                Ok(lp) => {
+                    let h = lp.hierarchy();
+                    let values: &[f32] = bytemuck::cast_slice(&h.error_radius);
                     if let Some(bad) = values.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
                         problems.push(format!(
                             "lp: value {} at index {bad} is not a finite non-negative number",
                             values[bad]
                         ));
                     } else {
-                        let h = Hierarchy {
-                            side,
-                            cell_size_m: m.grid.cell_size_m,
-                            error_radius: bytemuck::cast_slice(&values).to_vec(),
-                        };
                         problems.extend(
                             h.nesting_violations(&heights, 5)
                                 .into_iter()
@@ -123,7 +119,7 @@ pub fn validate(bundle: &Bundle) -> Vec<String> {
         }
     }
     if let Some(color) = &m.color {
-        match m.artifacts.get("color") {
+        match m.artifacts.get(names::COLOR.key) {
             None => problems
                 .push("manifest describes a colour image but has no \"color\" artifact".into()),
             Some(a) if a.shape != [color.height, color.width, 4] => problems.push(format!(
@@ -133,21 +129,17 @@ pub fn validate(bundle: &Bundle) -> Vec<String> {
             Some(_) => {}
         }
     }
-    if let Some(a) = m.artifacts.get("vegetation") {
-        problems.extend(vegetation_problems(bundle, &a.file));
+    if m.artifacts.contains_key(names::VEGETATION.key) {
+        problems.extend(vegetation_problems(bundle));
     }
     problems
 }
 
 /// The vegetation database parses, numbers its objects 1, 2, …, and keeps
 /// them on the colour image with positive sizes and scores in [0, 1].
-fn vegetation_problems(bundle: &Bundle, file: &str) -> Vec<String> {
-    let path = bundle.dir.join(file);
-    let objects = match std::fs::read_to_string(&path)
-        .map_err(|e| e.to_string())
-        .and_then(|text| crate::veg::db::from_csv(&text).map_err(|e| e.to_string()))
-    {
-        Ok(objects) => objects,
+fn vegetation_problems(bundle: &Bundle) -> Vec<String> {
+    let objects = match bundle.vegetation() {
+        Ok(objects) => objects.unwrap_or_default(),
         Err(e) => return vec![format!("vegetation: {e}")],
     };
     let bounds = bundle

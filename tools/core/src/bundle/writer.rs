@@ -74,6 +74,16 @@ impl BundleWriter {
         })
     }
 
+    /// Write a non-array file (CSV, PNG, …) and describe it.
+    pub fn write_file(&self, file: &str, bytes: &[u8]) -> Result<Artifact> {
+        let path = self.staging.join(file);
+        if let Some(parent) = path.parent() {
+            fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+        }
+        fs::write(&path, bytes).map_err(|e| Error::io(&path, e))?;
+        self.record_file(file)
+    }
+
     /// Describe a file already written inside the staging directory.
     pub fn record_file(&self, file: &str) -> Result<Artifact> {
         let (bytes, sha256) = sha256_file(&self.staging.join(file))?;

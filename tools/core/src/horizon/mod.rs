@@ -449,7 +449,7 @@ fn march_fixed(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geo::GeoTransform;
+    use crate::geo::{GeoTransform, TerrainFrame};
     use glam::DVec3;
 
     fn camera(w: u32, h: u32, eye: [f64; 3], heading: f64, incl: f64, far_m: f64) -> Camera {
@@ -492,7 +492,18 @@ mod tests {
         let side = 257;
         let (heights, mask, rgba, spots) = poles();
         let geo = GeoTransform::north_up(0.0, side as f64, 1.0, 1.0);
-        let color = ColorSource::new(&rgba, side, side, &geo, &geo, side, 1.0).unwrap();
+        let color = ColorSource::new(
+            &rgba,
+            side,
+            side,
+            &geo,
+            &TerrainFrame {
+                side,
+                cell_size_m: 1.0,
+                geotransform: geo,
+            },
+        )
+        .unwrap();
         let terrain = Terrain::new(side, 1.0, &heights, &mask, Some(color));
         // Eye south of the poles, looking north, level.
         let cam = camera(960, 540, [128.0, 0.0, 30.0], 0.0, 270.0, 400.0);
@@ -610,7 +621,18 @@ mod tests {
         let (heights, mask, rgba, _) = poles();
         let side = 257;
         let geo = GeoTransform::north_up(0.0, side as f64, 1.0, 1.0);
-        let color = ColorSource::new(&rgba, side, side, &geo, &geo, side, 1.0).unwrap();
+        let color = ColorSource::new(
+            &rgba,
+            side,
+            side,
+            &geo,
+            &TerrainFrame {
+                side,
+                cell_size_m: 1.0,
+                geotransform: geo,
+            },
+        )
+        .unwrap();
         let terrain = Terrain::new(side, 1.0, &heights, &mask, Some(color));
         let cam = camera(320, 180, [128.0, 0.0, 30.0], 10.0, 120.0, 400.0);
         let float = render(&terrain, &cam, &RenderOptions::default());
@@ -649,7 +671,18 @@ mod tests {
             .collect();
         let geo = GeoTransform::north_up(0.0, side as f64, 1.0, 1.0);
         let energy = |prefilter: bool| {
-            let color = ColorSource::new(&rgba, side, side, &geo, &geo, side, 1.0).unwrap();
+            let color = ColorSource::new(
+                &rgba,
+                side,
+                side,
+                &geo,
+                &TerrainFrame {
+                    side,
+                    cell_size_m: 1.0,
+                    geotransform: geo,
+                },
+            )
+            .unwrap();
             let terrain = Terrain::new(side, 1.0, &heights, &mask, Some(color));
             let cam = camera(320, 180, [256.0, 0.0, 12.0], 0.0, 150.0, 500.0);
             let opts = RenderOptions {

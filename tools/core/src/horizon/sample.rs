@@ -2,7 +2,7 @@
 //! bilinear), the mask, and colour from the drape image (optionally from a
 //! prefiltered level and with baked hillshade).
 
-use crate::geo::GeoTransform;
+use crate::geo::{GeoTransform, TerrainFrame};
 
 /// Sub-voxel divisions per cell side (seed 000, §6.2 uses 8).
 const DIVISIONS: usize = 8;
@@ -41,23 +41,18 @@ pub struct ColorSource {
 }
 
 impl ColorSource {
-    /// `rgba` (row-major, `width`×`height`) georeferenced by `color_geo`, on
-    /// a grid whose cells are georeferenced by `grid_geo` with `side` vertices
-    /// of `cell_m` spacing.
+    /// `rgba` (row-major, `width`×`height`) georeferenced by `color_geo`,
+    /// draped over the grid of `frame`.
     pub fn new(
         rgba: &[u8],
         width: usize,
         height: usize,
         color_geo: &GeoTransform,
-        grid_geo: &GeoTransform,
-        side: usize,
-        cell_m: f64,
+        frame: &TerrainFrame,
     ) -> Option<Self> {
-        // Terrain frame → grid cell coordinates → world → colour pixel, all affine.
-        let world =
-            |x: f64, y: f64| grid_geo.apply(x / cell_m + 0.5, (side - 1) as f64 - y / cell_m + 0.5);
+        // Terrain frame → world → colour pixel, all affine.
         let pixel = |x: f64, y: f64| {
-            let (wx, wy) = world(x, y);
+            let (wx, wy) = frame.world_from_terrain(x, y);
             color_geo.invert(wx, wy)
         };
         let (o, ex, ey) = (pixel(0.0, 0.0)?, pixel(1.0, 0.0)?, pixel(0.0, 1.0)?);

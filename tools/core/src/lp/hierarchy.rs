@@ -21,18 +21,39 @@
 
 use super::terrain_position;
 use rayon::prelude::*;
+use std::borrow::Cow;
 
-/// Per-vertex error and radius, row-major, interleaved as `[δ, r]`.
+/// Per-vertex error and radius, row-major, interleaved as `[δ, r]`: owned
+/// when computed, borrowed when read from a bundle's mapped `lp` array (no
+/// copy, whatever the grid size).
 #[derive(Debug, Clone, PartialEq)]
-pub struct Hierarchy {
+pub struct Hierarchy<'a> {
     pub side: usize,
     /// Horizontal vertex spacing, metres.
     pub cell_size_m: f64,
     /// `[object-space error δ (m), bounding-sphere radius r (m)]` per vertex.
-    pub error_radius: Vec<[f32; 2]>,
+    pub error_radius: Cow<'a, [[f32; 2]]>,
 }
 
-impl Hierarchy {
+impl<'a> Hierarchy<'a> {
+    /// A hierarchy over stored `[δ, r]` pairs, e.g. a bundle's `lp` array.
+    pub fn borrowed(side: usize, cell_size_m: f64, error_radius: &'a [[f32; 2]]) -> Self {
+        Hierarchy {
+            side,
+            cell_size_m,
+            error_radius: Cow::Borrowed(error_radius),
+        }
+    }
+
+    /// The same hierarchy owning its pairs (a copy when borrowed).
+    pub fn into_owned(self) -> Hierarchy<'static> {
+        Hierarchy {
+            side: self.side,
+            cell_size_m: self.cell_size_m,
+            error_radius: Cow::Owned(self.error_radius.into_owned()),
+        }
+    }
+
     pub fn error(&self, i: usize) -> f32 {
         self.error_radius[i][0]
     }
@@ -43,7 +64,7 @@ impl Hierarchy {
     /// Compute errors and radii of a `side`×`side` grid of heights (metres).
     /// Arithmetic is f64; results are stored as f32, radii rounded up so
     /// that nesting survives the rounding.
-    pub fn compute(heights: &[f32], side: usize, cell_size_m: f64) -> Hierarchy {
+    pub fn compute(heights: &[f32], side: usize, cell_size_m: f64) -> Hierarchy<'static> {
         assert!(
             side >= 3 && (side - 1).is_power_of_two(),
             "side must be 2^k+1"
@@ -61,7 +82,7 @@ impl Hierarchy {
         Hierarchy {
             side,
             cell_size_m,
-            error_radius: out,
+            error_radius: Cow::Owned(out),
         }
     }
 
@@ -453,7 +474,7 @@ mod tests {
         let side = 9;
         let heights = surface(side);
         let mut h = Hierarchy::compute(&heights, side, 1.0);
-        h.error_radius[4 * side + 4][0] = 0.0;
+        h.error_radius.to_mut()[4 * side + 4][0] = 0.0;
         assert!(!h.nesting_violations(&heights, 10).is_empty());
     }
 }

@@ -12,6 +12,7 @@
 //! - [`hierarchy`]: per-vertex object-space error δ and bounding-sphere radius
 //!   r, nested child → parent.
 //! - [`extract`]: the view-independent mesh for an object-space tolerance.
+//! - [`export`]: that mesh as glTF or OBJ, with normals and the drape.
 //! - [`refine`]: the view-dependent triangle strip for a camera and a
 //!   screen-space tolerance, with frustum culling and geomorphing.
 //!
@@ -19,6 +20,7 @@
 //! in the *terrain frame* at x = c·cell (east), y = (side − 1 − r)·cell
 //! (north), z = height, all in metres.
 
+pub mod export;
 pub mod extract;
 pub mod hierarchy;
 pub mod refine;

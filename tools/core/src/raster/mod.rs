@@ -1,11 +1,14 @@
 //! In-memory multiband rasters and the algorithms that turn tiles into one
 //! clean grid: mosaicking with feathered overlaps, no-data filling, and the
-//! decoding of RGB-encoded elevation tiles.
+//! decoding of RGB-encoded elevation tiles; 8-bit stretching and PNG
+//! encoding for what people look at.
 
 pub mod distance;
 pub mod encoding;
 pub mod fill;
 pub mod mosaic;
+pub mod png;
+pub mod stretch;
 
 /// The up-to-four edge neighbours of cell `i` (row-major) of a
 /// `width`×`height` grid.

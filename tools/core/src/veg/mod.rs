@@ -12,6 +12,8 @@
 //! - [`detect`]: vegetation objects from classified regions.
 //! - [`db`]: the `id;x;y;class;size;score` database.
 //! - [`eval`]: precision, recall and F1 against truth boxes.
+//! - [`pipeline`]: the whole extraction on one image (options, report,
+//!   overlay), as every program runs it.
 //! - [`baseline`]: excess-green detection, to measure against.
 
 pub mod baseline;
@@ -20,6 +22,7 @@ pub mod db;
 pub mod detect;
 pub mod eval;
 pub mod haar;
+pub mod pipeline;
 pub mod samples;
 pub mod segment;
 

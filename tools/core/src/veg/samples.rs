@@ -2,7 +2,9 @@
 //! (`class;xmin;ymin;xmax;ymax`, pixel coordinates) or GeoJSON polygons with
 //! a `class` property (coordinates in the image CRS).
 
+use crate::geo::GeoTransform;
 use crate::{Error, Result};
+use std::path::Path;
 
 /// One marked sample: a class and a polygon in pixel coordinates (x right,
 /// y down; pixel `i` spans `[i, i+1)`).
@@ -173,6 +175,30 @@ pub fn parse_geojson(
         return Err(Error::Input("no samples".into()));
     }
     Ok(samples)
+}
+
+/// Read a samples file for a `width`×`height` image georeferenced by
+/// `geotransform`: `.geojson`/`.json` polygons in the image CRS, else the
+/// semicolon CSV of pixel rectangles. Errors name the file.
+pub fn read_file(
+    path: &Path,
+    geotransform: Option<GeoTransform>,
+    w: usize,
+    h: usize,
+) -> Result<Vec<Sample>> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Error::Input(format!("{}: cannot read samples: {e}", path.display())))?;
+    let is_json = matches!(
+        path.extension().and_then(|e| e.to_str()),
+        Some("geojson" | "json")
+    );
+    let parsed = if is_json {
+        let geo = geotransform.unwrap_or(GeoTransform::IDENTITY);
+        parse_geojson(&text, |x, y| geo.invert(x, y).map(|(c, r)| [c, r]), w, h)
+    } else {
+        parse_csv(&text, w, h)
+    };
+    parsed.map_err(|e| Error::Input(format!("{}: {e}", path.display())))
 }
 
 #[cfg(test)]

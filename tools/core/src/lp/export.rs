@@ -1,16 +1,17 @@
-//! `relevo mesh`: export the view-independent mesh of a bundle at an
-//! object-space tolerance as glTF 2.0 (binary) or Wavefront OBJ, with
-//! normals and the drape image as texture.
+//! Export of the view-independent mesh at an object-space tolerance as
+//! glTF 2.0 (binary) or Wavefront OBJ, with normals and the drape image as
+//! texture.
 //!
 //! Both formats are written y-up (x east, y up, z south), as glTF requires
 //! and most OBJ readers assume. Vertex positions are local to the grid's
 //! south-west vertex so that f32 keeps centimetres; the world origin goes in
 //! the glTF node's translation and in an OBJ comment.
 
-use anyhow::{bail, Context, Result};
-use relevo_core::bundle::Bundle;
-use relevo_core::lp::extract::extract;
-use relevo_core::lp::{terrain_position, Hierarchy};
+use super::extract::extract;
+use super::terrain_position;
+use crate::bundle::Bundle;
+use crate::raster::png::encode_rgba;
+use crate::{Error, Result};
 use serde_json::json;
 use std::io::Write;
 
@@ -31,26 +32,23 @@ pub struct ExportMesh {
 
 /// Build the mesh of `bundle` at `max_error` metres.
 pub fn build(bundle: &Bundle, max_error: f32, keep_padding: bool) -> Result<ExportMesh> {
-    let m = &bundle.manifest;
-    let side = m.grid.side;
-    let heights = bundle.array::<f32>("height")?;
-    let mask = bundle.array::<u8>("mask")?;
-    let lp = bundle
-        .array::<f32>("lp")
-        .context("the bundle has no LP hierarchy (rebuild it with `relevo prep`)")?;
-    let h = Hierarchy {
-        side,
-        cell_size_m: m.grid.cell_size_m,
-        error_radius: bytemuck::cast_slice(&lp).to_vec(),
-    };
-    let grid = extract(&h, max_error, (!keep_padding).then_some(&mask[..]));
+    let frame = bundle.frame();
+    let side = frame.side;
+    let heights = bundle.heights()?;
+    let mask = bundle.mask()?;
+    let lp = bundle.lp()?;
+    let grid = extract(
+        &lp.hierarchy(),
+        max_error,
+        (!keep_padding).then_some(&mask[..]),
+    );
     if grid.triangles.is_empty() {
-        bail!(
-            "{}: no triangles: the mask covers no data",
-            bundle.dir.display()
-        );
+        return Err(Error::invalid(
+            &bundle.dir,
+            "no triangles: the mask covers no data",
+        ));
     }
-    let cell = m.grid.cell_size_m;
+    let cell = frame.cell_size_m;
     let position = |c: usize, r: usize| {
         let p = terrain_position(c, r, side, cell, heights[r * side + c] as f64);
         [p[0] as f32, p[2] as f32, -p[1] as f32]
@@ -97,18 +95,16 @@ pub fn build(bundle: &Bundle, max_error: f32, keep_padding: bool) -> Result<Expo
             }
         })
         .collect();
-    let geo = m.grid.geotransform;
-    // Vertex (c, r) sits at the centre of cell (c, r).
-    let (origin_x, origin_y) = geo.apply(0.5, side as f64 - 0.5);
-    let (uvs, texture_png) = match &m.color {
+    let (origin_x, origin_y) = frame.world_origin();
+    let (uvs, texture_png) = match bundle.drape()? {
         None => (None, None),
-        Some(color) => {
-            let rgba = bundle.array::<u8>("color")?;
+        Some(drape) => {
+            let color = &drape.info;
             let uvs = grid
                 .vertices
                 .iter()
                 .map(|v| {
-                    let (x, y) = geo.apply(v[0] as f64 + 0.5, v[1] as f64 + 0.5);
+                    let (x, y) = frame.world_from_vertex(v[0] as f64, v[1] as f64);
                     let (u, w) = color.geotransform.invert(x, y).unwrap_or((0.0, 0.0));
                     [
                         (u / color.width as f64) as f32,
@@ -118,7 +114,7 @@ pub fn build(bundle: &Bundle, max_error: f32, keep_padding: bool) -> Result<Expo
                 .collect();
             (
                 Some(uvs),
-                Some(crate::gdalio::encode_png(&rgba, color.width, color.height)?),
+                Some(encode_rgba(&drape.rgba, color.width, color.height)?),
             )
         }
     };
@@ -199,7 +195,7 @@ pub fn to_glb(mesh: &ExportMesh, crs_wkt: &str) -> Result<Vec<u8>> {
     }
     doc["bufferViews"] = json!(views);
     doc["buffers"] = json!([{"byteLength": bin.len()}]);
-    let mut text = serde_json::to_vec(&doc)?;
+    let mut text = serde_json::to_vec(&doc).map_err(|e| Error::Input(e.to_string()))?;
     while text.len() % 4 != 0 {
         text.push(b' ');
     }

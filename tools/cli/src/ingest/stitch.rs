@@ -4,8 +4,8 @@
 //! grid, then relevo-core's mosaic combines the windows (first, last, or a
 //! distance-weighted feather across overlaps).
 
-use crate::crs;
-use crate::gdalio::{self, GridSpec, Resampling, Source};
+use super::crs;
+use super::gdalio::{self, GridSpec, Resampling, Source};
 use crate::progress;
 use anyhow::{bail, Context, Result};
 use gdal::raster::GdalDataType;

@@ -4,14 +4,17 @@
 //! earlier stages left in [`Build`] and adds its own results. Adding a stage is
 //! writing one such function and listing it.
 
-use crate::crs;
-use crate::gdalio::{self, GridSpec};
-use crate::region::Region;
-use crate::stitch::{stitch, Mosaic, StitchOptions};
-use crate::veg::{self, Extraction, VegImage};
+pub mod region;
+
+use crate::ingest::crs;
+use crate::ingest::gdalio::{self, GridSpec};
+use crate::ingest::stitch::{stitch, Mosaic, StitchOptions};
+use crate::veg_io;
 use anyhow::{bail, Context, Result};
 use gdal::raster::GdalDataType;
 use gdal::spatial_ref::SpatialRef;
+use region::Region;
+use relevo_core::bundle::names::{self, ArtifactName};
 use relevo_core::bundle::{
     sha256_file, Artifact, BundleWriter, ColorInfo, Crs, Dtype, GridInfo, InputFile, Manifest,
     StageTiming, FORMAT, FORMAT_VERSION,
@@ -20,7 +23,11 @@ use relevo_core::geo::GeoTransform;
 use relevo_core::grid::HeightGrid;
 use relevo_core::lp::Hierarchy;
 use relevo_core::raster::fill::{fill_holes, FillReport};
+use relevo_core::raster::stretch::{stretch_or_default, to_rgba8};
 use relevo_core::raster::Raster;
+use relevo_core::veg::db;
+use relevo_core::veg::pipeline::{self, Extraction, VegImage};
+use relevo_core::veg::samples;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -66,7 +73,7 @@ struct Build<'a> {
     cell_size_m: f64,
     fill: FillReport,
     grid: Option<HeightGrid>,
-    hierarchy: Option<Hierarchy>,
+    hierarchy: Option<Hierarchy<'static>>,
     color: Option<(Mosaic, [usize; 3])>,
     /// The drape as RGBA8, as written to `color.rgba8`.
     rgba: Vec<u8>,
@@ -239,7 +246,7 @@ fn stage_drape(b: &mut Build) -> Result<()> {
     let mosaic = stitch(&image.files, &opts)?;
     b.rgba = to_rgba8(
         &mosaic.raster,
-        stretch_or_default(image.stretch, mosaic.band_type),
+        stretch_or_default(image.stretch, mosaic.band_type == GdalDataType::UInt8),
     );
     b.color = Some((mosaic, bands));
     Ok(())
@@ -277,7 +284,7 @@ fn stage_vegetation(b: &mut Build) -> Result<()> {
         );
     };
     let mut samples =
-        veg::read_samples(&section.samples, Some(file_geo), first.width, first.height)?;
+        samples::read_file(&section.samples, Some(file_geo), first.width, first.height)?;
     let drape_srs = (!grid.crs_wkt.is_empty())
         .then(|| SpatialRef::from_wkt(&grid.crs_wkt))
         .transpose()?;
@@ -299,7 +306,7 @@ fn stage_vegetation(b: &mut Build) -> Result<()> {
         }
         tracing::debug!(class = %sample.class, polygon = ?sample.polygon, "sample on the drape");
     }
-    let extraction = veg::extract(&image, &samples, &section.options)
+    let extraction = pipeline::extract(&image, &samples, &section.options)
         .with_context(|| section.samples.display().to_string())?;
     tracing::info!(objects = extraction.objects.len(), "vegetation");
     b.vegetation = Some((image, extraction));
@@ -311,25 +318,30 @@ fn stage_write(b: &mut Build) -> Result<()> {
     let grid = b.grid.as_ref().context("grid stage did not run")?;
     let dem = b.dem.as_ref().context("dem stage did not run")?;
     let side = grid.side;
+    let array = |name: ArtifactName| (name.key.to_string(), name.file);
+    let (key, file) = array(names::HEIGHT);
     b.artifacts.insert(
-        "height".into(),
+        key,
         b.writer
-            .write_array("height.f32", Dtype::F32, &[side, side], &grid.heights)?,
+            .write_array(file, Dtype::F32, &[side, side], &grid.heights)?,
     );
+    let (key, file) = array(names::MASK);
     b.artifacts.insert(
-        "mask".into(),
+        key,
         b.writer
-            .write_array("mask.u8", Dtype::U8, &[side, side], &grid.mask)?,
+            .write_array(file, Dtype::U8, &[side, side], &grid.mask)?,
     );
     if let Some(h) = &b.hierarchy {
         let values: &[f32] = bytemuck::cast_slice(&h.error_radius);
+        let (key, file) = array(names::LP);
         b.artifacts.insert(
-            "lp".into(),
+            key,
             b.writer
-                .write_array("lp.f32x2", Dtype::F32, &[side, side, 2], values)?,
+                .write_array(file, Dtype::F32, &[side, side, 2], values)?,
         );
     }
-    std::fs::create_dir_all(b.writer.dir().join("exports")).context("cannot create exports/")?;
+    std::fs::create_dir_all(b.writer.dir().join(names::EXPORTS_DIR))
+        .context("cannot create exports/")?;
 
     let spec = GridSpec {
         crs_wkt: dem.grid.crs_wkt.clone(),
@@ -344,126 +356,56 @@ fn stage_write(b: &mut Build) -> Result<()> {
         .map(|(&h, &m)| if m == 1 { h as f64 } else { f64::NAN })
         .collect();
     let raster = Raster::from_data(side, side, 1, heights);
+    let export = names::HEIGHT_GEOTIFF;
     gdalio::write_geotiff(
-        &b.writer.dir().join("exports/height.tif"),
+        &b.writer.dir().join(export.file),
         &raster,
         &spec,
         GdalDataType::Float32,
         Some(-9999.0),
     )?;
-    b.exports.insert(
-        "height_geotiff".into(),
-        b.writer.record_file("exports/height.tif")?,
-    );
+    b.exports
+        .insert(export.key.into(), b.writer.record_file(export.file)?);
 
     if let Some((mosaic, _)) = &b.color {
         let rgba = &b.rgba;
         let (w, h) = (mosaic.grid.width, mosaic.grid.height);
+        let (key, file) = array(names::COLOR);
         b.artifacts.insert(
-            "color".into(),
-            b.writer
-                .write_array("color.rgba8", Dtype::U8, &[h, w, 4], rgba)?,
+            key,
+            b.writer.write_array(file, Dtype::U8, &[h, w, 4], rgba)?,
         );
         let bands: Vec<f64> = (0..4)
             .flat_map(|c| rgba.iter().skip(c).step_by(4).map(|&v| v as f64))
             .collect();
         let raster = Raster::from_data(w, h, 4, bands);
+        let export = names::COLOR_GEOTIFF;
         gdalio::write_geotiff(
-            &b.writer.dir().join("exports/color.tif"),
+            &b.writer.dir().join(export.file),
             &raster,
             &mosaic.grid,
             GdalDataType::UInt8,
             None,
         )?;
-        b.exports.insert(
-            "color_geotiff".into(),
-            b.writer.record_file("exports/color.tif")?,
-        );
+        b.exports
+            .insert(export.key.into(), b.writer.record_file(export.file)?);
     }
     if let Some((image, extraction)) = &b.vegetation {
         let dir = b.writer.dir().to_path_buf();
-        veg::write_csv(&dir.join("vegetation.csv"), &extraction.objects)?;
+        let (key, file) = array(names::VEGETATION);
+        let csv = db::to_csv(&extraction.objects);
         b.artifacts
-            .insert("vegetation".into(), b.writer.record_file("vegetation.csv")?);
-        veg::write_gpkg(
-            &dir.join("exports/vegetation.gpkg"),
-            &extraction.objects,
-            &image.crs_wkt,
-        )?;
-        b.exports.insert(
-            "vegetation_geopackage".into(),
-            b.writer.record_file("exports/vegetation.gpkg")?,
-        );
-        veg::write_labels(
-            &dir.join("exports/vegetation_labels.tif"),
-            image,
-            extraction,
-        )?;
-        b.exports.insert(
-            "vegetation_labels".into(),
-            b.writer.record_file("exports/vegetation_labels.tif")?,
-        );
+            .insert(key, b.writer.write_file(file, csv.as_bytes())?);
+        let export = names::VEGETATION_GEOPACKAGE;
+        veg_io::write_gpkg(&dir.join(export.file), &extraction.objects, &image.crs_wkt)?;
+        b.exports
+            .insert(export.key.into(), b.writer.record_file(export.file)?);
+        let export = names::VEGETATION_LABELS;
+        veg_io::write_labels(&dir.join(export.file), image, extraction)?;
+        b.exports
+            .insert(export.key.into(), b.writer.record_file(export.file)?);
     }
     Ok(())
-}
-
-/// Map three bands to RGBA8 with [`stretch_ranges`] and [`to_u8`]. Alpha is
-/// 255 where the image has data.
-pub fn to_rgba8(raster: &Raster, stretch: Option<[f64; 2]>) -> Vec<u8> {
-    let ranges = stretch_ranges(raster, stretch);
-    let mut out = vec![0u8; raster.cells() * 4];
-    for i in 0..raster.cells() {
-        if !raster.is_valid(i) {
-            continue;
-        }
-        for (b, &range) in ranges.iter().take(3).enumerate() {
-            out[i * 4 + b] = to_u8(raster.band(b)[i], range);
-        }
-        out[i * 4 + 3] = 255;
-    }
-    out
-}
-
-/// The stretch asked for, or by default none for 8-bit data (values kept)
-/// and the 2nd to 98th percentiles for deeper data.
-pub fn stretch_or_default(stretch: Option<[f64; 2]>, band_type: GdalDataType) -> Option<[f64; 2]> {
-    stretch.or(match band_type {
-        GdalDataType::UInt8 => None,
-        _ => Some([2.0, 98.0]),
-    })
-}
-
-/// Per band, the values mapped to 0 and 255: the `[low, high]` percentiles
-/// of its valid cells, or `(0, 255)` (values kept) when `stretch` is `None`.
-pub fn stretch_ranges(raster: &Raster, stretch: Option<[f64; 2]>) -> Vec<(f64, f64)> {
-    (0..raster.bands)
-        .map(|b| match stretch {
-            None => (0.0, 255.0),
-            Some([lo, hi]) => {
-                let mut values: Vec<f64> = raster
-                    .band(b)
-                    .iter()
-                    .copied()
-                    .filter(|v| !v.is_nan())
-                    .collect();
-                values.sort_unstable_by(f64::total_cmp);
-                let at =
-                    |p: f64| values[((p / 100.0) * (values.len() - 1) as f64).round() as usize];
-                if values.is_empty() {
-                    (0.0, 255.0)
-                } else {
-                    (at(lo), at(hi).max(at(lo) + f64::EPSILON))
-                }
-            }
-        })
-        .collect()
-}
-
-/// `value` mapped linearly from `range` to 0..255, rounded and clamped
-/// (no-data, NaN, gives 0).
-#[inline]
-pub fn to_u8(value: f64, (lo, hi): (f64, f64)) -> u8 {
-    ((value - lo) / (hi - lo) * 255.0).round().clamp(0.0, 255.0) as u8
 }
 
 /// Write the manifest and move the bundle into place.

@@ -1,12 +1,13 @@
-//! `relevo bench`: measured figures, side by side with reference tools, as
-//! text or one JSON object per line. Timings are medians of repeated runs of
-//! release builds; nothing here is asserted by tests.
+//! The benchmark runners: measured figures, side by side with reference
+//! tools, as text or one JSON object per line. Timings are medians of
+//! repeated runs of release builds; nothing here is asserted by tests.
 
-use crate::gdalio;
-use crate::prep::prep;
-use crate::region::Region;
-use crate::stitch::{stitch, StitchOptions};
 use anyhow::{bail, Context, Result};
+use relevo::ingest::gdalio;
+use relevo::ingest::stitch::{stitch, StitchOptions};
+use relevo::prep::prep;
+use relevo::prep::region::Region;
+use relevo_core::grid::fractal_heights;
 use relevo_core::raster::mosaic::Overlap;
 use serde_json::json;
 use std::path::{Path, PathBuf};
@@ -165,52 +166,6 @@ fn srtm_padded(data: &Path) -> Result<relevo_core::grid::HeightGrid> {
     ))
 }
 
-/// A deterministic fractal heightfield (diamond-square with hash-based
-/// offsets, Hurst exponent about 0.75), `side` = 2^n + 1, heights in metres.
-pub fn fractal_heights(side: usize, seed: u64) -> Vec<f32> {
-    let mut z = vec![0.0f64; side * side];
-    let hash = |c: usize, r: usize| {
-        let mut x = seed ^ ((c as u64) << 32 | r as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-        x ^= x >> 29;
-        x = x.wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        x ^= x >> 32;
-        (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-    };
-    let mut step = side - 1;
-    let mut amplitude = 1500.0;
-    while step > 1 {
-        let half = step / 2;
-        for r in (half..side).step_by(step) {
-            for c in (half..side).step_by(step) {
-                let corners = z[(r - half) * side + c - half]
-                    + z[(r - half) * side + c + half]
-                    + z[(r + half) * side + c - half]
-                    + z[(r + half) * side + c + half];
-                z[r * side + c] = corners / 4.0 + amplitude * hash(c, r);
-            }
-        }
-        for r in (0..side).step_by(half) {
-            let start = if (r / half) % 2 == 0 { half } else { 0 };
-            for c in (start..side).step_by(step) {
-                let mut sum = 0.0;
-                let mut n = 0.0;
-                for (dc, dr) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
-                    let (nc, nr) = (c as i64 + dc * half as i64, r as i64 + dr * half as i64);
-                    if nc >= 0 && nr >= 0 && nc < side as i64 && nr < side as i64 {
-                        sum += z[nr as usize * side + nc as usize];
-                        n += 1.0;
-                    }
-                }
-                z[r * side + c] = sum / n + amplitude * hash(c, r);
-            }
-        }
-        step = half;
-        // Roughness of real relief: amplitude falls by 2^-0.75 per octave.
-        amplitude *= 0.6;
-    }
-    z.into_iter().map(|v| v as f32).collect()
-}
-
 /// Hierarchy figures: ours beside @mapbox/martini on the same grids, and
 /// view-dependent refinement on each grid.
 pub fn hierarchy(
@@ -323,7 +278,7 @@ pub fn hierarchy(
                 heights.iter().map(|&v| v as f64).collect(),
             );
             let spec = gdalio::GridSpec {
-                crs_wkt: crate::crs::to_wkt(&crate::crs::parse("EPSG:32633")?)?,
+                crs_wkt: relevo::ingest::crs::to_wkt(&relevo::ingest::crs::parse("EPSG:32633")?)?,
                 geotransform: relevo_core::geo::GeoTransform::north_up(
                     500_000.0,
                     5_000_000.0,
@@ -507,7 +462,9 @@ pub fn render(data: &Path, runs: usize, json_lines: bool) -> Result<()> {
 /// images up to `max_side`² beside scikit-image's felzenszwalb (when Python
 /// with scikit-image is installed).
 pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: bool) -> Result<()> {
-    use crate::veg::{extract, read_samples, VegImage, VegOptions};
+    use relevo::veg_io::read_image;
+    use relevo_core::veg::pipeline::{extract, VegImage, VegOptions};
+    use relevo_core::veg::samples::read_file as read_samples;
     use relevo_core::veg::{baseline, eval, segment};
 
     let options = VegOptions::default();
@@ -525,7 +482,7 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
     ];
     let mut yellowstone = None;
     for (name, stem, samples) in crops {
-        let image = VegImage::read(&data.join(format!("{stem}.png")), None, None, Some(0.1))?;
+        let image = read_image(&data.join(format!("{stem}.png")), None, None, Some(0.1))?;
         let (w, h) = (image.image.width, image.image.height);
         let samples = read_samples(&repo.join(samples), None, w, h)?;
         let truth = eval::parse_voc(&std::fs::read_to_string(data.join(format!("{stem}.xml")))?)?;

@@ -1,6 +1,7 @@
 //! Everything that talks to GDAL: opening rasters with clear errors, reading
 //! them into [`Raster`]s, warping onto a target grid, and writing GeoTIFFs.
 
+use crate::output;
 use anyhow::{anyhow, bail, Context, Result};
 use gdal::raster::{Buffer, GdalDataType, GdalType, RasterCreationOptions};
 use gdal::spatial_ref::SpatialRef;
@@ -321,6 +322,39 @@ fn gdal_warp(source: &Dataset, args: &[String]) -> Result<Dataset> {
     }
 }
 
+/// Read band 1 of a raster (warning when it has more) with its grid, band
+/// type and no-data value (`src_nodata` overriding the file's); a raster
+/// with no valid cell is refused.
+pub fn read_single_band(
+    path: &Path,
+    src_nodata: Option<f64>,
+) -> Result<(Raster, GridSpec, GdalDataType, Option<f64>)> {
+    let source = open(path)?;
+    let nodata = src_nodata.or(source.nodata);
+    let mut raster = source.read(nodata)?;
+    if raster.bands > 1 {
+        tracing::warn!("{}: using band 1 of {}", path.display(), raster.bands);
+        raster = Raster::from_data(raster.width, raster.height, 1, raster.band(0).to_vec());
+    }
+    let grid = GridSpec {
+        crs_wkt: source
+            .srs
+            .as_ref()
+            .map(super::crs::to_wkt)
+            .transpose()?
+            .unwrap_or_default(),
+        geotransform: source
+            .geotransform
+            .unwrap_or(relevo_core::geo::GeoTransform::IDENTITY),
+        width: source.width,
+        height: source.height,
+    };
+    if raster.valid_count() == 0 {
+        bail!("{}: no valid data (every cell is no-data)", path.display());
+    }
+    Ok((raster, grid, source.band_type, nodata))
+}
+
 /// Write `raster` as a tiled, deflate-compressed GeoTIFF of `band_type`,
 /// NaN cells becoming `nodata`. Written beside `path` and renamed into place,
 /// so an interrupted write leaves nothing at `path`.
@@ -331,45 +365,16 @@ pub fn write_geotiff(
     band_type: GdalDataType,
     nodata: Option<f64>,
 ) -> Result<()> {
-    let partial = partial_path(path);
+    let partial = output::partial_path(path);
     // Ask the OS first: its message says why a path cannot be written.
     std::fs::File::create(&partial)
         .map_err(|e| anyhow!("{}: cannot write ({e})", path.display()))?;
-    let result = write_geotiff_at(&partial, raster, grid, band_type, nodata).and_then(|()| {
-        std::fs::rename(&partial, path)
-            .with_context(|| format!("{}: cannot move into place", path.display()))
-    });
+    let result = write_geotiff_at(&partial, raster, grid, band_type, nodata)
+        .and_then(|()| output::move_into_place(&partial, path));
     if result.is_err() {
         let _ = std::fs::remove_file(&partial);
     }
     result
-}
-
-/// Write `bytes` to `path` through a partial file renamed into place.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let partial = partial_path(path);
-    std::fs::write(&partial, bytes).with_context(|| format!("{}: cannot write", path.display()))?;
-    std::fs::rename(&partial, path)
-        .with_context(|| format!("{}: cannot move into place", path.display()))
-}
-
-/// An RGBA8 image (row-major) encoded as PNG.
-pub fn encode_png(rgba: &[u8], width: usize, height: usize) -> Result<Vec<u8>> {
-    let mut out = Vec::new();
-    let mut encoder = png::Encoder::new(&mut out, width as u32, height as u32);
-    encoder.set_color(png::ColorType::Rgba);
-    encoder.set_depth(png::BitDepth::Eight);
-    encoder.write_header()?.write_image_data(rgba)?;
-    Ok(out)
-}
-
-/// `DIR/.NAME.partial` beside `path`.
-pub fn partial_path(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().to_string())
-        .unwrap_or_default();
-    path.with_file_name(format!(".{name}.partial"))
 }
 
 fn write_geotiff_at(

@@ -3,7 +3,7 @@
 //! Relative paths are relative to the REGION.toml file. See docs/guide.md for
 //! the reference.
 
-use crate::gdalio::Resampling;
+use crate::ingest::gdalio::Resampling;
 use anyhow::{anyhow, bail, Context, Result};
 use relevo_core::grid::Squaring;
 use relevo_core::raster::encoding::Encoding;
@@ -103,7 +103,7 @@ pub struct VegetationSection {
     /// the first image file, or GeoJSON polygons in its CRS.
     pub samples: PathBuf,
     #[serde(default)]
-    pub options: crate::veg::VegOptions,
+    pub options: relevo_core::veg::pipeline::VegOptions,
 }
 
 /// A no-data value as written in TOML: a number, or the string "nan".

@@ -1,24 +1,17 @@
-//! `relevo veg`: vegetation extraction on an image file, with GDAL reading
-//! the bands and writing the GeoPackage and the label GeoTIFF. The algorithms
-//! are in [`relevo_core::veg`]; this module turns files into their inputs and
-//! their results into files.
+//! The whole extraction on one image, as `relevo veg detect`, `relevo prep`
+//! and the viewer run it: split-and-merge, signatures learnt from the
+//! samples, classification of every region and object placement, with a
+//! report of what was found and an overlay for people to check it.
 
-use crate::gdalio::{self, GridSpec};
-use anyhow::{anyhow, bail, Context, Result};
-use gdal::raster::GdalDataType;
-use gdal::spatial_ref::SpatialRef;
-use gdal::vector::{Feature, FieldValue, Geometry, LayerAccess, LayerOptions, OGRFieldType};
-use gdal::DriverManager;
-use relevo_core::geo::GeoTransform;
-use relevo_core::raster::Raster;
-use relevo_core::veg::classify::{Classifier, Label};
-use relevo_core::veg::db::{self, VegObject};
-use relevo_core::veg::detect::{detect, Placement};
-use relevo_core::veg::samples::{self, Sample};
-use relevo_core::veg::segment::{segment, SegmentParams, Segmentation};
-use relevo_core::veg::Image;
+use super::classify::{Classifier, Label};
+use super::db::VegObject;
+use super::detect::{detect, Placement};
+use super::samples::Sample;
+use super::segment::{segment, SegmentParams, Segmentation};
+use super::Image;
+use crate::geo::GeoTransform;
+use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
-use std::path::Path;
 use std::time::Instant;
 
 /// Every setting of vegetation extraction, as in REGION.toml's
@@ -67,7 +60,7 @@ impl Default for VegOptions {
 }
 
 /// Crowns in fine imagery, filled regions in coarse imagery.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Mode {
     /// Crowns when a pixel is at most 1 m, else fill.
@@ -95,7 +88,7 @@ impl VegOptions {
             ("density_per_ha", self.density_per_ha),
         ] {
             if !(v.is_finite() && v > 0.0) {
-                bail!("{name} must be positive, got {v}");
+                return Err(Error::Input(format!("{name} must be positive, got {v}")));
             }
         }
         let crowns = match self.mode {
@@ -131,90 +124,6 @@ pub struct VegImage {
 }
 
 impl VegImage {
-    /// Read `bands` (1-based) of `path`; 8-bit data is kept, deeper data is
-    /// stretched between the `stretch` percentiles (default 2, 98) to 8 bits.
-    /// `pixel_m` sets the pixel size of an image that is not georeferenced.
-    pub fn read(
-        path: &Path,
-        bands: Option<&[usize]>,
-        stretch: Option<[f64; 2]>,
-        pixel_m: Option<f64>,
-    ) -> Result<VegImage> {
-        let source = gdalio::open(path)?;
-        let bands: Vec<usize> = match bands {
-            Some(b) => b.to_vec(),
-            None => (1..=source.bands.min(3)).collect(),
-        };
-        if bands.is_empty() || bands.len() > relevo_core::veg::MAX_BANDS {
-            bail!(
-                "{}: choose 1 to {} bands, got {}",
-                path.display(),
-                relevo_core::veg::MAX_BANDS,
-                bands.len()
-            );
-        }
-        if let Some(&b) = bands.iter().find(|&&b| b == 0 || b > source.bands) {
-            bail!(
-                "{}: has {} band(s), no band {b}",
-                path.display(),
-                source.bands
-            );
-        }
-        let selected = source.read_window(
-            0,
-            0,
-            source.width,
-            source.height,
-            Some(&bands),
-            source.nodata,
-        )?;
-        let stretch = crate::prep::stretch_or_default(stretch, source.band_type);
-        let ranges = crate::prep::stretch_ranges(&selected, stretch);
-        let n = selected.cells();
-        let mask = selected.valid_mask();
-        let valid = mask.contains(&false).then_some(mask);
-        let mut pixels = vec![0u8; n * bands.len()];
-        for (b, &range) in ranges.iter().enumerate() {
-            for (i, v) in selected.band(b).iter().enumerate() {
-                pixels[i * bands.len() + b] = crate::prep::to_u8(*v, range);
-            }
-        }
-        let image = Image::new(selected.width, selected.height, bands.len(), pixels)
-            .map_err(|e| anyhow!("{}: {e}", path.display()))?;
-        let crs_wkt = match &source.srs {
-            Some(srs) => crate::crs::to_wkt(srs)?,
-            None => String::new(),
-        };
-        let ground = source.geotransform.map(|g| {
-            let (w, h) = g.cell_size();
-            let cell = w.abs().min(h.abs());
-            // Geographic CRS: degrees to metres along a meridian.
-            match &source.srs {
-                Some(srs) if srs.is_geographic() => cell * 111_320.0,
-                _ => cell,
-            }
-        });
-        let pixel_m = match (pixel_m, ground) {
-            (Some(p), _) if p.is_finite() && p > 0.0 => p,
-            (Some(p), _) => bail!("--pixel-size must be positive, got {p}"),
-            (None, Some(g)) => g,
-            (None, None) => {
-                tracing::warn!(
-                    "{}: not georeferenced; taking 1 m pixels (set --pixel-size)",
-                    path.display()
-                );
-                1.0
-            }
-        };
-        Ok(VegImage {
-            image,
-            crs_wkt,
-            geotransform: source.geotransform,
-            pixel_m,
-            valid,
-        })
-    }
-
     /// World coordinates of a point in pixel coordinates.
     pub fn to_world(&self, x: f64, y: f64) -> (f64, f64) {
         match &self.geotransform {
@@ -222,30 +131,6 @@ impl VegImage {
             None => (x, y),
         }
     }
-}
-
-/// Read a samples file for a `width`×`height` image georeferenced by
-/// `geotransform`: `.geojson`/`.json` polygons in the image CRS, else the
-/// semicolon CSV of pixel rectangles. Errors name the file.
-pub fn read_samples(
-    path: &Path,
-    geotransform: Option<GeoTransform>,
-    w: usize,
-    h: usize,
-) -> Result<Vec<Sample>> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read samples", path.display()))?;
-    let is_json = matches!(
-        path.extension().and_then(|e| e.to_str()),
-        Some("geojson" | "json")
-    );
-    let parsed = if is_json {
-        let geo = geotransform.unwrap_or(GeoTransform::IDENTITY);
-        samples::parse_geojson(&text, |x, y| geo.invert(x, y).map(|(c, r)| [c, r]), w, h)
-    } else {
-        samples::parse_csv(&text, w, h)
-    };
-    parsed.map_err(|e| anyhow!("{}: {e}", path.display()))
 }
 
 /// Everything one extraction produced.
@@ -321,10 +206,10 @@ pub fn extract(image: &VegImage, samples: &[Sample], options: &VegOptions) -> Re
         .map(|c| *c != options.negative_class)
         .collect();
     if !vegetation.iter().any(|&v| v) {
-        bail!(
+        return Err(Error::Input(format!(
             "every sample is of the negative class {:?}: mark some vegetation",
             options.negative_class
-        );
+        )));
     }
     let start = Instant::now();
     let found = detect(
@@ -394,88 +279,6 @@ pub fn extract(image: &VegImage, samples: &[Sample], options: &VegOptions) -> Re
         objects,
         report,
     })
-}
-
-/// Write the database atomically.
-pub fn write_csv(path: &Path, objects: &[VegObject]) -> Result<()> {
-    gdalio::write_atomic(path, db::to_csv(objects).as_bytes())
-}
-
-/// Write the objects as points of a GeoPackage layer `vegetation` (QGIS,
-/// GDAL and most GIS open it), through a partial file renamed into place.
-pub fn write_gpkg(path: &Path, objects: &[VegObject], crs_wkt: &str) -> Result<()> {
-    let partial = gdalio::partial_path(path).with_extension("gpkg");
-    let _ = std::fs::remove_file(&partial);
-    // Fixed timestamps make the file depend on its content only.
-    gdal::config::set_config_option("OGR_CURRENT_DATE", "2000-01-01T00:00:00.000Z")?;
-    let result = (|| -> Result<()> {
-        let driver = DriverManager::get_driver_by_name("GPKG")?;
-        let mut dataset = driver
-            .create_vector_only(&partial)
-            .map_err(|e| anyhow!("{}: cannot create ({e})", path.display()))?;
-        let srs = if crs_wkt.is_empty() {
-            None
-        } else {
-            Some(SpatialRef::from_wkt(crs_wkt)?)
-        };
-        let mut txn = dataset.start_transaction()?;
-        {
-            let layer = txn.create_layer(LayerOptions {
-                name: "vegetation",
-                srs: srs.as_ref(),
-                ty: gdal::vector::OGRwkbGeometryType::wkbPoint,
-                options: None,
-            })?;
-            layer.create_defn_fields(&[
-                ("id", OGRFieldType::OFTInteger64),
-                ("class", OGRFieldType::OFTString),
-                ("size", OGRFieldType::OFTReal),
-                ("score", OGRFieldType::OFTReal),
-            ])?;
-            for o in objects {
-                let mut feature = Feature::new(layer.defn())?;
-                let mut point = Geometry::empty(gdal::vector::OGRwkbGeometryType::wkbPoint)?;
-                point.add_point_2d((o.x, o.y));
-                feature.set_geometry(point)?;
-                feature.set_field(0, &FieldValue::Integer64Value(o.id as i64))?;
-                feature.set_field(1, &FieldValue::StringValue(o.class.clone()))?;
-                feature.set_field(2, &FieldValue::RealValue(o.size))?;
-                feature.set_field(3, &FieldValue::RealValue(o.score as f64))?;
-                feature.create(&layer)?;
-            }
-        }
-        txn.commit()?;
-        Ok(())
-    })();
-    gdal::config::clear_config_option("OGR_CURRENT_DATE")?;
-    let result = result.and_then(|()| {
-        std::fs::rename(&partial, path)
-            .with_context(|| format!("{}: cannot move into place", path.display()))
-    });
-    if result.is_err() {
-        let _ = std::fs::remove_file(&partial);
-    }
-    result
-}
-
-/// Write the labels as a two-band UInt32 GeoTIFF: band 1 the region of each
-/// pixel (from 1), band 2 its class (1-based in the samples' order).
-pub fn write_labels(path: &Path, image: &VegImage, extraction: &Extraction) -> Result<()> {
-    let seg = &extraction.segmentation;
-    let regions = seg.labels.iter().map(|&r| r as f64 + 1.0);
-    let classes = seg
-        .labels
-        .iter()
-        .map(|&r| extraction.labels[r as usize].class as f64 + 1.0);
-    let data: Vec<f64> = regions.chain(classes).collect();
-    let raster = Raster::from_data(seg.width, seg.height, 2, data);
-    let grid = GridSpec {
-        crs_wkt: image.crs_wkt.clone(),
-        geotransform: image.geotransform.unwrap_or(GeoTransform::IDENTITY),
-        width: seg.width,
-        height: seg.height,
-    };
-    gdalio::write_geotiff(path, &raster, &grid, GdalDataType::UInt32, None)
 }
 
 /// An RGBA picture for people: the image, vegetation regions tinted by class,

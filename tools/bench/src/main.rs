@@ -1,0 +1,105 @@
+//! `relevo-bench`: Relevo's measured figures beside reference tools, run
+//! from the repository root as `cargo run --release -p relevo-bench -- …`.
+//! It starts node (martini), python (scikit-image) and gdalwarp from
+//! repository paths, so it is a development tool, not part of the shipped
+//! `relevo` binary.
+
+mod bench;
+
+use clap::{Args, Parser, Subcommand};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "relevo-bench",
+    version,
+    about = "Measure Relevo against reference tools (release builds only).",
+    after_help = "Examples:
+  cargo run --release -p relevo-bench -- ingest --json
+  cargo run --release -p relevo-bench -- hierarchy --max-side 8193 --runs 3
+  cargo run --release -p relevo-bench -- render --json --runs 3
+  cargo run --release -p relevo-bench -- veg --json --runs 3 --max-side 10000"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: BenchCommand,
+}
+
+#[derive(Subcommand, Debug)]
+enum BenchCommand {
+    /// `prep` on the sample region; `stitch` on the Landsat overlap beside gdalwarp.
+    #[command(after_help = "Examples:
+  relevo-bench ingest
+  relevo-bench ingest --json --runs 7 --data ../shared/data")]
+    Ingest(BenchArgs),
+    /// LP errors and radii beside @mapbox/martini; view-dependent refinement.
+    #[command(after_help = "Examples:
+  relevo-bench hierarchy --json
+  relevo-bench hierarchy --max-side 8193 --runs 3")]
+    Hierarchy {
+        #[command(flatten)]
+        common: BenchArgs,
+        /// Largest fractal grid side to run (257, 1025, 4097, 8193).
+        #[arg(long, default_value_t = 4097)]
+        max_side: usize,
+    },
+    /// The floating-horizon raycast: 1920×1080, far 1024, 8 headings, each configuration.
+    #[command(after_help = "Examples:
+  relevo-bench render
+  relevo-bench render --json --runs 3")]
+    Render(BenchArgs),
+    /// Vegetation: F1 on the annotated crowns beside an excess-green baseline;
+    /// split-and-merge and detection speed beside scikit-image's felzenszwalb.
+    #[command(after_help = "Examples:
+  relevo-bench veg
+  relevo-bench veg --json --runs 3 --max-side 10000")]
+    Veg {
+        #[command(flatten)]
+        common: BenchArgs,
+        /// Side of the largest tiled test image (up to 10000).
+        #[arg(long, default_value_t = 10000)]
+        max_side: usize,
+    },
+}
+
+#[derive(Args, Debug)]
+struct BenchArgs {
+    /// One JSON object per line instead of text.
+    #[arg(long)]
+    json: bool,
+    /// Runs per figure; the median is reported.
+    #[arg(long, default_value_t = 5)]
+    runs: usize,
+    /// The shared real-data folder (tiles/, dem/, …).
+    #[arg(long, env = "RELEVO_SHARED_DATA", default_value = "../shared/data")]
+    data: PathBuf,
+    /// The Relevo repository (for data/olinda).
+    #[arg(long, default_value = ".")]
+    repo: PathBuf,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    relevo::commands::init_logging(0, false);
+    relevo::ingest::gdalio::init();
+    let result = match cli.command {
+        BenchCommand::Ingest(a) => bench::ingest(&a.repo, &a.data, a.runs.max(1), a.json),
+        BenchCommand::Render(a) => bench::render(&a.data, a.runs.max(1), a.json),
+        BenchCommand::Veg {
+            common: a,
+            max_side,
+        } => bench::veg(&a.repo, &a.data, a.runs.max(1), max_side, a.json),
+        BenchCommand::Hierarchy {
+            common: a,
+            max_side,
+        } => bench::hierarchy(&a.repo, &a.data, a.runs.max(1), max_side, a.json),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("error: {error:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,73 @@
+//! `relevo info`: describe a bundle.
+
+use anyhow::Result;
+use clap::Args;
+use relevo_core::bundle::Bundle;
+use std::path::{Path, PathBuf};
+
+#[derive(Args, Debug)]
+pub struct InfoArgs {
+    /// The bundle to describe.
+    pub bundle: PathBuf,
+    /// Print the whole manifest as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(a: InfoArgs) -> Result<()> {
+    describe(&a.bundle, a.json)
+}
+
+fn describe(path: &Path, json: bool) -> Result<()> {
+    let bundle = Bundle::open(path)?;
+    let m = &bundle.manifest;
+    if json {
+        println!("{}", serde_json::to_string_pretty(m)?);
+        return Ok(());
+    }
+    println!(
+        "{} — region {:?}, format {} v{}",
+        path.display(),
+        m.region,
+        m.format,
+        m.format_version
+    );
+    match m.crs.epsg {
+        Some(code) => println!("  CRS          EPSG:{code}"),
+        None if m.crs.wkt.is_empty() => println!("  CRS          none (grid units)"),
+        None => println!("  CRS          custom (WKT in manifest)"),
+    }
+    let g = &m.grid;
+    println!(
+        "  grid         {0}×{0} vertices, {1:.3} m cells, z scale {2}",
+        g.side, g.cell_size_m, g.z_scale
+    );
+    println!(
+        "  data         {} vertices, heights {:.2}..{:.2} m",
+        g.valid_vertices, g.height_range_m[0], g.height_range_m[1]
+    );
+    println!("  extent       {:?}", g.valid_extent);
+    if let Some(c) = &m.color {
+        println!(
+            "  colour       {}×{} pixels, bands {:?}",
+            c.width, c.height, c.bands
+        );
+    }
+    if let Some(objects) = bundle.vegetation()? {
+        let mut per_class = std::collections::BTreeMap::new();
+        for o in &objects {
+            *per_class.entry(o.class.as_str()).or_insert(0usize) += 1;
+        }
+        println!("  vegetation   {} objects {per_class:?}", objects.len());
+    }
+    for (name, a) in m.artifacts.iter().chain(&m.exports) {
+        println!(
+            "  {name:<12} {} {:?} {:?} {} bytes",
+            a.file, a.dtype, a.shape, a.bytes
+        );
+    }
+    for t in &m.timings {
+        println!("  stage {:<6} {:.1} ms", t.stage, t.ms);
+    }
+    Ok(())
+}

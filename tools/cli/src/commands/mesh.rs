@@ -1,0 +1,93 @@
+//! `relevo mesh`: the mesh at an object-space tolerance as glTF or OBJ.
+
+use crate::output;
+use anyhow::{bail, Result};
+use clap::Args;
+use relevo_core::bundle::Bundle;
+use relevo_core::lp::export;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct MeshArgs {
+    /// The bundle to mesh.
+    pub bundle: PathBuf,
+    /// Largest vertical error left, metres.
+    #[arg(long)]
+    pub max_error: f32,
+    /// Output format; default: from the output's extension.
+    #[arg(long, value_enum)]
+    pub format: Option<MeshFormat>,
+    /// Output .glb or .obj (with .mtl and .png beside it).
+    #[arg(long, short)]
+    pub out: PathBuf,
+    /// Mesh the padding and voids too (as martini does), ignoring the mask.
+    #[arg(long)]
+    pub keep_padding: bool,
+    /// Replace existing outputs.
+    #[arg(long)]
+    pub force: bool,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq)]
+pub enum MeshFormat {
+    Glb,
+    Obj,
+}
+
+pub fn run(a: MeshArgs) -> Result<()> {
+    let format = match a.format {
+        Some(f) => f,
+        None => match a
+            .out
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .as_deref()
+        {
+            Some("glb") => MeshFormat::Glb,
+            Some("obj") => MeshFormat::Obj,
+            _ => bail!(
+                "{}: cannot tell the format from the extension; pass --format glb|obj",
+                a.out.display()
+            ),
+        },
+    };
+    if !(a.max_error.is_finite() && a.max_error >= 0.0) {
+        bail!(
+            "--max-error must be a non-negative number of metres, got {}",
+            a.max_error
+        );
+    }
+    output::check(&a.out, a.force)?;
+    let bundle = Bundle::open(&a.bundle)?;
+    let m = export::build(&bundle, a.max_error, a.keep_padding)?;
+    match format {
+        MeshFormat::Glb => {
+            output::write_atomic(&a.out, &export::to_glb(&m, &bundle.manifest.crs.wkt)?)?
+        }
+        MeshFormat::Obj => {
+            let stem = a
+                .out
+                .file_stem()
+                .map(|s| s.to_string_lossy().to_string())
+                .unwrap_or_else(|| "mesh".into());
+            if let Some(png) = &m.texture_png {
+                output::write_atomic(&a.out.with_file_name(format!("{stem}.png")), png)?;
+                let mtl = format!("newmtl drape\nKd 1 1 1\nmap_Kd {stem}.png\n");
+                output::write_atomic(&a.out.with_file_name(format!("{stem}.mtl")), mtl.as_bytes())?;
+            }
+            output::write_atomic(
+                &a.out,
+                &export::to_obj(&m, m.texture_png.as_ref().map(|_| stem.as_str())),
+            )?;
+        }
+    }
+    eprintln!(
+        "{}: {} vertices, {} triangles at {} m",
+        a.out.display(),
+        m.positions.len(),
+        m.triangles.len(),
+        a.max_error
+    );
+    Ok(())
+}

@@ -1,0 +1,158 @@
+//! The `relevo` command line: the argument tree and the dispatch. Each
+//! subcommand is one module holding its clap arguments and its `run`.
+
+mod fill;
+mod hierarchy;
+mod info;
+mod mesh;
+mod pad;
+mod prep;
+mod render;
+mod stitch;
+mod validate;
+mod veg;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+use relevo_core::raster::encoding::Encoding;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "relevo",
+    version,
+    about = "Terrain data preparation: tiles and imagery in, a self-describing bundle out."
+)]
+#[command(after_help = "Examples:
+  relevo prep data/olinda/REGION.toml --out olinda.relevo
+  relevo prep --dem n45e005.tif --image ortho.jpg --out alps.relevo
+  relevo stitch a.tif b.tif --overlap blend --out mosaic.tif
+  relevo validate olinda.relevo")]
+pub struct Cli {
+    /// More log output (-v info, -vv debug); RUST_LOG overrides.
+    #[arg(short, long, global = true, action = clap::ArgAction::Count)]
+    pub verbose: u8,
+    /// Only errors.
+    #[arg(short, long, global = true)]
+    pub quiet: bool,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Mosaic georeferenced tiles (any GDAL raster, world files, Terrain-RGB) into one GeoTIFF.
+    #[command(after_help = "Examples:
+  relevo stitch LC08_*_B4.TIF --src-nodata 0 --out red.tif
+  relevo stitch n45e005.tif n45e006.tif --t-srs EPSG:32631 --tr 30 -r bilinear --out dem.tif
+  relevo stitch fuji.png --encoding terrain-rgb --out fuji.tif
+  relevo stitch a.tif b.tif --te 500000 4980000 520000 5000000 --overlap first --out crop.tif")]
+    Stitch(stitch::StitchArgs),
+    /// Fill no-data holes by natural-neighbour interpolation.
+    #[command(after_help = "Examples:
+  relevo fill dem.tif --max-hole 5000 --out dem_filled.tif")]
+    Fill(fill::FillArgs),
+    /// Pad (or resample) a heightfield to (2^n+1)² and write its data mask.
+    #[command(after_help = "Examples:
+  relevo pad dem.tif --out dem_1025.tif            # also writes dem_1025_mask.tif
+  relevo pad dem.tif --resample --out dem_sq.tif --mask-out mask.tif")]
+    Pad(pad::PadArgs),
+    /// Compute LP object-space errors and bounding-sphere radii of a (2^n+1)² heightfield.
+    #[command(after_help = "Examples:
+  relevo pad dem.tif --out dem_1025.tif && relevo hierarchy dem_1025.tif --out lp.tif
+  relevo hierarchy fuji_513.tif --cell-size 30 --out lp.tif")]
+    Hierarchy(hierarchy::HierarchyArgs),
+    /// Build a bundle from a REGION.toml, or straight from rasters.
+    #[command(after_help = "Examples:
+  relevo prep data/olinda/REGION.toml --out olinda.relevo
+  relevo prep --dem srtm_ref.tif --out turkey.relevo --json
+  relevo prep --dem t1.tif t2.tif --image ortho.tif --bands 3,2,1 --crs EPSG:32633 --out r.relevo --force
+  relevo prep --dem dem.tif --image ortho.tif --samples marks.csv --out r.relevo   # with vegetation")]
+    Prep(prep::PrepArgs),
+    /// Export the mesh at an object-space tolerance as glTF (.glb) or OBJ.
+    #[command(after_help = "Examples:
+  relevo mesh olinda.relevo --max-error 2 --out olinda.glb
+  relevo mesh olinda.relevo --max-error 0.5 --format obj --out olinda.obj   # also olinda.mtl, olinda.png
+  relevo mesh fuji.relevo --max-error 5 --keep-padding --out fuji.glb")]
+    Mesh(mesh::MeshArgs),
+    /// Render a bundle with the CPU floating-horizon raycaster (PNG and depth).
+    #[command(after_help = "Examples:
+  relevo render olinda.relevo --camera 290000,9112000,400,45,300 --size 960x540 --out shot.png
+  relevo render olinda.relevo --camera 290000,9112000,400,45,300 --depth depth.f32 --bands 2000:4:sub,inf:1 --out shot.png
+  relevo render olinda.relevo --camera 290000,9112000,400,45,300 --mode distorted --out voxel_space.png")]
+    Render(render::RenderArgs),
+    /// Vegetation: detect objects in imagery from marked samples; score detections.
+    #[command(subcommand)]
+    Veg(veg::VegCommand),
+    /// Describe a bundle.
+    #[command(after_help = "Examples:
+  relevo info olinda.relevo
+  relevo info olinda.relevo --json")]
+    Info(info::InfoArgs),
+    /// Check a bundle's files, hashes, shapes and invariants; exit 1 on any problem.
+    #[command(after_help = "Examples:
+  relevo validate olinda.relevo")]
+    Validate(validate::ValidateArgs),
+}
+
+/// Run the parsed command.
+pub fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Stitch(a) => stitch::run(a),
+        Command::Fill(a) => fill::run(a),
+        Command::Pad(a) => pad::run(a),
+        Command::Hierarchy(a) => hierarchy::run(a),
+        Command::Prep(a) => prep::run(a),
+        Command::Mesh(a) => mesh::run(a),
+        Command::Render(a) => render::run(a),
+        Command::Veg(a) => veg::run(a),
+        Command::Info(a) => info::run(a),
+        Command::Validate(a) => validate::run(a),
+    }
+}
+
+/// How tiles encode heights.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum EncodingArg {
+    Plain,
+    TerrainRgb,
+    Terrarium,
+}
+
+impl From<EncodingArg> for Encoding {
+    fn from(e: EncodingArg) -> Encoding {
+        match e {
+            EncodingArg::Plain => Encoding::Plain,
+            EncodingArg::TerrainRgb => Encoding::TerrainRgb,
+            EncodingArg::Terrarium => Encoding::Terrarium,
+        }
+    }
+}
+
+/// `LOW,HIGH` percentiles with 0 ≤ LOW < HIGH ≤ 100.
+pub(crate) fn parse_percentiles(text: &str) -> Result<[f64; 2], String> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("{text:?} is not two numbers"))?;
+    match values[..] {
+        [lo, hi] if (0.0..100.0).contains(&lo) && lo < hi && hi <= 100.0 => Ok([lo, hi]),
+        _ => Err("--stretch takes LOW,HIGH percentiles with 0 <= LOW < HIGH <= 100".into()),
+    }
+}
+
+/// Set up tracing on stderr.
+pub fn init_logging(verbose: u8, quiet: bool) {
+    let level = match (quiet, verbose) {
+        (true, _) => "error",
+        (false, 0) => "warn",
+        (false, 1) => "info",
+        _ => "debug",
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
+}

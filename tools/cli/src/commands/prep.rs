@@ -1,0 +1,119 @@
+//! `relevo prep`: build a bundle from a REGION.toml or straight from rasters.
+
+use super::{parse_percentiles, EncodingArg};
+use crate::ingest::gdalio::Resampling;
+use crate::output;
+use crate::prep::prep;
+use crate::prep::region::{
+    parse_nodata, DemSection, FillSection, GridSection, ImageSection, NoData, Region,
+    VegetationSection,
+};
+use anyhow::{bail, Result};
+use clap::Args;
+use relevo_core::raster::mosaic::Overlap;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct PrepArgs {
+    /// REGION.toml describing the inputs (or give --dem instead).
+    #[arg(required_unless_present = "dem", conflicts_with_all = ["dem", "image"])]
+    pub region: Option<PathBuf>,
+    /// Output bundle directory, conventionally NAME.relevo.
+    #[arg(long, short)]
+    pub out: PathBuf,
+    /// DEM tiles (quick form, without a REGION.toml).
+    #[arg(long, num_args = 1..)]
+    pub dem: Vec<PathBuf>,
+    /// Imagery tiles to drape (quick form).
+    #[arg(long, num_args = 1..)]
+    pub image: Vec<PathBuf>,
+    /// Image bands shown as red, green, blue (quick form), e.g. 3,2,1.
+    #[arg(long, value_delimiter = ',', value_name = "R,G,B")]
+    pub bands: Option<Vec<usize>>,
+    /// Percentiles LOW,HIGH of each image band stretched to 0..255 (quick form).
+    #[arg(long, value_name = "LOW,HIGH", value_parser = parse_percentiles, requires = "image")]
+    pub stretch: Option<[f64; 2]>,
+    /// Vegetation samples marked on the first image (quick form; see `veg detect`).
+    #[arg(long, requires = "image")]
+    pub samples: Option<PathBuf>,
+    /// DEM encoding (quick form).
+    #[arg(long, value_enum, default_value_t = EncodingArg::Plain)]
+    pub encoding: EncodingArg,
+    /// Bundle CRS (quick form).
+    #[arg(long)]
+    pub crs: Option<String>,
+    /// Grid spacing in metres (quick form).
+    #[arg(long)]
+    pub cell_size: Option<f64>,
+    /// Factor from the DEM's vertical unit to metres (quick form).
+    #[arg(long, default_value_t = 1.0)]
+    pub z_scale: f64,
+    /// DEM no-data value, a number or nan (quick form).
+    #[arg(long, value_parser = parse_nodata, allow_negative_numbers = true)]
+    pub src_nodata: Option<f64>,
+    /// Replace an existing bundle.
+    #[arg(long)]
+    pub force: bool,
+    /// Print a JSON summary on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(a: PrepArgs) -> Result<()> {
+    if a.bands.as_ref().is_some_and(|b| b.len() != 3) {
+        bail!("--bands takes three bands R,G,B, e.g. 3,2,1");
+    }
+    let region = match &a.region {
+        Some(path) => Region::load(path)?,
+        None => {
+            let region = Region {
+                name: None,
+                crs: a.crs,
+                cell_size_m: a.cell_size,
+                z_scale: a.z_scale,
+                dem: DemSection {
+                    files: a.dem,
+                    encoding: a.encoding.into(),
+                    src_nodata: a.src_nodata.map(NoData::Value),
+                    overlap: Overlap::Blend,
+                    resampling: Resampling::Bilinear,
+                },
+                fill: FillSection::default(),
+                grid: GridSection::default(),
+                image: (!a.image.is_empty()).then(|| ImageSection {
+                    files: a.image,
+                    bands: a.bands.map(|b| [b[0], b[1], b[2]]),
+                    src_nodata: None,
+                    overlap: Overlap::Blend,
+                    resampling: Resampling::Bilinear,
+                    stretch: a.stretch,
+                }),
+                vegetation: a.samples.map(|samples| VegetationSection {
+                    samples,
+                    options: Default::default(),
+                }),
+            };
+            region.check()?;
+            region
+        }
+    };
+    output::check_folder(&a.out)?;
+    let summary = prep(&region, &a.out, a.force)?;
+    if a.json {
+        println!("{}", serde_json::to_string(&summary)?);
+    } else {
+        let total: f64 = summary.timings.iter().map(|t| t.ms).sum();
+        println!(
+            "{}: {}×{} grid, {:.2} m cells, {} vertices with data, heights {:.1}..{:.1} m, {:.0} ms",
+            summary.bundle.display(),
+            summary.side,
+            summary.side,
+            summary.cell_size_m,
+            summary.valid_vertices,
+            summary.height_range_m[0],
+            summary.height_range_m[1],
+            total
+        );
+    }
+    Ok(())
+}

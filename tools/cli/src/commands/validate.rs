@@ -1,0 +1,27 @@
+//! `relevo validate`: check a bundle's files, hashes, shapes and invariants.
+
+use anyhow::{bail, Result};
+use clap::Args;
+use relevo_core::bundle::{validate, Bundle};
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct ValidateArgs {
+    /// The bundle to check.
+    pub bundle: PathBuf,
+}
+
+pub fn run(a: ValidateArgs) -> Result<()> {
+    let path = &a.bundle;
+    let bundle = Bundle::open(path)?;
+    let problems = validate(&bundle);
+    if problems.is_empty() {
+        println!("{}: valid", path.display());
+        Ok(())
+    } else {
+        for p in &problems {
+            eprintln!("{}: {p}", path.display());
+        }
+        bail!("{}: {} problem(s)", path.display(), problems.len())
+    }
+}

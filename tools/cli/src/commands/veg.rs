@@ -1,0 +1,256 @@
+//! `relevo veg detect | eval`: vegetation from marked samples, and its score
+//! against truth boxes.
+
+use super::parse_percentiles;
+use crate::output;
+use crate::veg_io;
+use anyhow::{Context, Result};
+use clap::{Args, Subcommand};
+use relevo_core::raster::png::encode_rgba;
+use relevo_core::veg::pipeline::{self, Mode, VegOptions};
+use relevo_core::veg::{db, eval, samples};
+use std::path::{Path, PathBuf};
+
+#[derive(Subcommand, Debug)]
+pub enum VegCommand {
+    /// Split-and-merge the image, learn Haar signatures from the samples,
+    /// classify every region and write the vegetation objects.
+    #[command(
+        after_help = "Samples: a semicolon CSV `class;xmin;ymin;xmax;ymax` of pixel rectangles, or
+GeoJSON polygons with a `class` property in the image CRS. Samples of the
+negative class (default `other`) are counter-examples; every other class is
+vegetation.
+
+Examples:
+  relevo veg detect ortho.tif --samples marks.csv --out trees.csv --gpkg trees.gpkg
+  relevo veg detect crop.png --pixel-size 0.1 --samples marks.csv --out trees.csv --overlay check.png
+  relevo veg detect landsat.tif --bands 3,2,1 --stretch 1,99 --samples forest.geojson \\
+      --density 150 --labels regions.tif --out forest.csv"
+    )]
+    Detect(Box<VegDetectArgs>),
+    /// Precision, recall and F1 of detections against truth boxes (pixels).
+    #[command(
+        after_help = "A detection is a true positive when its centre falls inside a truth box not
+yet matched, taking detections from the highest score down.
+
+Examples:
+  relevo veg eval --detections trees.csv --truth crop.xml
+  relevo veg eval --detections trees.csv --truth boxes.csv --json"
+    )]
+    Eval {
+        /// Database written by `veg detect` (id;x;y;class;size;score).
+        #[arg(long)]
+        detections: PathBuf,
+        /// Pascal VOC XML, or CSV lines xmin,ymin,xmax,ymax.
+        #[arg(long)]
+        truth: PathBuf,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+#[derive(Args, Debug)]
+pub struct VegDetectArgs {
+    /// The image (anything GDAL reads).
+    pub image: PathBuf,
+    /// Marked samples: .csv (pixel rectangles) or .geojson (polygons).
+    #[arg(long)]
+    pub samples: PathBuf,
+    /// Bands to analyse, 1-based (1 to 4), e.g. 3,2,1 or 1,2,3,4. Default: the first three.
+    #[arg(long, value_delimiter = ',')]
+    pub bands: Option<Vec<usize>>,
+    /// Percentiles LOW,HIGH stretched to 0..255 (default: none for 8-bit, 2,98 otherwise).
+    #[arg(long, value_name = "LOW,HIGH", value_parser = parse_percentiles)]
+    pub stretch: Option<[f64; 2]>,
+    /// Ground size of a pixel in metres, for images that are not georeferenced.
+    #[arg(long, allow_negative_numbers = true)]
+    pub pixel_size: Option<f64>,
+    /// Largest brightness standard deviation in a region (8-bit units).
+    #[arg(long, allow_negative_numbers = true)]
+    pub brightness_std: Option<f32>,
+    /// Largest chroma standard deviation in a region (8-bit units).
+    #[arg(long, allow_negative_numbers = true)]
+    pub chroma_std: Option<f32>,
+    /// Regions smaller than this (pixels) join their most similar neighbour.
+    #[arg(long)]
+    pub min_region: Option<u32>,
+    /// Side of the smallest split block, pixels (1, 2, 4, …, 64).
+    #[arg(long)]
+    pub min_block: Option<u32>,
+    /// Smallest window side (pixels) a region's signature covers.
+    #[arg(long)]
+    pub window: Option<u32>,
+    /// Nearest learnt signatures per class a region's distance averages.
+    #[arg(long)]
+    pub neighbours: Option<usize>,
+    /// Class of counter-examples.
+    #[arg(long)]
+    pub negative: Option<String>,
+    /// Crowns (fine imagery) or fill (coarse imagery); auto picks by pixel size.
+    #[arg(long, value_enum)]
+    pub mode: Option<ModeArg>,
+    /// Smallest distance between crown centres, metres.
+    #[arg(long, allow_negative_numbers = true)]
+    pub crown_spacing: Option<f64>,
+    /// Smallest crown radius kept, metres.
+    #[arg(long, allow_negative_numbers = true)]
+    pub crown_min_radius: Option<f64>,
+    /// Fill mode: objects per hectare.
+    #[arg(long, allow_negative_numbers = true)]
+    pub density: Option<f64>,
+    /// The database (semicolon CSV).
+    #[arg(long, short)]
+    pub out: PathBuf,
+    /// Also write the objects as a GeoPackage.
+    #[arg(long)]
+    pub gpkg: Option<PathBuf>,
+    /// Also write region and class labels as a GeoTIFF.
+    #[arg(long)]
+    pub labels: Option<PathBuf>,
+    /// Also write a PNG of regions and objects over the image.
+    #[arg(long)]
+    pub overlay: Option<PathBuf>,
+    /// Print a JSON report.
+    #[arg(long)]
+    pub json: bool,
+    /// Replace existing outputs.
+    #[arg(long)]
+    pub force: bool,
+}
+
+impl VegDetectArgs {
+    /// The flags given, over the defaults.
+    pub fn options(&self) -> VegOptions {
+        let mut o = VegOptions::default();
+        macro_rules! set {
+            ($($flag:ident => $field:ident),*) => {$(
+                if let Some(v) = self.$flag.clone() { o.$field = v; }
+            )*};
+        }
+        set!(brightness_std => brightness_std, chroma_std => chroma_std,
+             min_region => min_region_px, min_block => min_block_px, window => window_px, neighbours => neighbours, negative => negative_class,
+             crown_spacing => crown_spacing_m,
+             crown_min_radius => crown_min_radius_m, density => density_per_ha);
+        if let Some(mode) = self.mode {
+            o.mode = mode.into();
+        }
+        o
+    }
+}
+
+/// Crowns (fine imagery) or fill (coarse imagery).
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum ModeArg {
+    /// Crowns when a pixel is at most 1 m, else fill.
+    Auto,
+    Crowns,
+    Fill,
+}
+
+impl From<ModeArg> for Mode {
+    fn from(m: ModeArg) -> Mode {
+        match m {
+            ModeArg::Auto => Mode::Auto,
+            ModeArg::Crowns => Mode::Crowns,
+            ModeArg::Fill => Mode::Fill,
+        }
+    }
+}
+
+/// Run `veg detect` or `veg eval`.
+pub fn run(command: VegCommand) -> Result<()> {
+    match command {
+        VegCommand::Detect(a) => detect(a),
+        VegCommand::Eval {
+            detections,
+            truth,
+            json,
+        } => score(&detections, &truth, json),
+    }
+}
+
+fn detect(a: Box<VegDetectArgs>) -> Result<()> {
+    let outputs = std::iter::once(&a.out)
+        .chain(a.gpkg.iter())
+        .chain(a.labels.iter())
+        .chain(a.overlay.iter());
+    for path in outputs {
+        output::check(path, a.force)?;
+    }
+    let image = veg_io::read_image(&a.image, a.bands.as_deref(), a.stretch, a.pixel_size)?;
+    let samples = samples::read_file(
+        &a.samples,
+        image.geotransform,
+        image.image.width,
+        image.image.height,
+    )?;
+    let options = a.options();
+    let extraction = pipeline::extract(&image, &samples, &options)
+        .with_context(|| format!("{}", a.image.display()))?;
+    output::write_atomic(&a.out, db::to_csv(&extraction.objects).as_bytes())?;
+    if let Some(path) = &a.gpkg {
+        veg_io::write_gpkg(path, &extraction.objects, &image.crs_wkt)?;
+    }
+    if let Some(path) = &a.labels {
+        veg_io::write_labels(path, &image, &extraction)?;
+    }
+    if let Some(path) = &a.overlay {
+        let rgba = pipeline::overlay(&image, &extraction, &options.negative_class);
+        let png = encode_rgba(&rgba, image.image.width, image.image.height)?;
+        output::write_atomic(path, &png)?;
+    }
+    let r = &extraction.report;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(r)?);
+    } else {
+        println!(
+            "{}: {}×{} px of {:.2} m, {} leaves → {} regions, {} objects ({:.0} ms split-and-merge, {:.0} ms classify, {:.0} ms place)",
+            a.image.display(), r.width, r.height, r.pixel_m, r.leaves, r.regions, r.objects,
+            r.segment_ms, r.classify_ms, r.detect_ms
+        );
+        for c in &r.classes {
+            println!(
+                "  {:<12} {:>10} signatures {:>4}  regions {:>7}  pixels {:>10}  objects {:>7}",
+                c.class,
+                if c.vegetation {
+                    "vegetation"
+                } else {
+                    "negative"
+                },
+                c.signatures,
+                c.regions,
+                c.pixels,
+                c.objects
+            );
+        }
+    }
+    Ok(())
+}
+
+fn score(detections: &Path, truth: &Path, json: bool) -> Result<()> {
+    let read = |p: &Path| {
+        std::fs::read_to_string(p).with_context(|| format!("{}: cannot read", p.display()))
+    };
+    let objects = db::from_csv(&read(detections)?)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", detections.display()))?;
+    let text = read(truth)?;
+    let boxes = if text.trim_start().starts_with('<') {
+        eval::parse_voc(&text)
+    } else {
+        eval::parse_box_csv(&text)
+    }
+    .map_err(|e| anyhow::anyhow!("{}: {e}", truth.display()))?;
+    let points: Vec<(f64, f64, f32)> = objects.iter().map(|o| (o.x, o.y, o.score)).collect();
+    let e = eval::evaluate(&points, &boxes);
+    if json {
+        println!("{}", serde_json::to_string_pretty(&e)?);
+    } else {
+        println!(
+            "precision {:.3}  recall {:.3}  F1 {:.3}  (TP {}, FP {}, FN {}; {} detections, {} boxes)",
+            e.precision, e.recall, e.f1, e.true_positives, e.false_positives,
+            e.false_negatives, e.detections, e.truth
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,62 @@
+//! Every file a command writes goes through here: outputs are checked
+//! before any work (an existing file is kept unless `--force`, a missing
+//! folder is named), and written as `.NAME.partial` then renamed, so a
+//! reader never sees half a file.
+
+use anyhow::{bail, Context, Result};
+use std::path::{Path, PathBuf};
+
+/// Refuse to replace `out` without `force`, and name a missing output folder,
+/// before any work is done.
+pub fn check(out: &Path, force: bool) -> Result<()> {
+    if out.exists() && !force {
+        bail!(
+            "{}: already exists (pass --force to replace it)",
+            out.display()
+        );
+    }
+    check_folder(out)
+}
+
+/// Name a missing output folder before any work is done.
+pub fn check_folder(out: &Path) -> Result<()> {
+    let parent = out
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    if !parent.is_dir() {
+        bail!(
+            "{}: cannot write, folder {} does not exist",
+            out.display(),
+            parent.display()
+        );
+    }
+    Ok(())
+}
+
+/// Write `bytes` to `path` through a partial file renamed into place.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let partial = partial_path(path);
+    let written = std::fs::write(&partial, bytes)
+        .with_context(|| format!("{}: cannot write", path.display()))
+        .and_then(|()| move_into_place(&partial, path));
+    if written.is_err() {
+        let _ = std::fs::remove_file(&partial);
+    }
+    written
+}
+
+/// Rename a finished partial file onto `path`.
+pub fn move_into_place(partial: &Path, path: &Path) -> Result<()> {
+    std::fs::rename(partial, path)
+        .with_context(|| format!("{}: cannot move into place", path.display()))
+}
+
+/// `DIR/.NAME.partial` beside `path`.
+pub fn partial_path(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_string())
+        .unwrap_or_default();
+    path.with_file_name(format!(".{name}.partial"))
+}

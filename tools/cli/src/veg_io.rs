@@ -1,0 +1,171 @@
+//! Vegetation files through GDAL: reading the analysed bands of any raster
+//! (stretched to 8 bits), and writing the objects as a GeoPackage and the
+//! labels as a GeoTIFF. The extraction itself is
+//! [`relevo_core::veg::pipeline`].
+
+use crate::ingest::crs;
+use crate::ingest::gdalio::{self, GridSpec};
+use crate::output;
+use anyhow::{anyhow, bail, Result};
+use gdal::raster::GdalDataType;
+use gdal::spatial_ref::SpatialRef;
+use gdal::vector::{Feature, FieldValue, Geometry, LayerAccess, LayerOptions, OGRFieldType};
+use gdal::DriverManager;
+use relevo_core::geo::GeoTransform;
+use relevo_core::raster::stretch::{stretch_or_default, to_interleaved_u8};
+use relevo_core::raster::Raster;
+use relevo_core::veg::db::VegObject;
+use relevo_core::veg::pipeline::{Extraction, VegImage};
+use relevo_core::veg::Image;
+use std::path::Path;
+
+/// Read `bands` (1-based) of `path`; 8-bit data is kept, deeper data is
+/// stretched between the `stretch` percentiles (default 2, 98) to 8 bits.
+/// `pixel_m` sets the pixel size of an image that is not georeferenced.
+pub fn read_image(
+    path: &Path,
+    bands: Option<&[usize]>,
+    stretch: Option<[f64; 2]>,
+    pixel_m: Option<f64>,
+) -> Result<VegImage> {
+    let source = gdalio::open(path)?;
+    let bands: Vec<usize> = match bands {
+        Some(b) => b.to_vec(),
+        None => (1..=source.bands.min(3)).collect(),
+    };
+    if bands.is_empty() || bands.len() > relevo_core::veg::MAX_BANDS {
+        bail!(
+            "{}: choose 1 to {} bands, got {}",
+            path.display(),
+            relevo_core::veg::MAX_BANDS,
+            bands.len()
+        );
+    }
+    if let Some(&b) = bands.iter().find(|&&b| b == 0 || b > source.bands) {
+        bail!(
+            "{}: has {} band(s), no band {b}",
+            path.display(),
+            source.bands
+        );
+    }
+    let selected = source.read_window(
+        0,
+        0,
+        source.width,
+        source.height,
+        Some(&bands),
+        source.nodata,
+    )?;
+    let stretch = stretch_or_default(stretch, source.band_type == GdalDataType::UInt8);
+    let pixels = to_interleaved_u8(&selected, stretch);
+    let mask = selected.valid_mask();
+    let valid = mask.contains(&false).then_some(mask);
+    let image = Image::new(selected.width, selected.height, bands.len(), pixels)
+        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    let crs_wkt = match &source.srs {
+        Some(srs) => crs::to_wkt(srs)?,
+        None => String::new(),
+    };
+    let ground = source.geotransform.map(|g| {
+        let (w, h) = g.cell_size();
+        let cell = w.abs().min(h.abs());
+        // Geographic CRS: degrees to metres along a meridian.
+        match &source.srs {
+            Some(srs) if srs.is_geographic() => cell * 111_320.0,
+            _ => cell,
+        }
+    });
+    let pixel_m = match (pixel_m, ground) {
+        (Some(p), _) if p.is_finite() && p > 0.0 => p,
+        (Some(p), _) => bail!("--pixel-size must be positive, got {p}"),
+        (None, Some(g)) => g,
+        (None, None) => {
+            tracing::warn!(
+                "{}: not georeferenced; taking 1 m pixels (set --pixel-size)",
+                path.display()
+            );
+            1.0
+        }
+    };
+    Ok(VegImage {
+        image,
+        crs_wkt,
+        geotransform: source.geotransform,
+        pixel_m,
+        valid,
+    })
+}
+
+/// Write the objects as points of a GeoPackage layer `vegetation` (QGIS,
+/// GDAL and most GIS open it), through a partial file renamed into place.
+pub fn write_gpkg(path: &Path, objects: &[VegObject], crs_wkt: &str) -> Result<()> {
+    let partial = output::partial_path(path).with_extension("gpkg");
+    let _ = std::fs::remove_file(&partial);
+    // Fixed timestamps make the file depend on its content only.
+    gdal::config::set_config_option("OGR_CURRENT_DATE", "2000-01-01T00:00:00.000Z")?;
+    let result = (|| -> Result<()> {
+        let driver = DriverManager::get_driver_by_name("GPKG")?;
+        let mut dataset = driver
+            .create_vector_only(&partial)
+            .map_err(|e| anyhow!("{}: cannot create ({e})", path.display()))?;
+        let srs = if crs_wkt.is_empty() {
+            None
+        } else {
+            Some(SpatialRef::from_wkt(crs_wkt)?)
+        };
+        let mut txn = dataset.start_transaction()?;
+        {
+            let layer = txn.create_layer(LayerOptions {
+                name: "vegetation",
+                srs: srs.as_ref(),
+                ty: gdal::vector::OGRwkbGeometryType::wkbPoint,
+                options: None,
+            })?;
+            layer.create_defn_fields(&[
+                ("id", OGRFieldType::OFTInteger64),
+                ("class", OGRFieldType::OFTString),
+                ("size", OGRFieldType::OFTReal),
+                ("score", OGRFieldType::OFTReal),
+            ])?;
+            for o in objects {
+                let mut feature = Feature::new(layer.defn())?;
+                let mut point = Geometry::empty(gdal::vector::OGRwkbGeometryType::wkbPoint)?;
+                point.add_point_2d((o.x, o.y));
+                feature.set_geometry(point)?;
+                feature.set_field(0, &FieldValue::Integer64Value(o.id as i64))?;
+                feature.set_field(1, &FieldValue::StringValue(o.class.clone()))?;
+                feature.set_field(2, &FieldValue::RealValue(o.size))?;
+                feature.set_field(3, &FieldValue::RealValue(o.score as f64))?;
+                feature.create(&layer)?;
+            }
+        }
+        txn.commit()?;
+        Ok(())
+    })();
+    gdal::config::clear_config_option("OGR_CURRENT_DATE")?;
+    let result = result.and_then(|()| output::move_into_place(&partial, path));
+    if result.is_err() {
+        let _ = std::fs::remove_file(&partial);
+    }
+    result
+}
+
+/// Write the labels as a two-band UInt32 GeoTIFF: band 1 the region of each
+/// pixel (from 1), band 2 its class (1-based in the samples' order).
+pub fn write_labels(path: &Path, image: &VegImage, extraction: &Extraction) -> Result<()> {
+    let seg = &extraction.segmentation;
+    let regions = seg.labels.iter().map(|&r| r as f64 + 1.0);
+    let classes = seg
+        .labels
+        .iter()
+        .map(|&r| extraction.labels[r as usize].class as f64 + 1.0);
+    let data: Vec<f64> = regions.chain(classes).collect();
+    let raster = Raster::from_data(seg.width, seg.height, 2, data);
+    let grid = GridSpec {
+        crs_wkt: image.crs_wkt.clone(),
+        geotransform: image.geotransform.unwrap_or(GeoTransform::IDENTITY),
+        width: seg.width,
+        height: seg.height,
+    };
+    gdalio::write_geotiff(path, &raster, &grid, GdalDataType::UInt32, None)
+}

@@ -1,0 +1,60 @@
+//! The artifacts Relevo writes into a bundle, each named once: the key it
+//! has in the manifest and its file inside the bundle directory.
+
+/// An artifact's manifest key and file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ArtifactName {
+    /// Key in `manifest.artifacts` (or `manifest.exports`).
+    pub key: &'static str,
+    /// Path relative to the bundle directory.
+    pub file: &'static str,
+}
+
+/// Heights in metres, f32, `[side, side]`.
+pub const HEIGHT: ArtifactName = ArtifactName {
+    key: "height",
+    file: "height.f32",
+};
+/// 1 where the grid has data, 0 on padding and voids, u8, `[side, side]`.
+pub const MASK: ArtifactName = ArtifactName {
+    key: "mask",
+    file: "mask.u8",
+};
+/// Lindstrom–Pascucci `[error, radius]` per vertex, f32, `[side, side, 2]`.
+pub const LP: ArtifactName = ArtifactName {
+    key: "lp",
+    file: "lp.f32x2",
+};
+/// The drape image, RGBA8, `[height, width, 4]`.
+pub const COLOR: ArtifactName = ArtifactName {
+    key: "color",
+    file: "color.rgba8",
+};
+/// The vegetation database (`id;x;y;class;size;score`).
+pub const VEGETATION: ArtifactName = ArtifactName {
+    key: "vegetation",
+    file: "vegetation.csv",
+};
+
+/// Folder of the interoperability exports.
+pub const EXPORTS_DIR: &str = "exports";
+/// Heights as a GeoTIFF (no-data outside the mask).
+pub const HEIGHT_GEOTIFF: ArtifactName = ArtifactName {
+    key: "height_geotiff",
+    file: "exports/height.tif",
+};
+/// The drape as a four-band GeoTIFF.
+pub const COLOR_GEOTIFF: ArtifactName = ArtifactName {
+    key: "color_geotiff",
+    file: "exports/color.tif",
+};
+/// Vegetation objects as GeoPackage points.
+pub const VEGETATION_GEOPACKAGE: ArtifactName = ArtifactName {
+    key: "vegetation_geopackage",
+    file: "exports/vegetation.gpkg",
+};
+/// Region and class labels of the drape as a two-band GeoTIFF.
+pub const VEGETATION_LABELS: ArtifactName = ArtifactName {
+    key: "vegetation_labels",
+    file: "exports/vegetation_labels.tif",
+};

@@ -1,0 +1,219 @@
+//! A bundle as something to look at: cameras given in world (CRS)
+//! coordinates, the text syntax both programs accept for them, and the
+//! raycast of a bundle. The conversions between world and terrain frame are
+//! [`TerrainFrame`]'s; everything here goes through them.
+
+use crate::bundle::Bundle;
+use crate::camera::Camera;
+use crate::geo::TerrainFrame;
+use crate::horizon::{render, Arithmetic, Band, Frame, Mode, RenderOptions, Terrain};
+use crate::{Error, Result};
+use glam::DVec3;
+
+/// A camera given in the bundle's world coordinates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct View {
+    /// Easting, northing (CRS units), height (metres).
+    pub eye: [f64; 3],
+    /// Degrees clockwise from north.
+    pub heading_deg: f64,
+    /// Projection-plane shift: the screen row, in pixels from the bottom,
+    /// of the horizon; `None` centres it.
+    pub incl_px: Option<f64>,
+    /// Horizontal field of view, degrees.
+    pub fov_x_deg: f64,
+    /// Image width and height, pixels.
+    pub size: [u32; 2],
+    /// Far plane in grid cells.
+    pub far_cells: f64,
+}
+
+/// The position and direction part of a camera, as typed on the command line
+/// and copied from the viewer: `X,Y,Z,HEADING[,INCL]`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CameraPose {
+    /// Easting, northing (CRS units), height (metres).
+    pub eye: [f64; 3],
+    /// Degrees clockwise from north.
+    pub heading_deg: f64,
+    /// Projection-plane shift in pixels from the bottom (see [`View`]).
+    pub incl_px: Option<f64>,
+}
+
+impl CameraPose {
+    /// Parse `X,Y,Z,HEADING[,INCL]`.
+    pub fn parse(text: &str) -> Result<CameraPose, String> {
+        let values: Vec<f64> = text
+            .split(',')
+            .map(|v| v.trim().parse::<f64>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| format!("{text:?}: expected numbers X,Y,Z,HEADING[,INCL]"))?;
+        Self::from_values(&values)
+    }
+
+    /// From the numbers `X, Y, Z, HEADING[, INCL]`.
+    pub fn from_values(values: &[f64]) -> Result<CameraPose, String> {
+        if !(4..=5).contains(&values.len()) {
+            return Err(format!(
+                "--camera takes X,Y,Z,HEADING[,INCL], got {} value(s)",
+                values.len()
+            ));
+        }
+        Ok(CameraPose {
+            eye: [values[0], values[1], values[2]],
+            heading_deg: values[3],
+            incl_px: values.get(4).copied(),
+        })
+    }
+}
+
+impl std::fmt::Display for CameraPose {
+    /// The same `X,Y,Z,HEADING[,INCL]` syntax [`CameraPose::parse`] reads.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let [x, y, z] = self.eye;
+        write!(f, "{x:.2},{y:.2},{z:.2},{:.2}", self.heading_deg)?;
+        if let Some(incl) = self.incl_px {
+            write!(f, ",{incl:.1}")?;
+        }
+        Ok(())
+    }
+}
+
+/// The camera of `view` in the terrain frame of `frame` (near plane one
+/// cell ahead).
+pub fn camera(frame: &TerrainFrame, view: &View) -> Result<Camera> {
+    let (x, y) = frame
+        .terrain_from_world(view.eye[0], view.eye[1])
+        .ok_or_else(|| Error::Input("the bundle's geotransform cannot be inverted".into()))?;
+    let cell = frame.cell_size_m;
+    Ok(Camera {
+        position: DVec3::new(x, y, view.eye[2]),
+        heading_deg: view.heading_deg,
+        pitch_deg: 0.0,
+        incl_px: view.incl_px.unwrap_or(view.size[1] as f64 / 2.0),
+        fov_x_deg: view.fov_x_deg,
+        width: view.size[0],
+        height: view.size[1],
+        near_m: cell,
+        far_m: view.far_cells * cell,
+    })
+}
+
+/// Parse an image size `WIDTHxHEIGHT`, each 1 to 16384 pixels.
+pub fn parse_size(text: &str) -> Result<[u32; 2], String> {
+    let (w, h) = text
+        .split_once('x')
+        .ok_or_else(|| format!("{text:?}: expected WIDTHxHEIGHT"))?;
+    let parse = |v: &str| v.parse::<u32>().ok().filter(|&v| (1..=16384).contains(&v));
+    match (parse(w), parse(h)) {
+        (Some(w), Some(h)) => Ok([w, h]),
+        _ => Err(format!("{text:?}: expected WIDTHxHEIGHT, each 1..=16384")),
+    }
+}
+
+/// Parse `UNTIL_M:SLICES_PER_CELL[:sub]` bands, comma-separated, e.g.
+/// `3000:4:sub,10000:2:sub,inf:1`.
+pub fn parse_bands(text: &str) -> Result<Vec<Band>, String> {
+    text.split(',')
+        .map(|band| {
+            let parts: Vec<&str> = band.split(':').collect();
+            let bad = || format!("{band:?}: expected UNTIL_M:SLICES_PER_CELL[:sub]");
+            if !(2..=3).contains(&parts.len()) {
+                return Err(bad());
+            }
+            let until_m = if parts[0] == "inf" {
+                f64::INFINITY
+            } else {
+                parts[0].parse().map_err(|_| bad())?
+            };
+            let slices_per_cell: f64 = parts[1].parse().map_err(|_| bad())?;
+            if !(slices_per_cell > 0.0 && slices_per_cell <= 64.0) {
+                return Err(format!("{band:?}: slices per cell must be in (0, 64]"));
+            }
+            let subvoxel = match parts.get(2) {
+                None => false,
+                Some(&"sub") => true,
+                Some(_) => return Err(bad()),
+            };
+            Ok(Band {
+                until_m,
+                slices_per_cell,
+                subvoxel,
+            })
+        })
+        .collect()
+}
+
+/// Raycast options from the command-line switches.
+pub fn render_options(
+    mode: Mode,
+    fixed: bool,
+    bands: Option<Vec<Band>>,
+    prefilter: bool,
+) -> Result<RenderOptions> {
+    let mut o = RenderOptions {
+        mode,
+        prefilter,
+        ..Default::default()
+    };
+    if fixed {
+        o.arithmetic = Arithmetic::Fixed;
+    }
+    if let Some(b) = bands {
+        if b.is_empty() {
+            return Err(Error::Input("--bands needs at least one band".into()));
+        }
+        o.bands = b;
+    }
+    Ok(o)
+}
+
+/// Raycast `bundle` for `view`, with a baked hillshade (sun azimuth and
+/// elevation in degrees) when asked.
+pub fn render_bundle(
+    bundle: &Bundle,
+    view: &View,
+    options: &RenderOptions,
+    hillshade: Option<[f64; 2]>,
+) -> Result<Frame> {
+    let frame = bundle.frame();
+    let heights = bundle.heights()?;
+    let mask = bundle.mask()?;
+    let color = match bundle.drape()? {
+        Some(drape) => drape.color_source(&frame),
+        None => None,
+    };
+    let mut terrain = Terrain::new(frame.side, frame.cell_size_m, &heights, &mask, color);
+    if let Some([az, el]) = hillshade {
+        terrain = terrain.with_hillshade(az, el);
+    }
+    let cam = camera(&frame, view)?;
+    Ok(render(&terrain, &cam, options))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn camera_strings_round_trip() {
+        let pose = CameraPose::parse("289000,9111000,400,40,420").unwrap();
+        assert_eq!(pose.eye, [289000.0, 9111000.0, 400.0]);
+        assert_eq!(pose.incl_px, Some(420.0));
+        assert_eq!(CameraPose::parse(&pose.to_string()).unwrap(), pose);
+        assert!(CameraPose::parse("1,2,3").is_err());
+        assert!(CameraPose::parse("1,2,x,4").is_err());
+    }
+
+    #[test]
+    fn bands_parse_and_refuse_nonsense() {
+        let b = parse_bands("3000:4:sub,inf:1").unwrap();
+        assert_eq!(b.len(), 2);
+        assert!(b[0].subvoxel && b[1].until_m.is_infinite());
+        assert!(parse_bands("3000:0").is_err());
+        assert!(parse_bands("3000:4:super").is_err());
+        assert!(parse_bands("x:4").is_err());
+        assert_eq!(parse_size("960x540"), Ok([960, 540]));
+        assert!(parse_size("0x540").is_err() && parse_size("960").is_err());
+    }
+}
