@@ -538,7 +538,7 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
         let image = if side == 0 {
             crop.image.clone()
         } else {
-            mirror_tile(&crop.image, side)
+            mirror_tile(&crop.image, side)?
         };
         let (w, h) = (image.width, image.height);
         let mpx = (w * h) as f64 / 1e6;
@@ -634,7 +634,7 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
 
 /// A `side`×`side` image tiled from `image`, every other copy mirrored so
 /// that tiles join without seams.
-fn mirror_tile(image: &relevo_core::veg::Image, side: usize) -> relevo_core::veg::Image {
+fn mirror_tile(image: &relevo_core::veg::Image, side: usize) -> Result<relevo_core::veg::Image> {
     let (w, h, b) = (image.width, image.height, image.bands);
     let mut pixels = vec![0u8; side * side * b];
     for (y, row) in pixels.chunks_mut(side * b).enumerate() {
@@ -647,5 +647,5 @@ fn mirror_tile(image: &relevo_core::veg::Image, side: usize) -> relevo_core::veg
             row[x * b..(x + 1) * b].copy_from_slice(&image.pixels[at..at + b]);
         }
     }
-    relevo_core::veg::Image::new(side, side, b, pixels).expect("tiled image")
+    Ok(relevo_core::veg::Image::new(side, side, b, pixels)?)
 }

@@ -1,5 +1,7 @@
 //! Bad input: every case must fail with a message naming the file and the
 //! problem, exit non-zero, and leave no output behind.
+// Test code: a failed unwrap is a failed test.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
 use common::*;

@@ -1,4 +1,6 @@
 //! The sample bundle: golden artifact hashes, determinism, atomic writes.
+// Test code: a failed unwrap is a failed test.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
 use common::*;

@@ -1,4 +1,6 @@
 //! End-to-end ingest on real tiles: stitching, reprojection and decoding.
+// Test code: a failed unwrap is a failed test.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
 use common::*;

@@ -1,5 +1,7 @@
 //! `relevo render` on real bundles: depth against the exact surface,
 //! snapshots with tolerance, bad arguments.
+// Test code: a failed unwrap is a failed test.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
 use common::*;
@@ -102,7 +104,7 @@ fn depth_of_real_terrain_matches_the_exact_surface() {
             let dv = depth[py * 240 + px];
             match (dv < 1.0, pick(&terrain, &cam, px as f64, py as f64)) {
                 (true, Some(s)) => {
-                    errors.push((distance_of_depth(&cam, dv as f64) - s).abs() / spacing)
+                    errors.push((distance_of_depth(&cam, dv as f64) - s).abs() / spacing);
                 }
                 (false, None) => {}
                 _ => disagree += 1,

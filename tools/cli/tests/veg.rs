@@ -1,6 +1,8 @@
 //! Vegetation extraction end to end on real imagery: accuracy against the
 //! hand-annotated crowns, the outputs (database, GeoPackage, labels), the
 //! Landsat fill mode, determinism and bad input.
+// Test code: a failed unwrap is a failed test.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
 

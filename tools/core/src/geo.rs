@@ -45,6 +45,22 @@ impl GeoTransform {
         self.0[2] == 0.0 && self.0[4] == 0.0 && self.0[1] > 0.0 && self.0[5] < 0.0
     }
 
+    /// When `self` and `other` are north-up grids with the same cells (to
+    /// 1e-9 relative) whose origins are a whole number of cells apart, the
+    /// (column, row) of `other`'s origin in `self`'s cells: copying cells
+    /// then places one grid on the other exactly.
+    pub fn whole_cell_offset(&self, other: &GeoTransform) -> Option<(i64, i64)> {
+        let (rx, ry) = other.cell_size();
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs());
+        if !self.is_north_up() || !close(self.0[1], rx) || !close(-self.0[5], ry) {
+            return None;
+        }
+        let dc = (other.0[0] - self.0[0]) / rx;
+        let dr = (self.0[3] - other.0[3]) / ry;
+        let whole = |v: f64| (v - v.round()).abs() < 1e-6;
+        (whole(dc) && whole(dr)).then(|| (dc.round() as i64, dr.round() as i64))
+    }
+
     /// Cell width and height in world units (positive).
     pub fn cell_size(&self) -> (f64, f64) {
         let t = &self.0;
@@ -172,6 +188,17 @@ mod tests {
         let (e, n) = frame.world_from_terrain(x, y);
         assert!((e - 289_000.25).abs() < 1e-6 && (n - 9_111_000.5).abs() < 1e-6);
         assert_eq!(frame.terrain_from_vertex(2.0, 128.0), (60.0, 0.0));
+    }
+
+    #[test]
+    fn whole_cell_offsets_only_between_aligned_grids() {
+        let src = GeoTransform::north_up(1000.0, 2000.0, 30.0, 30.0);
+        let window = GeoTransform::north_up(1090.0, 1940.0, 30.0, 30.0);
+        assert_eq!(src.whole_cell_offset(&window), Some((3, 2)));
+        let shifted = GeoTransform::north_up(1095.0, 1940.0, 30.0, 30.0);
+        assert_eq!(src.whole_cell_offset(&shifted), None);
+        let coarser = GeoTransform::north_up(1090.0, 1940.0, 60.0, 60.0);
+        assert_eq!(src.whole_cell_offset(&coarser), None);
     }
 
     #[test]

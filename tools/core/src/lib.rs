@@ -29,4 +29,6 @@ pub mod scene;
 pub mod veg;
 
 mod error;
+#[cfg(test)]
+mod testdata;
 pub use error::{Error, Result};

@@ -63,7 +63,7 @@ pub fn run(a: MeshArgs) -> Result<()> {
     let m = export::build(&bundle, a.max_error, a.keep_padding)?;
     match format {
         MeshFormat::Glb => {
-            output::write_atomic(&a.out, &export::to_glb(&m, &bundle.manifest.crs.wkt)?)?
+            output::write_atomic(&a.out, &export::to_glb(&m, &bundle.manifest.crs.wkt)?)?;
         }
         MeshFormat::Obj => {
             let stem = a

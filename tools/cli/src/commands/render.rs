@@ -42,7 +42,7 @@ pub struct RenderArgs {
     pub fixed: bool,
     /// Distance bands UNTIL_M:SLICES_PER_CELL[:sub], e.g. 3000:4:sub,inf:1 (sub = sub-voxel bilinear).
     #[arg(long, value_parser = scene::parse_bands)]
-    pub bands: Option<std::vec::Vec<Band>>,
+    pub bands: Option<Bands>,
     /// Sample prefiltered colour levels by slice footprint (anti-aliasing).
     #[arg(long)]
     pub prefilter: bool,
@@ -59,6 +59,10 @@ pub struct RenderArgs {
     #[arg(long)]
     pub force: bool,
 }
+
+/// One `--bands` value: the whole list (a plain `Vec` would make clap
+/// expect the flag once per band).
+type Bands = Vec<Band>;
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
 pub enum RenderMode {

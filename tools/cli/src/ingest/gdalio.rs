@@ -343,9 +343,7 @@ pub fn read_single_band(
             .map(super::crs::to_wkt)
             .transpose()?
             .unwrap_or_default(),
-        geotransform: source
-            .geotransform
-            .unwrap_or(relevo_core::geo::GeoTransform::IDENTITY),
+        geotransform: source.geotransform.unwrap_or(GeoTransform::IDENTITY),
         width: source.width,
         height: source.height,
     };

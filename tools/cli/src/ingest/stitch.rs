@@ -212,29 +212,18 @@ fn check_sources(sources: &[Source], opts: &StitchOptions) -> Result<()> {
 }
 
 /// The tile's values with its encoding decoded and no-data as NaN.
+/// The tile's heights (or bands) as the options ask: decoded from an RGB
+/// encoding, then the chosen bands.
 fn decode(source: &Source, opts: &StitchOptions) -> Result<Raster> {
     let raw = source.read(opts.src_nodata.or(source.nodata))?;
-    if opts.encoding == Encoding::Plain {
-        return Ok(raw);
-    }
-    let (r, g, b) = (raw.band(0), raw.band(1), raw.band(2));
-    let heights = (0..raw.cells())
-        .map(|i| opts.encoding.decode(r[i], g[i], b[i]))
-        .collect();
-    Ok(Raster::from_data(raw.width, raw.height, 1, heights))
+    Ok(opts.encoding.decode_raster(raw))
 }
 
 fn select_bands(raster: Raster, opts: &StitchOptions) -> Raster {
-    let Some(bands) = &opts.bands else {
-        return raster;
-    };
-    let data = bands
-        .iter()
-        .flat_map(|&b| raster.band(b - 1).iter().copied())
-        .collect();
-    let mut out = Raster::from_data(raster.width, raster.height, bands.len(), data);
-    out.unify_validity();
-    out
+    match &opts.bands {
+        Some(bands) => raster.select_bands(bands),
+        None => raster,
+    }
 }
 
 /// Plan the target grid and warp every tile onto its window of it.
@@ -258,14 +247,13 @@ fn warp_all(
         None => {
             let mut best = (f64::INFINITY, f64::INFINITY);
             for s in sources {
-                let geo = s.geotransform.expect("checked georeferenced");
+                let geo = georeferenced(s)?;
                 let (cx, cy) = if same_crs(s) {
                     geo.cell_size()
                 } else {
-                    let (from, to) = (
-                        s.srs.as_ref().expect("has CRS"),
-                        target.as_ref().expect("has CRS"),
-                    );
+                    let (Some(from), Some(to)) = (s.srs.as_ref(), target.as_ref()) else {
+                        bail!("{}: no CRS to reproject from", s.path.display());
+                    };
                     let cell = crs::detail_preserving_cell(&geo, s.width, s.height, from, to)
                         .with_context(|| s.path.display().to_string())?;
                     (cell, cell)
@@ -282,7 +270,7 @@ fn warp_all(
     let footprints: Vec<[f64; 4]> = sources
         .iter()
         .map(|s| {
-            let geo = s.geotransform.expect("checked georeferenced");
+            let geo = georeferenced(s)?;
             crs::footprint(&geo, s.width, s.height, s.srs.as_ref(), target.as_ref())
                 .with_context(|| s.path.display().to_string())
         })
@@ -317,7 +305,7 @@ fn warp_all(
             // Align to the first tile's cell lines when it already lies on the
             // target grid, so aligned tiles are copied without resampling;
             // otherwise to multiples of the resolution.
-            let geo = first.geotransform.expect("checked georeferenced");
+            let geo = georeferenced(first)?;
             let (anchor_x, anchor_y) =
                 if same_crs(first) && geo.is_north_up() && geo.cell_size() == (rx, ry) {
                     (geo.0[0], geo.0[3])
@@ -388,7 +376,7 @@ fn warp_all(
             }
         } else {
             let decoded = decode(s, opts)?;
-            let geo = s.geotransform.expect("checked georeferenced");
+            let geo = georeferenced(s)?;
             let mem = gdalio::mem_dataset(&decoded, &geo, s.srs.as_ref())?;
             gdalio::warp(&mem, &s.path, &window, opts.resampling, None)?
         };
@@ -411,15 +399,9 @@ fn warp_all(
 /// source cells: every kernel then reduces to copying cells.
 fn aligned_offset(source: &Source, window: &GridSpec, same_crs: bool) -> Option<(i64, i64)> {
     let geo = source.geotransform?;
-    let (rx, ry) = window.geotransform.cell_size();
-    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs());
-    if !same_crs || !geo.is_north_up() || !close(geo.0[1], rx) || !close(-geo.0[5], ry) {
-        return None;
-    }
-    let dc = (window.geotransform.0[0] - geo.0[0]) / rx;
-    let dr = (geo.0[3] - window.geotransform.0[3]) / ry;
-    let whole = |v: f64| (v - v.round()).abs() < 1e-6;
-    (whole(dc) && whole(dr)).then(|| (dc.round() as i64, dr.round() as i64))
+    same_crs
+        .then(|| geo.whole_cell_offset(&window.geotransform))
+        .flatten()
 }
 
 /// Fill the window from the source cells it overlaps, no-data elsewhere.
@@ -440,17 +422,16 @@ fn copy_aligned(
     }
     let (w, h) = ((c1 - c0) as usize, (r1 - r0) as usize);
     let part = source.read_window(c0 as usize, r0 as usize, w, h, None, nodata)?;
-    let (oc, or) = ((c0 - dc) as usize, (r0 - dr) as usize);
-    for b in 0..source.bands {
-        let src = part.band(b);
-        let dst = out.band_mut(b);
-        for r in 0..h {
-            let at = (or + r) * window.width + oc;
-            dst[at..at + w].copy_from_slice(&src[r * w..(r + 1) * w]);
-        }
-    }
+    out.paste(&part, (c0 - dc) as usize, (r0 - dr) as usize);
     out.unify_validity();
     Ok(out)
+}
+
+/// The geotransform of a source that [`check_sources`] found georeferenced.
+fn georeferenced(source: &Source) -> Result<GeoTransform> {
+    source
+        .geotransform
+        .with_context(|| format!("{}: not georeferenced", source.path.display()))
 }
 
 fn file_name(path: &Path) -> String {

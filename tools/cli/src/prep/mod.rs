@@ -261,20 +261,13 @@ fn stage_vegetation(b: &mut Build) -> Result<()> {
     };
     let (mosaic, _) = b.color.as_ref().context("drape stage did not run")?;
     let grid = &mosaic.grid;
-    let pixels: Vec<u8> = b
-        .rgba
-        .chunks_exact(4)
-        .flat_map(|p| [p[0], p[1], p[2]])
-        .collect();
-    let (cell_w, cell_h) = grid.geotransform.cell_size();
-    let valid: Vec<bool> = b.rgba.chunks_exact(4).map(|p| p[3] == 255).collect();
-    let image = VegImage {
-        image: relevo_core::veg::Image::new(grid.width, grid.height, 3, pixels)?,
-        crs_wkt: grid.crs_wkt.clone(),
-        geotransform: Some(grid.geotransform),
-        pixel_m: cell_w.abs().min(cell_h.abs()),
-        valid: valid.iter().any(|v| !v).then_some(valid),
-    };
+    let image = VegImage::from_drape(
+        &b.rgba,
+        grid.width,
+        grid.height,
+        grid.geotransform,
+        &grid.crs_wkt,
+    )?;
 
     let first = gdalio::open(&image_section.files[0])?;
     let Some(file_geo) = first.geotransform else {

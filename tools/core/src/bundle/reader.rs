@@ -194,7 +194,7 @@ impl Bundle {
         let artifact = self.artifact(name)?;
         let path = self.dir.join(&artifact.file);
         let element = match artifact.dtype.size() {
-            Some(e) if std::mem::size_of::<T>() % e == 0 => e,
+            Some(e) if size_of::<T>() % e == 0 => e,
             _ => {
                 return Err(Error::invalid(
                     &path,
@@ -219,22 +219,123 @@ impl Bundle {
                 ),
             ));
         }
-        if len as usize % std::mem::size_of::<T>() != 0 {
+        if len as usize % size_of::<T>() != 0 {
             return Err(Error::invalid(
                 &path,
                 format!("{len} bytes do not divide into elements of this type"),
             ));
         }
-        // SAFETY: the map is read-only; a bundle is not modified while read.
         let map = if len == 0 {
             None
         } else {
-            Some(unsafe { Mmap::map(&file) }.map_err(|e| Error::io(&path, e))?)
+            // SAFETY: the map is read-only; a bundle is not modified while read.
+            let map = unsafe { Mmap::map(&file) };
+            Some(map.map_err(|e| Error::io(&path, e))?)
         };
         Ok(Array {
             map,
             shape: artifact.shape.clone(),
             _element: PhantomData,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bundle::{validate, BundleWriter, Crs, Dtype, GridInfo};
+    use crate::geo::GeoTransform;
+    use crate::testdata;
+    use std::collections::BTreeMap;
+
+    /// A bundle of the Fuji crop written through [`BundleWriter`] and read
+    /// back through the typed accessors: same arrays, no copy of the
+    /// hierarchy, valid, and refused when an array's shape disagrees.
+    #[test]
+    fn bundles_round_trip_through_writer_and_reader() {
+        let dem = testdata::dem("fuji_257.f32");
+        let side = dem.side;
+        let hierarchy = Hierarchy::compute(&dem.heights, side, dem.cell_size_m);
+        let mask = vec![1u8; side * side];
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("fuji.relevo");
+        let writer = BundleWriter::create(&target, false).unwrap();
+        let mut artifacts = BTreeMap::new();
+        let sq = [side, side];
+        artifacts.insert(
+            names::HEIGHT.key.to_string(),
+            writer
+                .write_array(names::HEIGHT.file, Dtype::F32, &sq, &dem.heights)
+                .unwrap(),
+        );
+        artifacts.insert(
+            names::MASK.key.to_string(),
+            writer
+                .write_array(names::MASK.file, Dtype::U8, &sq, &mask)
+                .unwrap(),
+        );
+        let pairs: &[f32] = bytemuck::cast_slice(&hierarchy.error_radius);
+        artifacts.insert(
+            names::LP.key.to_string(),
+            writer
+                .write_array(names::LP.file, Dtype::F32, &[side, side, 2], pairs)
+                .unwrap(),
+        );
+        let lo = dem.heights.iter().copied().fold(f32::MAX, f32::min);
+        let hi = dem.heights.iter().copied().fold(f32::MIN, f32::max);
+        let geotransform = GeoTransform::north_up(0.0, side as f64 * 30.0, 30.0, 30.0);
+        let manifest = Manifest {
+            format: FORMAT.into(),
+            format_version: FORMAT_VERSION,
+            region: "fuji".into(),
+            tool_version: "test".into(),
+            crs: Crs {
+                wkt: String::new(),
+                epsg: None,
+            },
+            grid: GridInfo {
+                side,
+                geotransform,
+                cell_size_m: 30.0,
+                z_scale: 1.0,
+                valid_extent: geotransform.bounds(side, side),
+                height_range_m: [lo, hi],
+                valid_vertices: side * side,
+            },
+            color: None,
+            inputs: Vec::new(),
+            parameters: BTreeMap::new(),
+            artifacts,
+            exports: BTreeMap::new(),
+            timings: Vec::new(),
+        };
+        writer.commit(&manifest).unwrap();
+        assert!(!dir.path().join("fuji.relevo.tmp").exists());
+
+        let bundle = Bundle::open(&target).unwrap();
+        assert_eq!(bundle.manifest, manifest);
+        assert_eq!(&bundle.heights().unwrap()[..], &dem.heights[..]);
+        assert_eq!(&bundle.mask().unwrap()[..], &mask[..]);
+        let lp = bundle.lp().unwrap();
+        let view = lp.hierarchy();
+        assert!(matches!(view.error_radius, std::borrow::Cow::Borrowed(_)));
+        assert_eq!(view, hierarchy);
+        assert!(bundle.drape().unwrap().is_none());
+        assert!(bundle.vegetation().unwrap().is_none());
+        assert_eq!(bundle.frame().world_origin(), (15.0, 15.0));
+        assert_eq!(validate(&bundle), Vec::<String>::new());
+
+        // A manifest whose side disagrees with the arrays is refused by name.
+        let mut wrong = bundle.clone();
+        wrong.manifest.grid.side = 129;
+        let message = wrong
+            .heights()
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            message.contains("height.f32") && message.contains("[257, 257]"),
+            "{message}"
+        );
     }
 }

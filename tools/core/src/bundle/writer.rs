@@ -52,11 +52,7 @@ impl BundleWriter {
     ) -> Result<Artifact> {
         let elements: usize = shape.iter().product();
         assert_eq!(elements, data.len(), "{file}: shape does not match data");
-        assert_eq!(
-            dtype.size(),
-            Some(std::mem::size_of::<T>()),
-            "{file}: dtype"
-        );
+        assert_eq!(dtype.size(), Some(size_of::<T>()), "{file}: dtype");
         // Every target Relevo builds for is little-endian; refuse others.
         const { assert!(cfg!(target_endian = "little")) };
         let bytes: &[u8] = bytemuck::cast_slice(data);

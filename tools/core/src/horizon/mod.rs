@@ -277,10 +277,10 @@ impl Renderer {
                 let mut out = ColumnOut { colour, depth };
                 match opts.arithmetic {
                     Arithmetic::Float => {
-                        march_float(terrain, slices, eye, *dir, camera.incl_px, sky, &mut out)
+                        march_float(terrain, slices, eye, *dir, camera.incl_px, sky, &mut out);
                     }
                     Arithmetic::Fixed => {
-                        march_fixed(terrain, slices, eye, *dir, camera.incl_px, sky, &mut out)
+                        march_fixed(terrain, slices, eye, *dir, camera.incl_px, sky, &mut out);
                     }
                 }
             });
@@ -614,6 +614,80 @@ mod tests {
             median <= 1.0 && p95 <= 2.0,
             "median {median}, 95th percentile {p95} slice spacings"
         );
+    }
+
+    #[test]
+    fn depth_of_real_dems_matches_the_exact_surface() {
+        // From the south-west quarter of each crop looking north-east, 150 m
+        // above its highest point, the horizon three quarters up the screen.
+        for dem in [
+            crate::testdata::dem("srtm_ref_257.f32"),
+            crate::testdata::dem("copernicus_grenoble_257.f32"),
+        ] {
+            let (side, cell) = (dem.side, dem.cell_size_m);
+            let extent = (side - 1) as f64 * cell;
+            let top = dem.heights.iter().copied().fold(f32::MIN, f32::max) as f64;
+            let mask = vec![1u8; side * side];
+            let terrain = Terrain::new(side, cell, &dem.heights, &mask, None);
+            let (w, h) = (240u32, 135u32);
+            let mut cam = camera(
+                w,
+                h,
+                [0.15 * extent, 0.1 * extent, top + 150.0],
+                35.0,
+                0.75 * h as f64,
+                1024.0 * cell,
+            );
+            cam.near_m = cell;
+            let opts = RenderOptions {
+                bands: vec![Band {
+                    until_m: f64::INFINITY,
+                    slices_per_cell: 8.0,
+                    subvoxel: true,
+                }],
+                ..Default::default()
+            };
+            let frame = render(&terrain, &cam, &opts);
+            let spacing = cell / 8.0;
+            let (mut errors, mut disagree) = (Vec::new(), 0);
+            for py in 0..h as usize {
+                for px in 0..w as usize {
+                    let d = frame.depth[py * w as usize + px];
+                    match (d < 1.0, pick(&terrain, &cam, px as f64, py as f64)) {
+                        (true, Some(exact)) => {
+                            errors
+                                .push((distance_of_depth(&cam, d as f64) - exact).abs() / spacing);
+                        }
+                        (false, None) => {}
+                        _ => disagree += 1,
+                    }
+                }
+            }
+            errors.sort_by(f64::total_cmp);
+            let (median, p95) = (errors[errors.len() / 2], errors[errors.len() * 95 / 100]);
+            let pixels = (w * h) as usize;
+            eprintln!(
+                "{}: depth vs exact surface median {median:.3}, p95 {p95:.3} slice spacings; \
+                 {disagree} of {pixels} pixels disagree on terrain/sky",
+                dem.name
+            );
+            assert!(
+                errors.len() > pixels / 2,
+                "{}: {} terrain pixels",
+                dem.name,
+                errors.len()
+            );
+            assert!(
+                median <= 1.0 && p95 <= 2.0,
+                "{}: median {median}, p95 {p95}",
+                dem.name
+            );
+            assert!(
+                disagree * 100 < pixels,
+                "{}: {disagree} pixels disagree",
+                dem.name
+            );
+        }
     }
 
     #[test]

@@ -66,8 +66,7 @@ impl ColorSource {
                 .map(|c| [c[0], c[1], c[2], c[3]])
                 .collect(),
         }];
-        while levels.last().is_some_and(|l| l.width > 1 || l.height > 1) {
-            let prev = levels.last().expect("non-empty");
+        while let Some(prev) = levels.last().filter(|l| l.width > 1 || l.height > 1) {
             let (w, h) = (prev.width.div_ceil(2), prev.height.div_ceil(2));
             let mut texels = Vec::with_capacity(w * h);
             for r in 0..h {

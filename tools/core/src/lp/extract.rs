@@ -103,3 +103,86 @@ pub fn mask_boundaries(mask: &[u8], side: usize) -> Vec<bool> {
     });
     flag
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testdata;
+
+    /// Twice the plan area of the mesh's triangles, in cells², and whether
+    /// any triangle touches a vertex where `touching` is true.
+    fn area2_and_touch(
+        mesh: &GridMesh,
+        side: usize,
+        touching: impl Fn(usize) -> bool,
+    ) -> (i64, bool) {
+        let mut area2 = 0i64;
+        let mut touched = false;
+        for t in &mesh.triangles {
+            let p = t
+                .map(|i| mesh.vertices[i as usize])
+                .map(|v| (v[0] as i64, v[1] as i64));
+            touched |= p
+                .iter()
+                .any(|&(c, r)| touching(r as usize * side + c as usize));
+            area2 += ((p[1].0 - p[0].0) * (p[2].1 - p[0].1)
+                - (p[1].1 - p[0].1) * (p[2].0 - p[0].0))
+                .abs();
+        }
+        (area2, touched)
+    }
+
+    #[test]
+    fn meshes_of_real_dems_tile_the_grid_and_leave_out_only_small_errors() {
+        for dem in testdata::dems() {
+            let side = dem.side;
+            let h = Hierarchy::compute(&dem.heights, side, dem.cell_size_m);
+            let mut previous = usize::MAX;
+            for max_error in [0.0, 1.0, 10.0, 50.0] {
+                let mesh = extract(&h, max_error, None);
+                let (area2, _) = area2_and_touch(&mesh, side, |_| false);
+                let what = format!("{} at {max_error} m", dem.name);
+                assert_eq!(area2, 2 * ((side - 1) * (side - 1)) as i64, "{what}");
+                let mut used = vec![false; side * side];
+                for v in &mesh.vertices {
+                    used[v[1] as usize * side + v[0] as usize] = true;
+                }
+                for (i, _) in used.iter().enumerate().filter(|(_, u)| !**u) {
+                    assert!(h.error(i) <= max_error, "{what}: vertex {i} left out");
+                }
+                if max_error == 0.0 {
+                    // Only vertices on planes (error exactly 0) may be left out.
+                    assert!(mesh.vertices.len() > side * side / 2, "{what}");
+                }
+                assert!(mesh.vertices.len() <= previous, "{what}: more vertices");
+                previous = mesh.vertices.len();
+            }
+        }
+    }
+
+    #[test]
+    fn a_mask_keeps_triangles_off_voids_and_covers_the_data() {
+        // Gironde's sea floor (below 0 m) as the void: an irregular real coast.
+        let dem = testdata::dem("gironde_257.f32");
+        let side = dem.side;
+        let h = Hierarchy::compute(&dem.heights, side, dem.cell_size_m);
+        let mask: Vec<u8> = dem.heights.iter().map(|&z| u8::from(z >= 0.0)).collect();
+        // Cells whose four corners all hold data: what the mesh must cover.
+        let full_cells = (0..side - 1)
+            .flat_map(|r| (0..side - 1).map(move |c| (c, r)))
+            .filter(|&(c, r)| {
+                [(c, r), (c + 1, r), (c, r + 1), (c + 1, r + 1)]
+                    .iter()
+                    .all(|&(c, r)| mask[r * side + c] == 1)
+            })
+            .count() as i64;
+        for max_error in [0.0, 2.0, 20.0] {
+            let mesh = extract(&h, max_error, Some(&mask));
+            let (area2, touched) = area2_and_touch(&mesh, side, |i| mask[i] == 0);
+            assert!(!touched, "a triangle touches the void at {max_error} m");
+            // Whole data cells are covered; half cells along the coast may be too.
+            assert!(area2 >= 2 * full_cells, "{area2} < {}", 2 * full_cells);
+            assert!(area2 > 0);
+        }
+    }
+}

@@ -235,6 +235,7 @@ struct SharedOut {
 // SAFETY: see the type's documentation; every access is to a distinct
 // element or to one no thread writes at that time.
 unsafe impl Send for SharedOut {}
+// SAFETY: as for `Send`: threads never touch the same element concurrently.
 unsafe impl Sync for SharedOut {}
 
 impl SharedOut {
@@ -248,13 +249,16 @@ impl SharedOut {
     /// No thread may be writing element `i`.
     unsafe fn get(&self, i: usize) -> [f32; 2] {
         assert!(i < self.len);
-        *self.ptr.add(i)
+        // SAFETY: `i` is in bounds and, by the caller's promise, not written now.
+        unsafe { *self.ptr.add(i) }
     }
     /// # Safety
     /// No other thread may be reading or writing element `i`.
     unsafe fn set(&self, i: usize, value: [f32; 2]) {
         assert!(i < self.len);
-        *self.ptr.add(i) = value;
+        // SAFETY: `i` is in bounds and, by the caller's promise, no other
+        // thread touches it now.
+        unsafe { *self.ptr.add(i) = value };
     }
 }
 
@@ -445,6 +449,20 @@ mod tests {
         assert_eq!(h.error(0), 0.0);
         let max = h.error_radius.iter().map(|e| e[0]).fold(0.0, f32::max);
         assert_eq!(h.error(32 * side + 32), max);
+    }
+
+    #[test]
+    fn nested_on_real_dems() {
+        for dem in crate::testdata::dems() {
+            let h = Hierarchy::compute(&dem.heights, dem.side, dem.cell_size_m);
+            assert_eq!(
+                h.nesting_violations(&dem.heights, 10),
+                Vec::<String>::new(),
+                "{}",
+                dem.name
+            );
+            assert!(h.error_radius.iter().any(|e| e[0] > 1.0), "{}", dem.name);
+        }
     }
 
     #[test]

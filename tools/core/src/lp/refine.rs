@@ -285,3 +285,307 @@ impl Refiner {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    //! Properties of the refined mesh on four real DEM crops: crack-free
+    //! strips closed under parents for random cameras, τ = 0 keeping every
+    //! vertex, culling keeping what is visible, geomorphing continuity.
+    use super::*;
+    use crate::camera::Camera;
+    use crate::lp::hierarchy::visit_bottom_up;
+    use crate::lp::terrain_position;
+    use crate::testdata::{self, Lcg};
+    use glam::DVec3;
+    use std::collections::HashMap;
+
+    struct Terrain {
+        name: &'static str,
+        heights: Vec<f32>,
+        h: Hierarchy<'static>,
+    }
+
+    /// The real DEM crops with their hierarchies.
+    fn terrains() -> Vec<Terrain> {
+        testdata::dems()
+            .into_iter()
+            .map(|d| Terrain {
+                name: d.name,
+                h: Hierarchy::compute(&d.heights, d.side, d.cell_size_m),
+                heights: d.heights,
+            })
+            .collect()
+    }
+
+    /// Cameras inside, above and beside the terrain, looking anywhere.
+    fn cameras(t: &Terrain, count: usize, seed: u64) -> Vec<Camera> {
+        let mut rng = Lcg(seed);
+        let extent = (t.h.side - 1) as f64 * t.h.cell_size_m;
+        let top = t.heights.iter().cloned().fold(f32::MIN, f32::max) as f64;
+        (0..count)
+            .map(|k| {
+                let (x, y) = match k % 3 {
+                    0 => (rng.next() * extent, rng.next() * extent), // over the terrain
+                    1 => (
+                        -0.5 * extent + rng.next() * 0.4 * extent,
+                        rng.next() * extent,
+                    ), // beside it
+                    _ => (rng.next() * extent, 1.1 * extent + rng.next() * extent),
+                };
+                let z = top + 50.0 + rng.next() * extent * 0.3 * (k % 2) as f64;
+                Camera {
+                    position: DVec3::new(x, y, z),
+                    heading_deg: rng.next() * 360.0,
+                    pitch_deg: -89.0 + rng.next() * 120.0,
+                    incl_px: 540.0,
+                    fov_x_deg: 30.0 + rng.next() * 60.0,
+                    width: 1920,
+                    height: 1080,
+                    near_m: 1.0,
+                    far_m: extent * 3.0,
+                }
+            })
+            .collect()
+    }
+
+    fn parents(side: usize) -> HashMap<usize, Vec<usize>> {
+        let mut map = HashMap::new();
+        visit_bottom_up(side, |d| {
+            map.insert(d.vertex, d.parents.iter().flatten().copied().collect());
+        });
+        map
+    }
+
+    /// Every edge used once lies on the grid border, every other edge twice,
+    /// and the triangles' areas add up to the whole grid.
+    fn assert_watertight(strip: &Strip, side: usize, what: &str) {
+        let mut edges: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut area2 = 0i64;
+        let xy = |v: u32| ((v as usize % side) as i64, (v as usize / side) as i64);
+        let mut orientation = 0i64;
+        for t in strip.triangles() {
+            let (a, b, c) = (xy(t[0]), xy(t[1]), xy(t[2]));
+            let cross = (b.0 - a.0) * (c.1 - a.1) - (b.1 - a.1) * (c.0 - a.0);
+            assert!(cross != 0, "{what}: flat triangle");
+            if orientation == 0 {
+                orientation = cross.signum();
+            }
+            assert_eq!(
+                cross.signum(),
+                orientation,
+                "{what}: triangles wound both ways"
+            );
+            area2 += cross.abs();
+            for (p, q) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+                *edges.entry((p.min(q), p.max(q))).or_default() += 1;
+            }
+        }
+        let m = (side - 1) as i64;
+        assert_eq!(
+            area2,
+            2 * m * m,
+            "{what}: triangles do not tile the grid exactly"
+        );
+        for ((p, q), n) in edges {
+            let (a, b) = (xy(p), xy(q));
+            let on_border =
+                (a.0 == b.0 && (a.0 == 0 || a.0 == m)) || (a.1 == b.1 && (a.1 == 0 || a.1 == m));
+            match n {
+                1 => assert!(on_border, "{what}: open edge {a:?}-{b:?} inside the grid"),
+                2 => {}
+                _ => panic!("{what}: edge {a:?}-{b:?} used {n} times"),
+            }
+        }
+    }
+
+    #[test]
+    fn random_cameras_give_crack_free_meshes_closed_under_parents() {
+        let mut refiner = Refiner::new();
+        for t in terrains() {
+            let side = t.h.side;
+            let parents = parents(side);
+            for (k, cam) in cameras(&t, 24, 7).iter().enumerate() {
+                for (tau, cull) in [(1.0, true), (4.0, false), (0.5, true)] {
+                    let p = RefineParams::for_camera(cam, tau, None, cull);
+                    let strip = refiner.refine(&t.h, &t.heights, &p).clone();
+                    let what = format!("{} camera {k} τ={tau} cull={cull}", t.name);
+                    assert_watertight(&strip, side, &what);
+                    let active: std::collections::HashSet<usize> =
+                        strip.indices.iter().map(|&v| v as usize).collect();
+                    for &v in &active {
+                        for &parent in parents.get(&v).map(|p| p.as_slice()).unwrap_or(&[]) {
+                            assert!(
+                                active.contains(&parent),
+                                "{what}: vertex {v} active without parent {parent}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn zero_tolerance_keeps_every_vertex_and_culling_keeps_what_is_visible() {
+        let mut refiner = Refiner::new();
+        for t in terrains().into_iter().take(2) {
+            let side = t.h.side;
+            let cam = &cameras(&t, 1, 3)[0];
+            let all = refiner
+                .refine(
+                    &t.h,
+                    &t.heights,
+                    &RefineParams::for_camera(cam, 0.0, None, false),
+                )
+                .clone();
+            let used: std::collections::HashSet<u32> = all.indices.iter().copied().collect();
+            assert_eq!(
+                used.len(),
+                side * side,
+                "{}: τ = 0 must keep every vertex",
+                t.name
+            );
+
+            // With culling, every vertex active without it whose sphere is not
+            // wholly outside the frustum stays active; none is added.
+            for cam in cameras(&t, 12, 11) {
+                let free: std::collections::HashSet<u32> = refiner
+                    .refine(
+                        &t.h,
+                        &t.heights,
+                        &RefineParams::for_camera(&cam, 1.0, None, false),
+                    )
+                    .indices
+                    .iter()
+                    .copied()
+                    .collect();
+                let culled: std::collections::HashSet<u32> = refiner
+                    .refine(
+                        &t.h,
+                        &t.heights,
+                        &RefineParams::for_camera(&cam, 1.0, None, true),
+                    )
+                    .indices
+                    .iter()
+                    .copied()
+                    .collect();
+                assert!(culled.is_subset(&free));
+                let planes = cam.frustum_planes();
+                for &v in &free {
+                    let (c, r) = (v as usize % side, v as usize / side);
+                    let p =
+                        terrain_position(c, r, side, t.h.cell_size_m, t.heights[v as usize] as f64);
+                    let radius = t.h.radius(v as usize) as f64;
+                    let outside = planes
+                        .iter()
+                        .any(|q| q[0] * p[0] + q[1] * p[1] + q[2] * p[2] + q[3] < -radius);
+                    if !outside {
+                        assert!(
+                            culled.contains(&v),
+                            "{}: visible vertex ({c}, {r}) culled",
+                            t.name
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    /// Per drawn vertex: its drawn height, and the height of the edge it
+    /// splits (average of its hypotenuse end points as drawn).
+    fn drawn(
+        strip: &Strip,
+        heights: &[f32],
+        ends: &HashMap<usize, [usize; 2]>,
+    ) -> HashMap<u32, (f64, f64)> {
+        let z: HashMap<u32, f64> = if strip.morphed_z.is_empty() {
+            strip
+                .indices
+                .iter()
+                .map(|&v| (v, heights[v as usize] as f64))
+                .collect()
+        } else {
+            strip
+                .indices
+                .iter()
+                .copied()
+                .zip(strip.morphed_z.iter().map(|&z| z as f64))
+                .collect()
+        };
+        z.iter()
+            .map(|(&v, &zv)| {
+                let edge = ends
+                    .get(&(v as usize))
+                    .map_or(zv, |[a, b]| (z[&(*a as u32)] + z[&(*b as u32)]) / 2.0);
+                (v, (zv, edge))
+            })
+            .collect()
+    }
+
+    /// The surface jumps when a vertex appears or vanishes away from the
+    /// edge it splits, or when a drawn height moves: measure the largest such
+    /// change per small camera step, with and without geomorphing.
+    #[test]
+    fn geomorphing_keeps_the_surface_continuous_as_the_camera_moves() {
+        let t = terrains().remove(3); // fuji, 257², 30 m cells
+        let side = t.h.side;
+        let extent = (side - 1) as f64 * t.h.cell_size_m;
+        let mut ends = HashMap::new();
+        visit_bottom_up(side, |d| {
+            ends.insert(d.vertex, d.hypotenuse);
+        });
+        let mut refiner = Refiner::new();
+        let mut worst = [0.0f64; 2];
+        for (k, morph) in [Some(6.0), None].into_iter().enumerate() {
+            let mut previous: Option<HashMap<u32, (f64, f64)>> = None;
+            for step in 0..80 {
+                let cam = Camera {
+                    position: DVec3::new(0.2 * extent + step as f64 * 5.0, 0.5 * extent, 4500.0),
+                    heading_deg: 80.0,
+                    pitch_deg: -25.0,
+                    incl_px: 540.0,
+                    fov_x_deg: 60.0,
+                    width: 1920,
+                    height: 1080,
+                    near_m: 1.0,
+                    far_m: 1e6,
+                };
+                let strip = refiner.refine(
+                    &t.h,
+                    &t.heights,
+                    &RefineParams::for_camera(&cam, 2.0, morph, false),
+                );
+                let now = drawn(strip, &t.heights, &ends);
+                if let Some(prev) = &previous {
+                    for (v, &(z, edge)) in &now {
+                        let change = match prev.get(v) {
+                            Some(&(z0, _)) => (z - z0).abs(),
+                            None => (z - edge).abs(), // appeared
+                        };
+                        worst[k] = worst[k].max(change);
+                    }
+                    for (v, &(z0, edge0)) in prev {
+                        if !now.contains_key(v) {
+                            worst[k] = worst[k].max((z0 - edge0).abs()); // vanished
+                        }
+                    }
+                }
+                previous = Some(now);
+            }
+        }
+        eprintln!(
+            "largest surface change per 5 m camera step: morphing {:.3} m, without {:.3} m",
+            worst[0], worst[1]
+        );
+        assert!(
+            worst[1] > 1.0,
+            "the path should cross refinement thresholds"
+        );
+        assert!(
+            worst[0] < worst[1] / 5.0,
+            "morphing {} vs popping {}",
+            worst[0],
+            worst[1]
+        );
+    }
+}

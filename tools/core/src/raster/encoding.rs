@@ -24,6 +24,19 @@ impl Encoding {
         }
     }
 
+    /// The heights a decoded raster holds: the raster itself when
+    /// [`Encoding::Plain`], else one band decoded from its first three.
+    pub fn decode_raster(self, raw: super::Raster) -> super::Raster {
+        if self == Encoding::Plain {
+            return raw;
+        }
+        let (r, g, b) = (raw.band(0), raw.band(1), raw.band(2));
+        let heights = (0..raw.cells())
+            .map(|i| self.decode(r[i], g[i], b[i]))
+            .collect();
+        super::Raster::from_data(raw.width, raw.height, 1, heights)
+    }
+
     /// Height in metres of one pixel, computed in f64.
     pub fn decode(self, r: f64, g: f64, b: f64) -> f64 {
         match self {

@@ -86,6 +86,32 @@ impl Raster {
         (0..self.cells()).filter(|&i| self.is_valid(i)).count()
     }
 
+    /// The raster of `bands` (1-based, in that order), validity unified.
+    pub fn select_bands(&self, bands: &[usize]) -> Raster {
+        let data = bands
+            .iter()
+            .flat_map(|&b| self.band(b - 1).iter().copied())
+            .collect();
+        let mut out = Raster::from_data(self.width, self.height, bands.len(), data);
+        out.unify_validity();
+        out
+    }
+
+    /// Copy `block` (same band count) into this raster with its top-left
+    /// cell at (`col`, `row`); the block must fit.
+    pub fn paste(&mut self, block: &Raster, col: usize, row: usize) {
+        let w = block.width;
+        for b in 0..self.bands {
+            let width = self.width;
+            let dst = self.band_mut(b);
+            let src = block.band(b);
+            for r in 0..block.height {
+                let at = (row + r) * width + col;
+                dst[at..at + w].copy_from_slice(&src[r * w..(r + 1) * w]);
+            }
+        }
+    }
+
     /// Marks a cell no-data in every band when any band lacks data, so that
     /// validity is one per-cell notion.
     pub fn unify_validity(&mut self) {
@@ -97,5 +123,23 @@ impl Raster {
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bands_are_selected_and_blocks_pasted_in_place() {
+        let r = Raster::from_data(2, 1, 3, vec![1.0, 2.0, 3.0, f64::NAN, 5.0, 6.0]);
+        let s = r.select_bands(&[3, 1]);
+        assert_eq!(s.bands, 2);
+        assert_eq!(s.band(0), &[5.0, 6.0]);
+        assert_eq!(s.band(1)[0], 1.0);
+        let mut out = Raster::empty(3, 2, 1);
+        out.paste(&Raster::from_data(2, 1, 1, vec![7.0, 8.0]), 1, 1);
+        assert_eq!(out.band(0)[4..], [7.0, 8.0]);
+        assert!(out.band(0)[..4].iter().all(|v| v.is_nan()));
     }
 }

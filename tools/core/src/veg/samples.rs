@@ -149,9 +149,8 @@ pub fn parse_geojson(
                 .ok_or_else(|| fail("a ring needs at least 4 positions"))?;
             let mut polygon = Vec::with_capacity(points.len());
             for p in points {
-                let (x, y) = match (p[0].as_f64(), p[1].as_f64()) {
-                    (Some(x), Some(y)) => (x, y),
-                    _ => return Err(fail("a position is not a pair of numbers")),
+                let (Some(x), Some(y)) = (p[0].as_f64(), p[1].as_f64()) else {
+                    return Err(fail("a position is not a pair of numbers"));
                 };
                 let pixel = to_pixel(x, y).ok_or_else(|| fail("cannot map to pixels"))?;
                 if pixel[0] < 0.0

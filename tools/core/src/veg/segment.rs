@@ -462,8 +462,7 @@ fn split_coarse(
             levels[0][ty * side + tx] = tiles[ty * tiles_x + tx].moments;
         }
     }
-    while levels.last().unwrap().len() > 1 {
-        let child = levels.last().unwrap();
+    while let Some(child) = levels.last().filter(|level| level.len() > 1) {
         let s = (child.len() as f64).sqrt() as usize / 2;
         let parent: Vec<Moments> = (0..s * s)
             .map(|i| {
