@@ -1,0 +1,139 @@
+//! Helpers for Relevo's end-to-end tests (`tests/tests/`): where the real
+//! inputs are, building bundles through the library in process, and image
+//! comparison against reviewed references that leaves `-actual` and
+//! `-difference` PNGs beside a failing reference for people to look at.
+// Test support: a failed unwrap is a failed test.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use relevo::prep::region::Region;
+use std::path::{Path, PathBuf};
+
+/// A file of this repository.
+pub fn repo(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
+}
+
+/// The shared real inputs beside the repository (or `$RELEVO_SHARED_DATA`).
+pub fn shared(rel: &str) -> PathBuf {
+    let root = std::env::var_os("RELEVO_SHARED_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| repo("../shared/data"));
+    let path = root.join(rel);
+    assert!(
+        path.exists(),
+        "{} is missing: set RELEVO_SHARED_DATA to the shared data folder",
+        path.display()
+    );
+    path
+}
+
+/// Whether the run asked to rewrite golden outputs (`RELEVO_BLESS=1`).
+pub fn blessing() -> bool {
+    std::env::var_os("RELEVO_BLESS").is_some()
+}
+
+/// `relevo prep` in process: the region file at `region` into `out`.
+pub fn prep_region(region: &Path, out: &Path) -> PathBuf {
+    relevo::ingest::gdalio::init();
+    let region = Region::load(region).unwrap();
+    relevo::prep::prep(&region, out, true).unwrap().bundle
+}
+
+/// `relevo prep --dem FILE` in process, through a one-line REGION.toml.
+pub fn prep_dem(dem: &Path, dir: &Path) -> PathBuf {
+    let toml = dir.join("REGION.toml");
+    std::fs::write(
+        &toml,
+        format!("[dem]\nfiles = [{:?}]\n", dem.display().to_string()),
+    )
+    .unwrap();
+    prep_region(&toml, &dir.join("dem.relevo"))
+}
+
+/// Decode an RGBA8 PNG.
+pub fn decode_png(path: &Path) -> (Vec<u8>, [u32; 2]) {
+    let file = std::fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut reader = png::Decoder::new(std::io::BufReader::new(file))
+        .read_info()
+        .unwrap();
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    buf.truncate(info.buffer_size());
+    (buf, [info.width, info.height])
+}
+
+/// How far an image is from its reference.
+#[derive(Debug, Clone, Copy)]
+pub struct ImageDifference {
+    /// Pixels with any channel more than `threshold` levels off.
+    pub pixels_off: usize,
+    /// Mean absolute difference over all channels, in levels.
+    pub mean: f64,
+}
+
+/// Compare RGBA8 `actual` (`size`) with the reference PNG `reference`
+/// (rewritten when blessing). On a size change or when `accept` refuses the
+/// difference, writes `NAME-actual.png` and `NAME-difference.png` beside the
+/// reference and panics naming them.
+pub fn compare_with_reference(
+    actual: &[u8],
+    size: [u32; 2],
+    reference: &Path,
+    threshold: u8,
+    accept: impl Fn(&ImageDifference) -> bool,
+) -> ImageDifference {
+    let encode = |rgba: &[u8]| {
+        relevo_core::raster::png::encode_rgba(rgba, size[0] as usize, size[1] as usize).unwrap()
+    };
+    if blessing() {
+        std::fs::create_dir_all(reference.parent().unwrap()).unwrap();
+        std::fs::write(reference, encode(actual)).unwrap();
+    }
+    let (want, want_size) = decode_png(reference);
+    let beside = |suffix: &str| {
+        let stem = reference.file_stem().unwrap().to_string_lossy();
+        reference.with_file_name(format!("{stem}-{suffix}.png"))
+    };
+    let difference = if want_size == size {
+        let pixels_off = actual
+            .chunks(4)
+            .zip(want.chunks(4))
+            .filter(|(a, b)| {
+                a.iter()
+                    .zip(b.iter())
+                    .any(|(x, y)| x.abs_diff(*y) > threshold)
+            })
+            .count();
+        let mean = actual
+            .iter()
+            .zip(&want)
+            .map(|(a, b)| a.abs_diff(*b) as f64)
+            .sum::<f64>()
+            / actual.len() as f64;
+        Some(ImageDifference { pixels_off, mean })
+    } else {
+        None
+    };
+    match difference {
+        Some(d) if accept(&d) => d,
+        _ => {
+            std::fs::write(beside("actual"), encode(actual)).unwrap();
+            if want_size == size {
+                let diff: Vec<u8> = actual
+                    .chunks(4)
+                    .zip(want.chunks(4))
+                    .flat_map(|(a, b)| {
+                        let d = (0..3).map(|k| a[k].abs_diff(b[k])).max().unwrap_or(0);
+                        [d.saturating_mul(8), 0, 0, 255]
+                    })
+                    .collect();
+                std::fs::write(beside("difference"), encode(&diff)).unwrap();
+            }
+            panic!(
+                "{} differs ({difference:?}, size {size:?} vs {want_size:?}); see {} (rerun with RELEVO_BLESS=1 if intended)",
+                reference.display(),
+                beside("actual").display()
+            );
+        }
+    }
+}

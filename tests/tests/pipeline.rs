@@ -1,0 +1,73 @@
+//! The sample region from raw inputs to a bundle, in process: artifact
+//! hashes against `data/golden/`, the grid and the drape as recorded.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use relevo_core::bundle::{sha256_file, validate, Bundle};
+use relevo_tests::{blessing, prep_region, repo};
+use std::collections::BTreeMap;
+
+const GOLDEN: &str = "data/golden/olinda.json";
+
+/// Rebuild the sample region and compare with `data/golden/`. Set
+/// RELEVO_BLESS=1 to rewrite the golden file after a reviewed change.
+#[test]
+fn sample_bundle_matches_golden_hashes() {
+    let d = tempfile::tempdir().unwrap();
+    let out = prep_region(
+        &repo("data/olinda/REGION.toml"),
+        &d.path().join("olinda.relevo"),
+    );
+    let bundle = Bundle::open(&out).unwrap();
+    assert_eq!(validate(&bundle), Vec::<String>::new());
+    // Hashes recomputed from the files, not trusted from the manifest.
+    let hashes: BTreeMap<String, String> = bundle
+        .manifest
+        .artifacts
+        .iter()
+        .map(|(name, a)| (name.clone(), sha256_file(&out.join(&a.file)).unwrap().1))
+        .collect();
+    let golden_path = repo(GOLDEN);
+    if blessing() {
+        std::fs::write(
+            &golden_path,
+            serde_json::to_string_pretty(&hashes).unwrap() + "\n",
+        )
+        .unwrap();
+    }
+    let golden: BTreeMap<String, String> =
+        serde_json::from_str(&std::fs::read_to_string(&golden_path).unwrap()).unwrap();
+    assert_eq!(
+        hashes, golden,
+        "sample bundle differs from {GOLDEN}; if intended, rerun with RELEVO_BLESS=1"
+    );
+
+    let m = &bundle.manifest;
+    assert_eq!(m.grid.side, 129);
+    assert_eq!(m.grid.valid_vertices, 111 * 111);
+    assert_eq!(m.color.as_ref().map(|c| c.bands), Some([3, 2, 1]));
+    assert_eq!(m.inputs.len(), 2, "the DEM and the image");
+    let heights = bundle.heights().unwrap();
+    // The DEM is already on the bundle grid: its heights are copied exactly.
+    let source = relevo::ingest::gdalio::open(&repo("data/olinda/olinda_dem_utm25s.tif"))
+        .unwrap()
+        .read(None)
+        .unwrap();
+    for r in 0..111 {
+        for c in 0..111 {
+            assert_eq!(
+                heights[r * 129 + c] as f64,
+                source.band(0)[r * 111 + c],
+                "({c}, {r})"
+            );
+        }
+    }
+    // Padding replicates the last real row and column.
+    for r in 0..129 {
+        for c in 111..129 {
+            assert_eq!(heights[r * 129 + c], heights[r.min(110) * 129 + 110]);
+        }
+    }
+    // The vegetation database lies on the drape (validate checks the rest).
+    let objects = bundle.vegetation().unwrap().unwrap();
+    assert!(objects.len() > 10_000, "{} objects", objects.len());
+}
