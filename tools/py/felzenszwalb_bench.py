@@ -2,7 +2,7 @@
 
 Usage: felzenszwalb_bench.py RAW WIDTH HEIGHT BANDS RUNS
 RAW holds WIDTH*HEIGHT*BANDS bytes, pixel-interleaved, row-major (as
-`relevo bench veg` writes it). Prints one JSON object: the median time in
+`relevo-bench veg` writes it). Prints one JSON object: the median time in
 milliseconds and the number of segments.
 """
 import json
