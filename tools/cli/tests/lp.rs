@@ -16,7 +16,7 @@ fn errors_and_meshes_match_martini() {
     for (name, file, encoding) in MARTINI_TILES {
         let bundle = Bundle::open(&prep_martini_tile(d.path(), file, encoding)).unwrap();
         let r = &reference[name];
-        let heights = bundle.array::<f32>("height").unwrap();
+        let heights = bundle.heights().unwrap();
         let side = bundle.manifest.grid.side;
         let h = Hierarchy::compute(&heights, side, 1.0);
         let errors: Vec<f32> = h.error_radius.iter().map(|e| e[0]).collect();
@@ -26,8 +26,9 @@ fn errors_and_meshes_match_martini() {
             "{name}: errors"
         );
         // The bundle stores the same errors beside the radii.
-        let lp = bundle.array::<f32>("lp").unwrap();
-        assert!(lp.chunks(2).zip(&errors).all(|(p, e)| p[0] == *e));
+        let lp = bundle.lp().unwrap();
+        let stored = lp.hierarchy();
+        assert!(stored.error_radius.iter().zip(&errors).all(|(p, e)| p[0] == *e));
 
         for (max_error, mesh) in r["meshes"].as_object().unwrap() {
             let m = extract(&h, max_error.parse().unwrap(), None);
@@ -76,7 +77,7 @@ fn hierarchy_is_nested_on_real_dems() {
             out.as_os_str(),
         ]);
         let bundle = Bundle::open(&out).unwrap();
-        let heights = bundle.array::<f32>("height").unwrap();
+        let heights = bundle.heights().unwrap();
         let lp = bundle.lp().unwrap();
         let h = lp.hierarchy().into_owned();
         assert_eq!(

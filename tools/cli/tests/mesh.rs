@@ -76,7 +76,7 @@ fn the_mask_is_honoured_and_the_data_is_covered() {
     let d = tempfile::tempdir().unwrap();
     let b = Bundle::open(&sample_bundle(d.path())).unwrap();
     let side = b.manifest.grid.side;
-    let mask = b.array::<u8>("mask").unwrap();
+    let mask = b.mask().unwrap();
     let lp = b.lp().unwrap();
     let h = lp.hierarchy().into_owned();
     for max_error in [0.0, 1.0, 5.0, 1000.0] {
