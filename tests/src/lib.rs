@@ -5,27 +5,11 @@
 // Test support: a failed unwrap is a failed test.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+mod paths;
+
+pub use paths::{repo, repo_root, shared};
 use relevo::prep::region::Region;
 use std::path::{Path, PathBuf};
-
-/// A file of this repository.
-pub fn repo(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
-}
-
-/// The shared real inputs beside the repository (or `$RELEVO_SHARED_DATA`).
-pub fn shared(rel: &str) -> PathBuf {
-    let root = std::env::var_os("RELEVO_SHARED_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| repo("../shared/data"));
-    let path = root.join(rel);
-    assert!(
-        path.exists(),
-        "{} is missing: set RELEVO_SHARED_DATA to the shared data folder",
-        path.display()
-    );
-    path
-}
 
 /// Whether the run asked to rewrite golden outputs (`RELEVO_BLESS=1`).
 pub fn blessing() -> bool {

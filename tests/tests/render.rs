@@ -17,25 +17,11 @@ fn bundle_of(input: &str, dir: &Path) -> PathBuf {
     }
 }
 
-/// A view from the south-west quarter of the data, looking north-east.
-fn view_of(b: &Bundle, size: [u32; 2]) -> View {
-    let [x0, y0, x1, y1] = b.manifest.grid.valid_extent;
-    let top = b.manifest.grid.height_range_m[1] as f64;
-    View {
-        eye: [x0 + 0.15 * (x1 - x0), y0 + 0.1 * (y1 - y0), top + 150.0],
-        heading_deg: 35.0,
-        incl_px: Some(size[1] as f64 * 0.75),
-        fov_x_deg: 60.0,
-        size,
-        far_cells: 1024.0,
-    }
-}
-
 #[test]
 fn depth_of_a_real_bundle_matches_the_exact_surface() {
     let d = tempfile::tempdir().unwrap();
     let b = Bundle::open(&bundle_of("dem/srtm_ref.tif", d.path())).unwrap();
-    let view = view_of(&b, [240, 135]);
+    let view = View::home(&b.manifest.grid, [240, 135]);
     let options = scene::render_options(
         Mode::Raycast,
         false,
@@ -102,7 +88,7 @@ fn renders_of_real_bundles_match_their_references() {
         let dir = d.path().join(name);
         std::fs::create_dir_all(&dir).unwrap();
         let b = Bundle::open(&bundle_of(input, &dir)).unwrap();
-        let view = view_of(&b, [320, 180]);
+        let view = View::home(&b.manifest.grid, [320, 180]);
         let bands = bands.map(|t| scene::parse_bands(t).unwrap());
         let options = scene::render_options(Mode::Raycast, false, bands, prefilter).unwrap();
         let frame = scene::render_bundle(&b, &view, &options, hillshade).unwrap();

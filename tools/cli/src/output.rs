@@ -36,20 +36,33 @@ pub fn check_folder(out: &Path) -> Result<()> {
 
 /// Write `bytes` to `path` through a partial file renamed into place.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let partial = partial_path(path);
-    let written = std::fs::write(&partial, bytes)
-        .with_context(|| format!("{}: cannot write", path.display()))
-        .and_then(|()| move_into_place(&partial, path));
-    if written.is_err() {
-        let _ = std::fs::remove_file(&partial);
-    }
-    written
+    write_through_partial(path, "", |partial| {
+        std::fs::write(partial, bytes).with_context(|| format!("{}: cannot write", path.display()))
+    })
 }
 
-/// Rename a finished partial file onto `path`.
-pub fn move_into_place(partial: &Path, path: &Path) -> Result<()> {
-    std::fs::rename(partial, path)
-        .with_context(|| format!("{}: cannot move into place", path.display()))
+/// The one atomic write: `write` fills a partial file beside `path`
+/// (`.NAME.partial`, with `extension` added when a format needs its own,
+/// e.g. `gpkg`), which is renamed onto `path` when complete and removed
+/// on any failure, so `path` only ever holds a whole file.
+pub fn write_through_partial(
+    path: &Path,
+    extension: &str,
+    write: impl FnOnce(&Path) -> Result<()>,
+) -> Result<()> {
+    let mut partial = partial_path(path);
+    if !extension.is_empty() {
+        partial.set_extension(extension);
+    }
+    let _ = std::fs::remove_file(&partial);
+    let result = write(&partial).and_then(|()| {
+        std::fs::rename(&partial, path)
+            .with_context(|| format!("{}: cannot move into place", path.display()))
+    });
+    if result.is_err() {
+        let _ = std::fs::remove_file(&partial);
+    }
+    result
 }
 
 /// `DIR/.NAME.partial` beside `path`.

@@ -99,14 +99,12 @@ pub fn read_image(
 /// Write the objects as points of a GeoPackage layer `vegetation` (QGIS,
 /// GDAL and most GIS open it), through a partial file renamed into place.
 pub fn write_gpkg(path: &Path, objects: &[VegObject], crs_wkt: &str) -> Result<()> {
-    let partial = output::partial_path(path).with_extension("gpkg");
-    let _ = std::fs::remove_file(&partial);
     // Fixed timestamps make the file depend on its content only.
     gdal::config::set_config_option("OGR_CURRENT_DATE", "2000-01-01T00:00:00.000Z")?;
-    let result = (|| -> Result<()> {
+    let result = output::write_through_partial(path, "gpkg", |partial| {
         let driver = DriverManager::get_driver_by_name("GPKG")?;
         let mut dataset = driver
-            .create_vector_only(&partial)
+            .create_vector_only(partial)
             .map_err(|e| anyhow!("{}: cannot create ({e})", path.display()))?;
         let srs = if crs_wkt.is_empty() {
             None
@@ -141,12 +139,8 @@ pub fn write_gpkg(path: &Path, objects: &[VegObject], crs_wkt: &str) -> Result<(
         }
         txn.commit()?;
         Ok(())
-    })();
+    });
     gdal::config::clear_config_option("OGR_CURRENT_DATE")?;
-    let result = result.and_then(|()| output::move_into_place(&partial, path));
-    if result.is_err() {
-        let _ = std::fs::remove_file(&partial);
-    }
     result
 }
 

@@ -28,7 +28,11 @@ fn errors_and_meshes_match_martini() {
         // The bundle stores the same errors beside the radii.
         let lp = bundle.lp().unwrap();
         let stored = lp.hierarchy();
-        assert!(stored.error_radius.iter().zip(&errors).all(|(p, e)| p[0] == *e));
+        assert!(stored
+            .error_radius
+            .iter()
+            .zip(&errors)
+            .all(|(p, e)| p[0] == *e));
 
         for (max_error, mesh) in r["meshes"].as_object().unwrap() {
             let m = extract(&h, max_error.parse().unwrap(), None);

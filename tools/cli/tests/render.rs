@@ -30,31 +30,6 @@ fn bundle_of(dem: &str, dir: &Path) -> PathBuf {
     out
 }
 
-/// A view from the south-west quarter of the data, looking north-east.
-fn view_of(b: &Bundle, size: [u32; 2]) -> View {
-    let [x0, y0, x1, y1] = b.manifest.grid.valid_extent;
-    let top = b.manifest.grid.height_range_m[1] as f64;
-    View {
-        eye: [x0 + 0.15 * (x1 - x0), y0 + 0.1 * (y1 - y0), top + 150.0],
-        heading_deg: 35.0,
-        incl_px: Some(size[1] as f64 * 0.75),
-        fov_x_deg: 60.0,
-        size,
-        far_cells: 1024.0,
-    }
-}
-
-fn camera_arg(v: &View) -> String {
-    format!(
-        "{},{},{},{},{}",
-        v.eye[0],
-        v.eye[1],
-        v.eye[2],
-        v.heading_deg,
-        v.incl_px.unwrap()
-    )
-}
-
 fn decode_png(path: &Path) -> Vec<u8> {
     let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
     let mut reader = decoder.read_info().unwrap();
@@ -71,13 +46,13 @@ fn render_command_writes_what_the_library_renders() {
     let d = tempfile::tempdir().unwrap();
     let path = bundle_of("data/olinda/REGION.toml", d.path());
     let b = Bundle::open(&path).unwrap();
-    let view = view_of(&b, [320, 180]);
+    let view = View::home(&b.manifest.grid, [320, 180]);
     let (png, depth) = (d.path().join("s.png"), d.path().join("s.f32"));
     relevo_ok([
         "render".as_ref(),
         path.as_os_str(),
         "--camera".as_ref(),
-        camera_arg(&view).as_ref(),
+        view.pose().to_string().as_ref(),
         "--size".as_ref(),
         "320x180".as_ref(),
         "--bands".as_ref(),

@@ -3,7 +3,7 @@
 //! raycast of a bundle. The conversions between world and terrain frame are
 //! [`TerrainFrame`]'s; everything here goes through them.
 
-use crate::bundle::Bundle;
+use crate::bundle::{Bundle, GridInfo};
 use crate::camera::Camera;
 use crate::geo::TerrainFrame;
 use crate::horizon::{render, Arithmetic, Band, Frame, Mode, RenderOptions, Terrain};
@@ -26,6 +26,33 @@ pub struct View {
     pub size: [u32; 2],
     /// Far plane in grid cells.
     pub far_cells: f64,
+}
+
+impl View {
+    /// Where the camera is and where it looks, as the camera string has it.
+    pub fn pose(&self) -> CameraPose {
+        CameraPose {
+            eye: self.eye,
+            heading_deg: self.heading_deg,
+            incl_px: self.incl_px,
+        }
+    }
+
+    /// The home view of a grid: from the south-west quarter of its data,
+    /// 150 m above its highest point, looking north-east (35°), the horizon
+    /// three quarters up a `size` image, far plane 1024 cells.
+    pub fn home(grid: &GridInfo, size: [u32; 2]) -> View {
+        let [x0, y0, x1, y1] = grid.valid_extent;
+        let top = grid.height_range_m[1] as f64;
+        View {
+            eye: [x0 + 0.15 * (x1 - x0), y0 + 0.1 * (y1 - y0), top + 150.0],
+            heading_deg: 35.0,
+            incl_px: Some(size[1] as f64 * 0.75),
+            fov_x_deg: 60.0,
+            size,
+            far_cells: 1024.0,
+        }
+    }
 }
 
 /// The position and direction part of a camera, as typed on the command line
@@ -68,12 +95,13 @@ impl CameraPose {
 }
 
 impl std::fmt::Display for CameraPose {
-    /// The same `X,Y,Z,HEADING[,INCL]` syntax [`CameraPose::parse`] reads.
+    /// The same `X,Y,Z,HEADING[,INCL]` syntax [`CameraPose::parse`] reads,
+    /// each number in its shortest form that reads back exactly.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let [x, y, z] = self.eye;
-        write!(f, "{x:.2},{y:.2},{z:.2},{:.2}", self.heading_deg)?;
+        write!(f, "{x},{y},{z},{}", self.heading_deg)?;
         if let Some(incl) = self.incl_px {
-            write!(f, ",{incl:.1}")?;
+            write!(f, ",{incl}")?;
         }
         Ok(())
     }
@@ -201,6 +229,12 @@ mod tests {
         assert_eq!(pose.eye, [289000.0, 9111000.0, 400.0]);
         assert_eq!(pose.incl_px, Some(420.0));
         assert_eq!(CameraPose::parse(&pose.to_string()).unwrap(), pose);
+        let exact = CameraPose {
+            eye: [289000.125, 9111000.3, 412.7],
+            heading_deg: 33.333,
+            incl_px: None,
+        };
+        assert_eq!(CameraPose::parse(&exact.to_string()).unwrap(), exact);
         assert!(CameraPose::parse("1,2,3").is_err());
         assert!(CameraPose::parse("1,2,x,4").is_err());
     }

@@ -363,16 +363,12 @@ pub fn write_geotiff(
     band_type: GdalDataType,
     nodata: Option<f64>,
 ) -> Result<()> {
-    let partial = output::partial_path(path);
-    // Ask the OS first: its message says why a path cannot be written.
-    std::fs::File::create(&partial)
-        .map_err(|e| anyhow!("{}: cannot write ({e})", path.display()))?;
-    let result = write_geotiff_at(&partial, raster, grid, band_type, nodata)
-        .and_then(|()| output::move_into_place(&partial, path));
-    if result.is_err() {
-        let _ = std::fs::remove_file(&partial);
-    }
-    result
+    output::write_through_partial(path, "", |partial| {
+        // Ask the OS first: its message says why a path cannot be written.
+        std::fs::File::create(partial)
+            .map_err(|e| anyhow!("{}: cannot write ({e})", path.display()))?;
+        write_geotiff_at(partial, raster, grid, band_type, nodata)
+    })
 }
 
 fn write_geotiff_at(

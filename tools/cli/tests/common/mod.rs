@@ -7,26 +7,10 @@ use gdal::Dataset;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-/// The real inputs (DEMs, imagery, tiles) shipped beside the repository.
-pub fn shared(rel: &str) -> PathBuf {
-    let root = std::env::var_os("RELEVO_SHARED_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"));
-    let path = root.join(rel);
-    assert!(
-        path.exists(),
-        "{} is missing: set RELEVO_SHARED_DATA to the shared data folder",
-        path.display()
-    );
-    path
-}
-
-/// A file of this repository.
-pub fn repo(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../..")
-        .join(rel)
-}
+#[path = "../../../../tests/src/paths.rs"]
+mod paths;
+#[allow(unused_imports)] // each test file uses its own part
+pub use paths::{repo, shared};
 
 /// Run `relevo ARGS…` and return its output.
 pub fn relevo<I, S>(args: I) -> Output

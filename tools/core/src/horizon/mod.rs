@@ -466,6 +466,17 @@ mod tests {
         }
     }
 
+    /// A drape of one texel per cell over a `side`² grid of 1 m cells.
+    fn texel_per_cell(rgba: &[u8], side: usize) -> ColorSource {
+        let geotransform = GeoTransform::north_up(0.0, side as f64, 1.0, 1.0);
+        let frame = TerrainFrame {
+            side,
+            cell_size_m: 1.0,
+            geotransform,
+        };
+        ColorSource::new(rgba, side, side, &geotransform, &frame).unwrap()
+    }
+
     /// A flat 257² grid, 1 m cells, with one-cell poles of height 40 m, and
     /// an image (one texel per cell) that is red on the poles, green elsewhere.
     /// Heights, mask, RGBA image and pole cells of the pole scene.
@@ -491,19 +502,7 @@ mod tests {
     fn pole_misses(mode: Mode) -> Vec<f64> {
         let side = 257;
         let (heights, mask, rgba, spots) = poles();
-        let geo = GeoTransform::north_up(0.0, side as f64, 1.0, 1.0);
-        let color = ColorSource::new(
-            &rgba,
-            side,
-            side,
-            &geo,
-            &TerrainFrame {
-                side,
-                cell_size_m: 1.0,
-                geotransform: geo,
-            },
-        )
-        .unwrap();
+        let color = texel_per_cell(&rgba, side);
         let terrain = Terrain::new(side, 1.0, &heights, &mask, Some(color));
         // Eye south of the poles, looking north, level.
         let cam = camera(960, 540, [128.0, 0.0, 30.0], 0.0, 270.0, 400.0);
@@ -565,6 +564,38 @@ mod tests {
         );
     }
 
+    /// Render `terrain` for `cam` at 8 slices per cell with sub-voxels, and
+    /// measure its depth against the exact surface: per terrain pixel, the
+    /// distance error in slice spacings (sorted), and how many pixels the
+    /// two disagree on being terrain or sky.
+    fn depth_against_exact_surface(terrain: &Terrain, cam: &Camera) -> (Frame, Vec<f64>, usize) {
+        let opts = RenderOptions {
+            bands: vec![Band {
+                until_m: f64::INFINITY,
+                slices_per_cell: 8.0,
+                subvoxel: true,
+            }],
+            ..Default::default()
+        };
+        let frame = render(terrain, cam, &opts);
+        let spacing = terrain.cell_m / 8.0;
+        let (mut errors, mut disagree) = (Vec::new(), 0);
+        for py in 0..cam.height as usize {
+            for px in 0..cam.width as usize {
+                let d = frame.depth[py * cam.width as usize + px];
+                match (d < 1.0, pick(terrain, cam, px as f64, py as f64)) {
+                    (true, Some(exact)) => {
+                        errors.push((distance_of_depth(cam, d as f64) - exact).abs() / spacing);
+                    }
+                    (false, None) => {}
+                    _ => disagree += 1,
+                }
+            }
+        }
+        errors.sort_by(f64::total_cmp);
+        (frame, errors, disagree)
+    }
+
     #[test]
     fn depth_is_monotonic_up_each_column_and_matches_the_exact_surface() {
         // A smooth real-looking surface: sums of sines, 129², 10 m cells.
@@ -578,15 +609,7 @@ mod tests {
         let mask = vec![1u8; side * side];
         let terrain = Terrain::new(side, 10.0, &heights, &mask, None);
         let cam = camera(160, 90, [300.0, 100.0, 120.0], 20.0, 70.0, 1200.0);
-        let opts = RenderOptions {
-            bands: vec![Band {
-                until_m: f64::INFINITY,
-                slices_per_cell: 8.0,
-                subvoxel: true,
-            }],
-            ..Default::default()
-        };
-        let frame = render(&terrain, &cam, &opts);
+        let (frame, errors, _) = depth_against_exact_surface(&terrain, &cam);
         for k in 0..160 {
             let mut last = 0.0f32;
             for row in (0..90).rev() {
@@ -596,17 +619,6 @@ mod tests {
                 last = d;
             }
         }
-        let spacing = 10.0 / 8.0;
-        let mut errors = Vec::new();
-        for py in 0..90 {
-            for px in 0..160 {
-                let d = frame.depth[py * 160 + px];
-                if let (true, Some(exact)) = (d < 1.0, pick(&terrain, &cam, px as f64, py as f64)) {
-                    errors.push((distance_of_depth(&cam, d as f64) - exact).abs() / spacing);
-                }
-            }
-        }
-        errors.sort_by(f64::total_cmp);
         let (median, p95) = (errors[errors.len() / 2], errors[errors.len() * 95 / 100]);
         eprintln!("depth vs exact surface: median {median:.3}, 95th percentile {p95:.3} slice spacings over {} pixels", errors.len());
         assert!(errors.len() > 5000);
@@ -629,43 +641,12 @@ mod tests {
             let top = dem.heights.iter().copied().fold(f32::MIN, f32::max) as f64;
             let mask = vec![1u8; side * side];
             let terrain = Terrain::new(side, cell, &dem.heights, &mask, None);
-            let (w, h) = (240u32, 135u32);
-            let mut cam = camera(
-                w,
-                h,
-                [0.15 * extent, 0.1 * extent, top + 150.0],
-                35.0,
-                0.75 * h as f64,
-                1024.0 * cell,
-            );
+            let eye = [0.15 * extent, 0.1 * extent, top + 150.0];
+            let mut cam = camera(240, 135, eye, 35.0, 0.75 * 135.0, 1024.0 * cell);
             cam.near_m = cell;
-            let opts = RenderOptions {
-                bands: vec![Band {
-                    until_m: f64::INFINITY,
-                    slices_per_cell: 8.0,
-                    subvoxel: true,
-                }],
-                ..Default::default()
-            };
-            let frame = render(&terrain, &cam, &opts);
-            let spacing = cell / 8.0;
-            let (mut errors, mut disagree) = (Vec::new(), 0);
-            for py in 0..h as usize {
-                for px in 0..w as usize {
-                    let d = frame.depth[py * w as usize + px];
-                    match (d < 1.0, pick(&terrain, &cam, px as f64, py as f64)) {
-                        (true, Some(exact)) => {
-                            errors
-                                .push((distance_of_depth(&cam, d as f64) - exact).abs() / spacing);
-                        }
-                        (false, None) => {}
-                        _ => disagree += 1,
-                    }
-                }
-            }
-            errors.sort_by(f64::total_cmp);
+            let (_, errors, disagree) = depth_against_exact_surface(&terrain, &cam);
             let (median, p95) = (errors[errors.len() / 2], errors[errors.len() * 95 / 100]);
-            let pixels = (w * h) as usize;
+            let pixels = 240 * 135;
             eprintln!(
                 "{}: depth vs exact surface median {median:.3}, p95 {p95:.3} slice spacings; \
                  {disagree} of {pixels} pixels disagree on terrain/sky",
@@ -694,19 +675,7 @@ mod tests {
     fn fixed_point_matches_floating_point() {
         let (heights, mask, rgba, _) = poles();
         let side = 257;
-        let geo = GeoTransform::north_up(0.0, side as f64, 1.0, 1.0);
-        let color = ColorSource::new(
-            &rgba,
-            side,
-            side,
-            &geo,
-            &TerrainFrame {
-                side,
-                cell_size_m: 1.0,
-                geotransform: geo,
-            },
-        )
-        .unwrap();
+        let color = texel_per_cell(&rgba, side);
         let terrain = Terrain::new(side, 1.0, &heights, &mask, Some(color));
         let cam = camera(320, 180, [128.0, 0.0, 30.0], 10.0, 120.0, 400.0);
         let float = render(&terrain, &cam, &RenderOptions::default());
@@ -743,20 +712,8 @@ mod tests {
                 [v, v, v, 255]
             })
             .collect();
-        let geo = GeoTransform::north_up(0.0, side as f64, 1.0, 1.0);
         let energy = |prefilter: bool| {
-            let color = ColorSource::new(
-                &rgba,
-                side,
-                side,
-                &geo,
-                &TerrainFrame {
-                    side,
-                    cell_size_m: 1.0,
-                    geotransform: geo,
-                },
-            )
-            .unwrap();
+            let color = texel_per_cell(&rgba, side);
             let terrain = Terrain::new(side, 1.0, &heights, &mask, Some(color));
             let cam = camera(320, 180, [256.0, 0.0, 12.0], 0.0, 150.0, 500.0);
             let opts = RenderOptions {
