@@ -35,6 +35,13 @@ impl<T: bytemuck::Pod> std::ops::Deref for Array<T> {
     }
 }
 
+impl<'a, T: bytemuck::Pod> From<&'a Array<T>> for std::borrow::Cow<'a, [T]> {
+    /// The mapped elements, borrowed.
+    fn from(array: &'a Array<T>) -> Self {
+        std::borrow::Cow::Borrowed(array)
+    }
+}
+
 /// The mapped `lp` array; [`LpArray::hierarchy`] views it without a copy.
 pub struct LpArray {
     pairs: Array<[f32; 2]>,

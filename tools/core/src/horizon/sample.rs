@@ -3,6 +3,7 @@
 //! prefiltered level and with baked hillshade).
 
 use crate::geo::{GeoTransform, TerrainFrame};
+use std::borrow::Cow;
 
 /// Sub-voxel divisions per cell side (seed 000, §6.2 uses 8).
 const DIVISIONS: usize = 8;
@@ -102,14 +103,14 @@ pub struct Terrain<'a> {
     pub side: usize,
     /// Vertex spacing, metres.
     pub cell_m: f64,
-    heights: &'a [f32],
+    heights: Cow<'a, [f32]>,
     /// Per vertex: the height, NaN where the mask is 0, and the colour used
     /// without imagery (a grey ramp by height, shaded) — one cache line
     /// answers a sample.
     sampled: Vec<(f32, u32)>,
     /// Heights in 16.16 fixed point, built on the first fixed-point render.
     heights_fixed: std::sync::OnceLock<Vec<i32>>,
-    mask: &'a [u8],
+    mask: Cow<'a, [u8]>,
     color: Option<ColorSource>,
     /// Per-vertex light factor, when hillshade is baked in.
     shade: Option<Vec<f32>>,
@@ -119,24 +120,28 @@ pub struct Terrain<'a> {
 }
 
 impl<'a> Terrain<'a> {
+    /// A terrain over `heights` (metres) and `mask`, borrowed (e.g. from a
+    /// mapped bundle) or owned (a viewer keeping one for its session).
     pub fn new(
         side: usize,
         cell_m: f64,
-        heights: &'a [f32],
-        mask: &'a [u8],
+        heights: impl Into<Cow<'a, [f32]>>,
+        mask: impl Into<Cow<'a, [u8]>>,
         color: Option<ColorSource>,
     ) -> Self {
+        let (heights, mask) = (heights.into(), mask.into());
         assert_eq!(heights.len(), side * side);
         assert_eq!(mask.len(), side * side);
+        let sampled = heights
+            .iter()
+            .zip(mask.iter())
+            .map(|(&h, &m)| (if m == 1 { h } else { f32::NAN }, 0))
+            .collect();
         let mut terrain = Terrain {
             side,
             cell_m,
             heights,
-            sampled: heights
-                .iter()
-                .zip(mask)
-                .map(|(&h, &m)| (if m == 1 { h } else { f32::NAN }, 0))
-                .collect(),
+            sampled,
             heights_fixed: std::sync::OnceLock::new(),
             mask,
             color,
