@@ -4,7 +4,7 @@
 //! reader never sees half a file.
 
 use anyhow::{bail, Context, Result};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Refuse to replace `out` without `force`, and name a missing output folder,
 /// before any work is done.
@@ -36,9 +36,7 @@ pub fn check_folder(out: &Path) -> Result<()> {
 
 /// Write `bytes` to `path` through a partial file renamed into place.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_through_partial(path, "", |partial| {
-        std::fs::write(partial, bytes).with_context(|| format!("{}: cannot write", path.display()))
-    })
+    Ok(relevo_core::atomic::write_file(path, bytes)?)
 }
 
 /// The one atomic write: `write` fills a partial file beside `path`
@@ -50,7 +48,7 @@ pub fn write_through_partial(
     extension: &str,
     write: impl FnOnce(&Path) -> Result<()>,
 ) -> Result<()> {
-    let mut partial = partial_path(path);
+    let mut partial = relevo_core::atomic::partial_path(path);
     if !extension.is_empty() {
         partial.set_extension(extension);
     }
@@ -63,13 +61,4 @@ pub fn write_through_partial(
         let _ = std::fs::remove_file(&partial);
     }
     result
-}
-
-/// `DIR/.NAME.partial` beside `path`.
-pub fn partial_path(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().to_string())
-        .unwrap_or_default();
-    path.with_file_name(format!(".{name}.partial"))
 }

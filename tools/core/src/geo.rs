@@ -152,6 +152,19 @@ impl TerrainFrame {
         Some((col - 0.5, row - 0.5))
     }
 
+    /// The affine map from terrain (x, y) to pixel (column, row) of an
+    /// image georeferenced by `image`: `[a₀, a₁, a₂, a₃, a₄, a₅]` with
+    /// column = a₀ + a₁x + a₂y, row = a₃ + a₄x + a₅y. `None` when either
+    /// geotransform cannot be inverted.
+    pub fn terrain_to_pixel(&self, image: &GeoTransform) -> Option<[f64; 6]> {
+        let pixel = |x: f64, y: f64| {
+            let (east, north) = self.world_from_terrain(x, y);
+            image.invert(east, north)
+        };
+        let (o, ex, ey) = (pixel(0.0, 0.0)?, pixel(1.0, 0.0)?, pixel(0.0, 1.0)?);
+        Some([o.0, ex.0 - o.0, ey.0 - o.0, o.1, ex.1 - o.1, ey.1 - o.1])
+    }
+
     /// World (east, north) of the terrain frame's origin, the south-west vertex.
     pub fn world_origin(&self) -> (f64, f64) {
         self.world_from_vertex(0.0, (self.side - 1) as f64)

@@ -183,6 +183,20 @@ fn bilinear(values: &[f64], width: usize, height: usize, x: f64, y: f64) -> f64 
     top * (1.0 - fy) + bottom * fy
 }
 
+/// Unit normal (terrain frame, z up) of the full-resolution surface at
+/// vertex (c, r) of a `side`² grid of `heights` with `cell`-metre spacing:
+/// central differences, one-sided at the border.
+pub fn vertex_normal(heights: &[f32], side: usize, cell: f64, c: usize, r: usize) -> [f64; 3] {
+    let z = |c: usize, r: usize| heights[r * side + c] as f64;
+    let (c0, c1) = (c.saturating_sub(1), (c + 1).min(side - 1));
+    let (r0, r1) = (r.saturating_sub(1), (r + 1).min(side - 1));
+    let dz_east = (z(c1, r) - z(c0, r)) / ((c1 - c0) as f64 * cell);
+    // Rows grow southwards.
+    let dz_north = (z(c, r0) - z(c, r1)) / ((r1 - r0) as f64 * cell);
+    let len = (dz_east * dz_east + dz_north * dz_north + 1.0).sqrt();
+    [-dz_east / len, -dz_north / len, 1.0 / len]
+}
+
 /// A deterministic synthetic heightfield for tests and benchmarks of the
 /// algorithms at sizes no committed DEM has: a fractal (diamond-square with hash-based
 /// offsets, Hurst exponent about 0.75), `side` = 2^n + 1, heights in metres.

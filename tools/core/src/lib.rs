@@ -4,6 +4,7 @@
 //! decoded into memory, and everything that touches files outside a bundle
 //! lives in the `relevo` command-line crate.
 //!
+//! - [`atomic`]: files written whole or not at all.
 //! - [`geo`]: affine geotransforms between grid cells and world coordinates,
 //!   and the terrain frame with its named conversions.
 //! - [`raster`]: in-memory multiband rasters with no-data, mosaicking,
@@ -18,6 +19,7 @@
 //!   classification from samples, objects, the vegetation database.
 //! - [`bundle`]: the `NAME.relevo/` directory: manifest, artifacts, validation.
 
+pub mod atomic;
 pub mod bundle;
 pub mod camera;
 pub mod geo;

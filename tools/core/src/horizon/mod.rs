@@ -230,6 +230,11 @@ impl ColumnOut<'_> {
 }
 
 impl Renderer {
+    /// The last frame rendered (empty before the first).
+    pub fn frame(&self) -> &Frame {
+        &self.frame
+    }
+
     /// Render `terrain` seen from `camera` (whose pitch must be 0: tilt is
     /// the projection-plane shift `incl_px`).
     pub fn render(&mut self, terrain: &Terrain, camera: &Camera, opts: &RenderOptions) -> &Frame {

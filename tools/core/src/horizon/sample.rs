@@ -3,6 +3,7 @@
 //! prefiltered level and with baked hillshade).
 
 use crate::geo::{GeoTransform, TerrainFrame};
+use crate::grid::vertex_normal;
 use std::borrow::Cow;
 
 /// Sub-voxel divisions per cell side (seed 000, §6.2 uses 8).
@@ -52,12 +53,7 @@ impl ColorSource {
         frame: &TerrainFrame,
     ) -> Option<Self> {
         // Terrain frame → world → colour pixel, all affine.
-        let pixel = |x: f64, y: f64| {
-            let (wx, wy) = frame.world_from_terrain(x, y);
-            color_geo.invert(wx, wy)
-        };
-        let (o, ex, ey) = (pixel(0.0, 0.0)?, pixel(1.0, 0.0)?, pixel(0.0, 1.0)?);
-        let to_pixel = [o.0, ex.0 - o.0, ey.0 - o.0, o.1, ex.1 - o.1, ey.1 - o.1];
+        let to_pixel = frame.terrain_to_pixel(color_geo)?;
         let texel_m = color_geo.cell_size().0.max(color_geo.cell_size().1);
         let mut levels = vec![Level {
             width,
@@ -174,17 +170,10 @@ impl<'a> Terrain<'a> {
         let (az, el) = (azimuth_deg.to_radians(), elevation_deg.to_radians());
         let sun = [az.sin() * el.cos(), az.cos() * el.cos(), el.sin()];
         let (side, cell) = (self.side, self.cell_m);
-        let z = |c: usize, r: usize| self.heights[r * side + c] as f64;
         let shade = (0..side * side)
             .map(|i| {
-                let (c, r) = (i % side, i / side);
-                let (c0, c1) = (c.saturating_sub(1), (c + 1).min(side - 1));
-                let (r0, r1) = (r.saturating_sub(1), (r + 1).min(side - 1));
-                let gx = (z(c1, r) - z(c0, r)) / ((c1 - c0) as f64 * cell);
-                let gy = (z(c, r0) - z(c, r1)) / ((r1 - r0) as f64 * cell);
-                let n = [-gx, -gy, 1.0];
-                let len = (n[0] * n[0] + n[1] * n[1] + 1.0).sqrt();
-                let lambert = ((n[0] * sun[0] + n[1] * sun[1] + n[2] * sun[2]) / len).max(0.0);
+                let n = vertex_normal(&self.heights, side, cell, i % side, i / side);
+                let lambert = (n[0] * sun[0] + n[1] * sun[1] + n[2] * sun[2]).max(0.0);
                 (0.35 + 0.65 * lambert) as f32
             })
             .collect();

@@ -10,6 +10,7 @@
 use super::extract::extract;
 use super::terrain_position;
 use crate::bundle::Bundle;
+use crate::grid::vertex_normal;
 use crate::raster::png::encode_rgba;
 use crate::{Error, Result};
 use serde_json::json;
@@ -64,19 +65,9 @@ pub fn build(bundle: &Bundle, max_error: f32, keep_padding: bool) -> Result<Expo
         .vertices
         .iter()
         .map(|v| {
-            let (c, r) = (v[0] as usize, v[1] as usize);
-            let z = |c: usize, r: usize| heights[r * side + c] as f64;
-            let (c0, c1) = (c.saturating_sub(1), (c + 1).min(side - 1));
-            let (r0, r1) = (r.saturating_sub(1), (r + 1).min(side - 1));
-            let dz_east = (z(c1, r) - z(c0, r)) / ((c1 - c0) as f64 * cell);
-            let dz_north = (z(c, r0) - z(c, r1)) / ((r1 - r0) as f64 * cell);
-            let n = [-dz_east, 1.0, dz_north];
-            let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-            [
-                (n[0] / len) as f32,
-                (n[1] / len) as f32,
-                (n[2] / len) as f32,
-            ]
+            let n = vertex_normal(&heights, side, cell, v[0] as usize, v[1] as usize);
+            // z up → y up (x east, y up, z south).
+            [n[0] as f32, n[2] as f32, -n[1] as f32]
         })
         .collect();
     // Grid (col, row) triangles from martini's traversal are clockwise seen

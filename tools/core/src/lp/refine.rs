@@ -62,13 +62,21 @@ pub struct Strip {
 impl Strip {
     /// The non-degenerate triangles, all wound the same way as the first.
     pub fn triangles(&self) -> impl Iterator<Item = [u32; 3]> + '_ {
+        self.triangle_entries()
+            .map(|e| e.map(|k| self.indices[k]))
+    }
+
+    /// The non-degenerate triangles as positions in the strip (so that
+    /// per-entry data such as [`Strip::morphed_z`] can be read), wound as
+    /// [`Strip::triangles`].
+    pub fn triangle_entries(&self) -> impl Iterator<Item = [usize; 3]> + '_ {
         self.indices.windows(3).enumerate().filter_map(|(k, w)| {
-            let t = if k % 2 == 0 {
-                [w[0], w[1], w[2]]
+            let (t, e) = if k % 2 == 0 {
+                ([w[0], w[1], w[2]], [k, k + 1, k + 2])
             } else {
-                [w[1], w[0], w[2]]
+                ([w[1], w[0], w[2]], [k + 1, k, k + 2])
             };
-            (t[0] != t[1] && t[1] != t[2] && t[0] != t[2]).then_some(t)
+            (t[0] != t[1] && t[1] != t[2] && t[0] != t[2]).then_some(e)
         })
     }
 }

@@ -1,0 +1,46 @@
+//! Whole files or nothing: every file Relevo writes outside a bundle goes
+//! to a partial file beside its path (`.NAME.partial`) that is renamed onto
+//! the path only when complete, so a reader never sees half a file.
+
+use crate::{Error, Result};
+use std::path::{Path, PathBuf};
+
+/// `DIR/.NAME.partial` beside `path`.
+pub fn partial_path(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_string())
+        .unwrap_or_default();
+    path.with_file_name(format!(".{name}.partial"))
+}
+
+/// Write `bytes` to `path` through a partial file renamed into place.
+pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
+    let partial = partial_path(path);
+    let written = std::fs::write(&partial, bytes)
+        .and_then(|()| std::fs::rename(&partial, path))
+        .map_err(|e| Error::invalid(path, format!("cannot write ({e})")));
+    if written.is_err() {
+        let _ = std::fs::remove_file(&partial);
+    }
+    written
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn files_appear_whole_and_failures_leave_nothing() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("shot.png");
+        write_file(&path, b"one").unwrap();
+        write_file(&path, b"two").unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), b"two");
+        let missing = dir.path().join("no/such/folder/x.png");
+        let message = write_file(&missing, b"x").unwrap_err().to_string();
+        assert!(message.contains("x.png") && message.contains("cannot write"), "{message}");
+        let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert_eq!(names.len(), 1, "only the finished file remains");
+    }
+}
