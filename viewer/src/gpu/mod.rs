@@ -1,0 +1,158 @@
+//! The GPU side of the viewer: one offscreen colour + depth target that
+//! every mode draws into, so the window and the headless renders share the
+//! same code. The terrain comes from relevo-core either as the refined mesh
+//! ([`mesh`]) or as the CPU raycast composited with its depth ([`raycast`]).
+
+mod mesh;
+mod raycast;
+mod targets;
+
+pub use targets::{Readback, Targets};
+
+use crate::scene::Scene;
+use eframe::egui_wgpu::wgpu;
+use relevo_core::camera::Camera;
+use relevo_core::horizon::RenderOptions;
+use serde::Serialize;
+use std::time::Instant;
+
+/// How the terrain is drawn.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// relevo-core's view-dependent refinement, drawn as triangles.
+    Mesh,
+    /// relevo-core's floating-horizon raycast, composited with its depth.
+    Raycast,
+}
+
+/// Everything a frame is drawn with besides the camera.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Settings {
+    pub mode: Mode,
+    /// Screen-space tolerance τ of the refinement, pixels.
+    pub tau_px: f64,
+    /// Geomorphing band: vertices blend in between τ and this many pixels.
+    pub morph: bool,
+    /// Frustum culling in the refinement.
+    pub cull: bool,
+    pub wireframe: bool,
+    /// The drape as texture (else a shaded height ramp).
+    pub texture: bool,
+    /// The raycaster's options (bands, fixed point, prefilter).
+    pub raycast: RenderOptions,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            mode: Mode::Mesh,
+            tau_px: 2.0,
+            morph: true,
+            cull: true,
+            wireframe: false,
+            texture: true,
+            raycast: RenderOptions::default(),
+        }
+    }
+}
+
+/// What one frame cost and drew (the HUD's numbers; `--stats` writes them).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct FrameStats {
+    pub width: u32,
+    pub height: u32,
+    /// Triangles submitted to the GPU.
+    pub triangles: usize,
+    /// Refinement (mesh mode), milliseconds.
+    pub refine_ms: f64,
+    /// Building and uploading the vertex buffer (mesh mode).
+    pub mesh_upload_ms: f64,
+    /// The CPU raycast (raycast mode).
+    pub raycast_ms: f64,
+    /// Uploading the raycast colour.
+    pub colour_upload_ms: f64,
+    /// Uploading the raycast depth (skipped for terrain-only frames).
+    pub depth_upload_ms: f64,
+    /// Recording and submitting the GPU work.
+    pub submit_ms: f64,
+}
+
+/// The viewer's GPU resources for one scene.
+pub struct Renderer {
+    pub targets: Targets,
+    mesh: mesh::MeshPass,
+    raycast: raycast::RaycastPass,
+}
+
+/// The sky: the raycaster's colour for pixels without terrain.
+pub fn sky_colour(options: &RenderOptions) -> wgpu::Color {
+    let [r, g, b, a] = options.sky.map(|c| c as f64 / 255.0);
+    wgpu::Color { r, g, b, a }
+}
+
+impl Renderer {
+    /// Resources for `scene` drawing into a `size` target.
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, scene: &Scene, size: [u32; 2]) -> Self {
+        Renderer {
+            targets: Targets::new(device, size),
+            mesh: mesh::MeshPass::new(device, queue, scene),
+            raycast: raycast::RaycastPass::new(device),
+        }
+    }
+
+    /// Draw the terrain of `scene` seen by `camera` into the targets
+    /// (resized to the camera's viewport when needed).
+    pub fn render(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        scene: &mut Scene,
+        camera: &Camera,
+        settings: &Settings,
+        objects_drawn: bool,
+    ) -> FrameStats {
+        let size = [camera.width, camera.height];
+        if self.targets.size != size {
+            self.targets = Targets::new(device, size);
+        }
+        let mut stats = FrameStats {
+            width: size[0],
+            height: size[1],
+            ..Default::default()
+        };
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("relevo-view frame"),
+        });
+        match settings.mode {
+            Mode::Mesh => {
+                self.mesh
+                    .prepare(device, queue, scene, camera, settings, &mut stats);
+                self.mesh
+                    .draw(&mut encoder, &self.targets, sky_colour(&settings.raycast));
+            }
+            Mode::Raycast => {
+                self.raycast.prepare(
+                    device,
+                    queue,
+                    scene,
+                    camera,
+                    settings,
+                    objects_drawn,
+                    &mut stats,
+                );
+                self.raycast.draw(&mut encoder, &self.targets);
+            }
+        }
+        let start = Instant::now();
+        queue.submit([encoder.finish()]);
+        stats.submit_ms = start.elapsed().as_secs_f64() * 1e3;
+        stats
+    }
+
+    /// The depth of the last raycast frame, when the last frame was one:
+    /// exactly the CPU depth buffer that was composited.
+    pub fn raycast_depth<'a>(&self, scene: &'a Scene, settings: &Settings) -> Option<&'a [f32]> {
+        (settings.mode == Mode::Raycast).then(|| scene.raycaster.frame().depth.as_slice())
+    }
+}

@@ -1,0 +1,215 @@
+//! Raycast mode: relevo-core's floating-horizon raycast writes colour and
+//! depth on the CPU; they are uploaded (depth as `R32Float`, since wgpu
+//! cannot write a depth texture directly) and a full-screen pass writes both
+//! into the shared targets with `frag_depth`. A terrain-only frame uploads
+//! colour alone (Szenberg 1997, table 8.1).
+
+use super::targets::{Targets, COLOUR_FORMAT, DEPTH_FORMAT};
+use super::{FrameStats, Settings};
+use crate::scene::Scene;
+use eframe::egui_wgpu::wgpu;
+use relevo_core::camera::Camera;
+use std::time::Instant;
+
+pub struct RaycastPass {
+    layout: wgpu::BindGroupLayout,
+    with_depth: wgpu::RenderPipeline,
+    colour_only: wgpu::RenderPipeline,
+    /// Upload textures and their bind group, for one size.
+    uploads: Option<Uploads>,
+    depth_uploaded: bool,
+}
+
+struct Uploads {
+    size: [u32; 2],
+    colour: wgpu::Texture,
+    depth: wgpu::Texture,
+    bind_group: wgpu::BindGroup,
+}
+
+impl RaycastPass {
+    pub fn new(device: &wgpu::Device) -> Self {
+        let texture_entry = |binding, filterable| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable },
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+            count: None,
+        };
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("raycast bindings"),
+            entries: &[texture_entry(0, true), texture_entry(1, false)],
+        });
+        let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("raycast.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("raycast.wgsl").into()),
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("raycast"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = |fragment: &str, write_depth: bool| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(fragment),
+                layout: Some(&pipeline_layout),
+                vertex: wgpu::VertexState {
+                    module: &shader,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[],
+                },
+                primitive: Default::default(),
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH_FORMAT,
+                    depth_write_enabled: Some(write_depth),
+                    depth_compare: Some(wgpu::CompareFunction::Always),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &shader,
+                    entry_point: Some(fragment),
+                    compilation_options: Default::default(),
+                    targets: &[Some(COLOUR_FORMAT.into())],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        RaycastPass {
+            with_depth: pipeline("fs_colour_and_depth", true),
+            colour_only: pipeline("fs_colour", false),
+            layout,
+            uploads: None,
+            depth_uploaded: false,
+        }
+    }
+
+    /// Raycast for `camera` and upload the colour, and the depth when
+    /// objects will be drawn against it.
+    #[allow(clippy::too_many_arguments)]
+    pub fn prepare(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        scene: &mut Scene,
+        camera: &Camera,
+        settings: &Settings,
+        objects_drawn: bool,
+        stats: &mut FrameStats,
+    ) {
+        let start = Instant::now();
+        let frame = scene.raycaster.render(&scene.terrain, camera, &settings.raycast);
+        stats.raycast_ms = start.elapsed().as_secs_f64() * 1e3;
+        let size = [camera.width, camera.height];
+        if self.uploads.as_ref().is_none_or(|u| u.size != size) {
+            self.uploads = Some(self.uploads_of(device, size));
+        }
+        let Some(uploads) = &self.uploads else {
+            return;
+        };
+        let write = |texture: &wgpu::Texture, bytes: &[u8]| {
+            queue.write_texture(
+                texture.as_image_copy(),
+                bytes,
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(4 * size[0]),
+                    rows_per_image: Some(size[1]),
+                },
+                texture.size(),
+            );
+        };
+        let start = Instant::now();
+        write(&uploads.colour, frame.rgba_bytes());
+        stats.colour_upload_ms = start.elapsed().as_secs_f64() * 1e3;
+        self.depth_uploaded = objects_drawn;
+        if objects_drawn {
+            let start = Instant::now();
+            write(&uploads.depth, bytemuck::cast_slice(&frame.depth));
+            stats.depth_upload_ms = start.elapsed().as_secs_f64() * 1e3;
+        }
+    }
+
+    /// Write the uploaded raycast into the targets.
+    pub fn draw(&self, encoder: &mut wgpu::CommandEncoder, targets: &Targets) {
+        let Some(uploads) = &self.uploads else {
+            return;
+        };
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("raycast composite"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &targets.colour_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &targets.depth_view,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            ..Default::default()
+        });
+        pass.set_pipeline(if self.depth_uploaded {
+            &self.with_depth
+        } else {
+            &self.colour_only
+        });
+        pass.set_bind_group(0, &uploads.bind_group, &[]);
+        pass.draw(0..3, 0..1);
+    }
+
+    fn uploads_of(&self, device: &wgpu::Device, size: [u32; 2]) -> Uploads {
+        let texture = |label, format| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d {
+                    width: size[0],
+                    height: size[1],
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            })
+        };
+        let colour = texture("raycast colour", COLOUR_FORMAT);
+        let depth = texture("raycast depth", wgpu::TextureFormat::R32Float);
+        let view = |t: &wgpu::Texture| t.create_view(&wgpu::TextureViewDescriptor::default());
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("raycast bindings"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&view(&colour)),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&view(&depth)),
+                },
+            ],
+        });
+        Uploads {
+            size,
+            colour,
+            depth,
+            bind_group,
+        }
+    }
+}

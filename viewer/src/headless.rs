@@ -1,0 +1,192 @@
+//! `relevo-view render`: the same renderer as the window, drawing into its
+//! offscreen targets without a window, read back to PNG (and the depth
+//! buffer), at any size the GPU allows.
+
+use crate::flight::Flight;
+use crate::gpu::{FrameStats, Mode, Readback, Renderer, Settings};
+use crate::scene::Scene;
+use anyhow::{bail, Context, Result};
+use eframe::egui_wgpu::wgpu;
+use relevo_core::horizon::{Arithmetic, Band};
+use relevo_core::raster::png::encode_rgba;
+use relevo_core::scene::{self, CameraPose};
+use serde::Serialize;
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug)]
+pub struct RenderArgs {
+    /// The bundle to render.
+    pub bundle: PathBuf,
+    /// How the terrain is drawn.
+    #[arg(long, value_enum, default_value_t = Mode::Mesh)]
+    pub mode: Mode,
+    /// Eye easting, northing (bundle CRS), height (m), heading (° clockwise
+    /// from north) and incl (the horizon's screen row in pixels from the
+    /// bottom; larger looks further down). Default: the home view.
+    #[arg(long, value_name = "X,Y,Z,HEADING[,INCL]", allow_hyphen_values = true)]
+    pub camera: Option<String>,
+    /// Image size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x720", value_parser = scene::parse_size)]
+    pub size: [u32; 2],
+    /// Horizontal field of view, degrees.
+    #[arg(long, default_value_t = 60.0)]
+    pub fov: f64,
+    /// Far plane, in grid cells.
+    #[arg(long, default_value_t = 1024.0)]
+    pub far: f64,
+    /// Mesh mode: screen-space tolerance τ, pixels (0 keeps every vertex).
+    #[arg(long, default_value_t = 2.0)]
+    pub tau: f64,
+    /// Mesh mode: no geomorphing.
+    #[arg(long)]
+    pub no_morph: bool,
+    /// Mesh mode: wireframe over the surface.
+    #[arg(long)]
+    pub wireframe: bool,
+    /// Mesh mode: a shaded height ramp instead of the drape.
+    #[arg(long)]
+    pub no_texture: bool,
+    /// Raycast mode: distance bands UNTIL_M:SLICES_PER_CELL[:sub], e.g. 3000:4:sub,inf:1.
+    #[arg(long, value_parser = scene::parse_bands)]
+    pub bands: Option<Bands>,
+    /// Raycast mode: 16.16 fixed-point inner loop.
+    #[arg(long)]
+    pub fixed: bool,
+    /// Raycast mode: prefiltered colour levels by slice footprint.
+    #[arg(long)]
+    pub prefilter: bool,
+    /// Output PNG.
+    #[arg(long, short)]
+    pub out: PathBuf,
+    /// Also write the depth buffer: raw little-endian f32, row-major, top row first, [0, 1].
+    #[arg(long)]
+    pub depth: Option<PathBuf>,
+    /// Also write the frame's figures as JSON.
+    #[arg(long)]
+    pub stats: Option<PathBuf>,
+    /// Replace existing outputs.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// One `--bands` value: the whole list.
+type Bands = Vec<Band>;
+
+/// What `--stats` writes.
+#[derive(Debug, Serialize)]
+struct Report<'a> {
+    adapter: &'a str,
+    mode: Mode,
+    camera: String,
+    frame: FrameStats,
+}
+
+/// A device without a window: the first adapter wgpu finds (a GPU, or
+/// Mesa's lavapipe where there is none), with the adapter's own limits so
+/// images larger than any screen can be drawn.
+pub fn device() -> Result<(wgpu::Device, wgpu::Queue, String)> {
+    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+        power_preference: wgpu::PowerPreference::HighPerformance,
+        ..Default::default()
+    }))
+    .context("no GPU adapter (install Mesa's Vulkan drivers for a software one)")?;
+    let info = adapter.get_info();
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("relevo-view"),
+        required_limits: adapter.limits(),
+        ..Default::default()
+    }))
+    .context("the GPU adapter refused a device")?;
+    Ok((device, queue, format!("{} ({:?})", info.name, info.backend)))
+}
+
+/// Render `scene` once for `flight` and read the targets back.
+pub fn render_once(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    scene: &mut Scene,
+    flight: &Flight,
+    settings: &Settings,
+    size: [u32; 2],
+) -> Result<(Readback, FrameStats)> {
+    let camera = flight.camera(scene, size);
+    let mut renderer = Renderer::new(device, queue, scene, size);
+    let stats = renderer.render(device, queue, scene, &camera, settings, false);
+    let mut readback = renderer.targets.read(device, queue)?;
+    // The raycast's depth is the CPU buffer itself (a terrain-only frame does
+    // not upload it).
+    if let Some(depth) = renderer.raycast_depth(scene, settings) {
+        readback.depth.copy_from_slice(depth);
+    }
+    Ok((readback, stats))
+}
+
+pub fn run(a: RenderArgs) -> Result<()> {
+    for path in std::iter::once(&a.out).chain(&a.depth).chain(&a.stats) {
+        if path.exists() && !a.force {
+            bail!("{}: already exists (pass --force to replace it)", path.display());
+        }
+    }
+    if !(a.fov > 0.0 && a.fov < 179.0) {
+        bail!("--fov must be between 0 and 179 degrees, got {}", a.fov);
+    }
+    if !(a.far >= 2.0 && a.far.is_finite()) {
+        bail!("--far must be at least 2 cells, got {}", a.far);
+    }
+    if !(a.tau >= 0.0 && a.tau.is_finite()) {
+        bail!("--tau must be a non-negative number of pixels, got {}", a.tau);
+    }
+    let mut scene = Scene::open(&a.bundle)?;
+    let mut flight = match &a.camera {
+        None => Flight::home(&scene),
+        Some(text) => {
+            let pose = CameraPose::parse(text).map_err(anyhow::Error::msg)?;
+            Flight::from_pose(&scene, &pose, a.size[1])
+                .with_context(|| format!("{}: the bundle's geotransform cannot be inverted", a.bundle.display()))?
+        }
+    };
+    flight.fov_x_deg = a.fov;
+    flight.far_cells = a.far;
+    let mut settings = Settings {
+        mode: a.mode,
+        tau_px: a.tau,
+        morph: !a.no_morph,
+        wireframe: a.wireframe,
+        texture: !a.no_texture,
+        ..Default::default()
+    };
+    settings.raycast.prefilter = a.prefilter;
+    if a.fixed {
+        settings.raycast.arithmetic = Arithmetic::Fixed;
+    }
+    if let Some(bands) = a.bands {
+        settings.raycast.bands = bands;
+    }
+    let (device, queue, adapter) = device()?;
+    let (readback, stats) = render_once(&device, &queue, &mut scene, &flight, &settings, a.size)?;
+    let png = encode_rgba(&readback.rgba, a.size[0] as usize, a.size[1] as usize)?;
+    relevo_core::atomic::write_file(&a.out, &png)?;
+    if let Some(path) = &a.depth {
+        relevo_core::atomic::write_file(path, bytemuck::cast_slice(&readback.depth))?;
+    }
+    let camera = flight.pose(&scene, a.size[1]).to_string();
+    if let Some(path) = &a.stats {
+        let report = Report {
+            adapter: &adapter,
+            mode: a.mode,
+            camera: camera.clone(),
+            frame: stats,
+        };
+        relevo_core::atomic::write_file(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
+    }
+    eprintln!(
+        "{}: {}×{} {:?} on {adapter}, {} triangles, camera {camera}",
+        a.out.display(),
+        a.size[0],
+        a.size[1],
+        a.mode,
+        stats.triangles
+    );
+    Ok(())
+}

@@ -1,0 +1,63 @@
+//! `relevo-view`: fly over a Relevo bundle as a view-dependent refined mesh
+//! or a CPU floating-horizon raycast; `relevo-view render` draws the same
+//! frames headless to PNG. Depends on relevo-core only: every terrain
+//! computation is core's; this crate owns GPU resources, input and UI.
+
+mod flight;
+mod gpu;
+mod headless;
+mod scene;
+
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "relevo-view",
+    version,
+    about = "Fly over a Relevo bundle (refined mesh or floating-horizon raycast); render it headless to PNG.",
+    args_conflicts_with_subcommands = true,
+    after_help = "Examples:
+  relevo-view olinda.relevo
+  relevo-view render olinda.relevo --mode raycast --size 1920x1080 --out shot.png
+  relevo-view render olinda.relevo --mode mesh --tau 1 --wireframe --camera 289000,9111000,400,40,420 --out mesh.png
+  relevo-view render alps.relevo --size 7680x4320 --depth depth.f32 --stats stats.json --out big.png"
+)]
+struct Cli {
+    /// The bundle to open in the window.
+    bundle: Option<PathBuf>,
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Render one frame without a window (PNG, depth, figures).
+    Render(headless::RenderArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .with_writer(std::io::stderr)
+        .try_init();
+    let result = match cli.command {
+        Some(Command::Render(args)) => headless::run(args),
+        None => {
+            let _ = cli.bundle;
+            Ok(())
+        }
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("error: {error:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

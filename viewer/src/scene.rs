@@ -1,0 +1,104 @@
+//! The bundle the viewer shows, opened once through relevo-core: its frame,
+//! mapped heights and mask, the LP hierarchy over the mapped array, the
+//! raycaster's terrain (owned for the session) and the drape. Everything the
+//! viewer computes about terrain goes through these core types.
+
+use anyhow::{Context, Result};
+use relevo_core::bundle::{Array, Bundle, LpArray};
+use relevo_core::geo::TerrainFrame;
+use relevo_core::horizon::{self, Terrain};
+use relevo_core::lp::refine::Refiner;
+use std::path::{Path, PathBuf};
+
+/// The drape image and the affine map from the terrain frame to its
+/// texture coordinates (u right, v down, both 0..1).
+pub struct DrapeImage {
+    pub width: u32,
+    pub height: u32,
+    pub rgba: Array<u8>,
+    /// u = a₀ + a₁x + a₂y, v = a₃ + a₄x + a₅y for terrain (x, y) in metres.
+    pub terrain_to_uv: [f64; 6],
+}
+
+/// An opened bundle with the per-session state of both renderers.
+pub struct Scene {
+    pub path: PathBuf,
+    pub bundle: Bundle,
+    pub frame: TerrainFrame,
+    pub heights: Array<f32>,
+    pub mask: Array<u8>,
+    pub lp: LpArray,
+    pub drape: Option<DrapeImage>,
+    /// The raycaster's view of the terrain (colour pyramid built once).
+    pub terrain: Terrain<'static>,
+    /// Reusable refinement and raycast buffers: nothing allocated per frame
+    /// once warm.
+    pub refiner: Refiner,
+    pub raycaster: horizon::Renderer,
+}
+
+impl Scene {
+    /// Open the bundle at `path`; errors name the bundle and the problem.
+    pub fn open(path: &Path) -> Result<Scene> {
+        let bundle = Bundle::open(path)?;
+        let frame = bundle.frame();
+        let heights = bundle.heights()?;
+        let mask = bundle.mask()?;
+        let lp = bundle.lp()?;
+        let drape = bundle.drape()?;
+        let color = drape.as_ref().and_then(|d| d.color_source(&frame));
+        let terrain = Terrain::new(
+            frame.side,
+            frame.cell_size_m,
+            heights.to_vec(),
+            mask.to_vec(),
+            color,
+        );
+        let drape = match drape {
+            None => None,
+            Some(d) => {
+                let pixel = frame
+                    .terrain_to_pixel(&d.info.geotransform)
+                    .with_context(|| format!("{}: the drape's geotransform cannot be inverted", path.display()))?;
+                let (w, h) = (d.info.width as f64, d.info.height as f64);
+                let terrain_to_uv = [
+                    pixel[0] / w,
+                    pixel[1] / w,
+                    pixel[2] / w,
+                    pixel[3] / h,
+                    pixel[4] / h,
+                    pixel[5] / h,
+                ];
+                Some(DrapeImage {
+                    width: d.info.width as u32,
+                    height: d.info.height as u32,
+                    rgba: d.rgba,
+                    terrain_to_uv,
+                })
+            }
+        };
+        Ok(Scene {
+            path: path.to_path_buf(),
+            bundle,
+            frame,
+            heights,
+            mask,
+            lp,
+            drape,
+            terrain,
+            refiner: Refiner::new(),
+            raycaster: horizon::Renderer::default(),
+        })
+    }
+
+    /// Side of the terrain frame's square, metres.
+    pub fn extent_m(&self) -> f64 {
+        (self.frame.side - 1) as f64 * self.frame.cell_size_m
+    }
+
+    /// Ground height (bilinear) under terrain point (x, y), metres; `None`
+    /// off the data.
+    pub fn ground_height(&self, x: f64, y: f64) -> Option<f64> {
+        self.terrain.surface(x, y)
+    }
+}
