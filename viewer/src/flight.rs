@@ -85,7 +85,9 @@ impl Flight {
     /// The camera string of this view for an image `height_px` tall: the
     /// syntax `relevo render` and `relevo-view render` read.
     pub fn pose(&self, scene: &Scene, height_px: u32) -> CameraPose {
-        let (east, north) = scene.frame.world_from_terrain(self.position.x, self.position.y);
+        let (east, north) = scene
+            .frame
+            .world_from_terrain(self.position.x, self.position.y);
         CameraPose {
             eye: [east, north, self.position.z],
             heading_deg: self.heading_deg.rem_euclid(360.0),
@@ -119,7 +121,8 @@ impl Flight {
     /// Move for `dt` seconds of `controls`.
     pub fn fly(&mut self, scene: &Scene, controls: &Controls, dt: f64) {
         let above = self.height_above_ground(scene);
-        self.heading_deg = (self.heading_deg + controls.turn * TURN_DEG_PER_S * dt).rem_euclid(360.0);
+        self.heading_deg =
+            (self.heading_deg + controls.turn * TURN_DEG_PER_S * dt).rem_euclid(360.0);
         self.horizon_frac = (self.horizon_frac + controls.look * LOOK_PER_S * dt).clamp(0.05, 4.0);
         let h = self.heading_deg.to_radians();
         let step = controls.forward * self.speed_mps * dt;
@@ -150,7 +153,13 @@ impl Flight {
         if !(0.0..=last).contains(&c) || !(0.0..=last).contains(&r) {
             return DVec3::Z;
         }
-        let n = vertex_normal(&scene.heights, f.side, f.cell_size_m, c.round() as usize, r.round() as usize);
+        let n = vertex_normal(
+            &scene.heights,
+            f.side,
+            f.cell_size_m,
+            c.round() as usize,
+            r.round() as usize,
+        );
         DVec3::from_array(n)
     }
 }

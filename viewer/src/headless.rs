@@ -85,7 +85,8 @@ struct Report<'a> {
 /// Mesa's lavapipe where there is none), with the adapter's own limits so
 /// images larger than any screen can be drawn.
 pub fn device() -> Result<(wgpu::Device, wgpu::Queue, String)> {
-    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let instance =
+        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
     let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
         power_preference: wgpu::PowerPreference::HighPerformance,
         ..Default::default()
@@ -125,7 +126,10 @@ pub fn render_once(
 pub fn run(a: RenderArgs) -> Result<()> {
     for path in std::iter::once(&a.out).chain(&a.depth).chain(&a.stats) {
         if path.exists() && !a.force {
-            bail!("{}: already exists (pass --force to replace it)", path.display());
+            bail!(
+                "{}: already exists (pass --force to replace it)",
+                path.display()
+            );
         }
     }
     if !(a.fov > 0.0 && a.fov < 179.0) {
@@ -135,16 +139,26 @@ pub fn run(a: RenderArgs) -> Result<()> {
         bail!("--far must be at least 2 cells, got {}", a.far);
     }
     if !(a.tau >= 0.0 && a.tau.is_finite()) {
-        bail!("--tau must be a non-negative number of pixels, got {}", a.tau);
+        bail!(
+            "--tau must be a non-negative number of pixels, got {}",
+            a.tau
+        );
     }
+    let pose = a
+        .camera
+        .as_deref()
+        .map(CameraPose::parse)
+        .transpose()
+        .map_err(anyhow::Error::msg)?;
     let mut scene = Scene::open(&a.bundle)?;
-    let mut flight = match &a.camera {
+    let mut flight = match &pose {
         None => Flight::home(&scene),
-        Some(text) => {
-            let pose = CameraPose::parse(text).map_err(anyhow::Error::msg)?;
-            Flight::from_pose(&scene, &pose, a.size[1])
-                .with_context(|| format!("{}: the bundle's geotransform cannot be inverted", a.bundle.display()))?
-        }
+        Some(pose) => Flight::from_pose(&scene, pose, a.size[1]).with_context(|| {
+            format!(
+                "{}: the bundle's geotransform cannot be inverted",
+                a.bundle.display()
+            )
+        })?,
     };
     flight.fov_x_deg = a.fov;
     flight.far_cells = a.far;

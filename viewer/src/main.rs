@@ -3,11 +3,6 @@
 //! frames headless to PNG. Depends on relevo-core only: every terrain
 //! computation is core's; this crate owns GPU resources, input and UI.
 
-mod flight;
-mod gpu;
-mod headless;
-mod scene;
-
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -20,6 +15,7 @@ use std::process::ExitCode;
     args_conflicts_with_subcommands = true,
     after_help = "Examples:
   relevo-view olinda.relevo
+  relevo-view olinda.relevo --tour 90 --screenshot window.png   # scripted flight, screenshot, exit
   relevo-view render olinda.relevo --mode raycast --size 1920x1080 --out shot.png
   relevo-view render olinda.relevo --mode mesh --tau 1 --wireframe --camera 289000,9111000,400,40,420 --out mesh.png
   relevo-view render alps.relevo --size 7680x4320 --depth depth.f32 --stats stats.json --out big.png"
@@ -27,6 +23,13 @@ use std::process::ExitCode;
 struct Cli {
     /// The bundle to open in the window.
     bundle: Option<PathBuf>,
+    /// Fly a scripted tour of this many frames (forward, turning), then
+    /// save a screenshot of the window to --screenshot and close.
+    #[arg(long, requires = "screenshot", value_name = "FRAMES")]
+    tour: Option<u32>,
+    /// Where the tour's screenshot goes (PNG).
+    #[arg(long, requires = "tour")]
+    screenshot: Option<PathBuf>,
     #[command(subcommand)]
     command: Option<Command>,
 }
@@ -34,7 +37,7 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Render one frame without a window (PNG, depth, figures).
-    Render(headless::RenderArgs),
+    Render(relevo_view::headless::RenderArgs),
 }
 
 fn main() -> ExitCode {
@@ -47,10 +50,13 @@ fn main() -> ExitCode {
         .with_writer(std::io::stderr)
         .try_init();
     let result = match cli.command {
-        Some(Command::Render(args)) => headless::run(args),
+        Some(Command::Render(args)) => relevo_view::headless::run(args),
         None => {
-            let _ = cli.bundle;
-            Ok(())
+            let tour = cli
+                .tour
+                .zip(cli.screenshot)
+                .map(|(frames, path)| relevo_view::app::Tour::new(frames, path));
+            relevo_view::app::run(cli.bundle, tour)
         }
     };
     match result {

@@ -59,7 +59,12 @@ impl Scene {
             Some(d) => {
                 let pixel = frame
                     .terrain_to_pixel(&d.info.geotransform)
-                    .with_context(|| format!("{}: the drape's geotransform cannot be inverted", path.display()))?;
+                    .with_context(|| {
+                        format!(
+                            "{}: the drape's geotransform cannot be inverted",
+                            path.display()
+                        )
+                    })?;
                 let (w, h) = (d.info.width as f64, d.info.height as f64);
                 let terrain_to_uv = [
                     pixel[0] / w,

@@ -39,7 +39,10 @@ mod tests {
         assert_eq!(std::fs::read(&path).unwrap(), b"two");
         let missing = dir.path().join("no/such/folder/x.png");
         let message = write_file(&missing, b"x").unwrap_err().to_string();
-        assert!(message.contains("x.png") && message.contains("cannot write"), "{message}");
+        assert!(
+            message.contains("x.png") && message.contains("cannot write"),
+            "{message}"
+        );
         let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
         assert_eq!(names.len(), 1, "only the finished file remains");
     }

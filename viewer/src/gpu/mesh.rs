@@ -54,7 +54,10 @@ pub struct MeshPass {
 impl MeshPass {
     pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, scene: &Scene) -> Self {
         let (drape_view, has_drape) = match &scene.drape {
-            Some(d) => (upload_mipmapped(device, queue, d.width, d.height, &d.rgba), true),
+            Some(d) => (
+                upload_mipmapped(device, queue, d.width, d.height, &d.rgba),
+                true,
+            ),
             None => (upload_mipmapped(device, queue, 1, 1, &[255; 4]), false),
         };
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
@@ -207,7 +210,10 @@ impl MeshPass {
         let uv_of = |x: f64, y: f64| match &scene.drape {
             Some(d) => {
                 let t = &d.terrain_to_uv;
-                [(t[0] + t[1] * x + t[2] * y) as f32, (t[3] + t[4] * x + t[5] * y) as f32]
+                [
+                    (t[0] + t[1] * x + t[2] * y) as f32,
+                    (t[3] + t[4] * x + t[5] * y) as f32,
+                ]
             }
             None => [0.0, 0.0],
         };
@@ -353,7 +359,12 @@ fn upload_mipmapped(
         let mut next = Vec::with_capacity((nw * nh * 4) as usize);
         for y in 0..nh {
             for x in 0..nw {
-                let quad = [texel(2 * x, 2 * y), texel(2 * x + 1, 2 * y), texel(2 * x, 2 * y + 1), texel(2 * x + 1, 2 * y + 1)];
+                let quad = [
+                    texel(2 * x, 2 * y),
+                    texel(2 * x + 1, 2 * y),
+                    texel(2 * x, 2 * y + 1),
+                    texel(2 * x + 1, 2 * y + 1),
+                ];
                 for c in 0..4 {
                     let sum: u32 = quad.iter().map(|t| t[c] as u32).sum();
                     next.push(((sum + 2) / 4) as u8);

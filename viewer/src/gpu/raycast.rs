@@ -104,7 +104,9 @@ impl RaycastPass {
         stats: &mut FrameStats,
     ) {
         let start = Instant::now();
-        let frame = scene.raycaster.render(&scene.terrain, camera, &settings.raycast);
+        let frame = scene
+            .raycaster
+            .render(&scene.terrain, camera, &settings.raycast);
         stats.raycast_ms = start.elapsed().as_secs_f64() * 1e3;
         let size = [camera.width, camera.height];
         if self.uploads.as_ref().is_none_or(|u| u.size != size) {

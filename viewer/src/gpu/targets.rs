@@ -5,10 +5,8 @@ use anyhow::{Context, Result};
 use eframe::egui_wgpu::wgpu;
 
 /// Colour as stored: RGBA bytes, no sRGB conversion, so the raycaster's
-/// and the drape's bytes reach the PNG unchanged.
+/// and the drape's bytes reach the PNG, and egui's gamma-space image, unchanged.
 pub const COLOUR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
-/// The same texels seen as sRGB, for showing the target through egui.
-pub const DISPLAY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 /// Depth in [0, 1] as the off-axis projection writes it.
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
@@ -17,15 +15,12 @@ pub struct Targets {
     pub size: [u32; 2],
     pub colour: wgpu::Texture,
     pub colour_view: wgpu::TextureView,
-    /// `colour` viewed as sRGB (egui shows it without changing the bytes).
-    pub display_view: wgpu::TextureView,
     pub depth: wgpu::Texture,
     pub depth_view: wgpu::TextureView,
 }
 
 /// The targets' contents read back to the CPU.
 pub struct Readback {
-    pub size: [u32; 2],
     /// RGBA8, row-major, top row first.
     pub rgba: Vec<u8>,
     /// [0, 1] depth, row-major, top row first.
@@ -49,7 +44,7 @@ impl Targets {
             usage: wgpu::TextureUsages::RENDER_ATTACHMENT
                 | wgpu::TextureUsages::TEXTURE_BINDING
                 | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[DISPLAY_FORMAT],
+            view_formats: &[],
         });
         let depth = device.create_texture(&wgpu::TextureDescriptor {
             label: Some("depth target"),
@@ -64,10 +59,6 @@ impl Targets {
         Targets {
             size,
             colour_view: colour.create_view(&wgpu::TextureViewDescriptor::default()),
-            display_view: colour.create_view(&wgpu::TextureViewDescriptor {
-                format: Some(DISPLAY_FORMAT),
-                ..Default::default()
-            }),
             depth_view: depth.create_view(&wgpu::TextureViewDescriptor::default()),
             colour,
             depth,
@@ -78,7 +69,8 @@ impl Targets {
     pub fn read(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Readback> {
         let [w, h] = self.size;
         // Rows of a buffer copy are padded to 256 bytes.
-        let row = (w * 4).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+        let row = (w * 4).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
+            * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
         let buffer_of = |label| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -87,7 +79,8 @@ impl Targets {
                 mapped_at_creation: false,
             })
         };
-        let (colour_buffer, depth_buffer) = (buffer_of("colour readback"), buffer_of("depth readback"));
+        let (colour_buffer, depth_buffer) =
+            (buffer_of("colour readback"), buffer_of("depth readback"));
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("readback"),
         });
@@ -126,7 +119,9 @@ impl Targets {
             .poll(wgpu::PollType::wait_indefinitely())
             .context("waiting for the GPU to finish the frame")?;
         let unpad = |buffer: &wgpu::Buffer| -> Result<Vec<u8>> {
-            let mapped = buffer.get_mapped_range(..).context("reading back the frame")?;
+            let mapped = buffer
+                .get_mapped_range(..)
+                .context("reading back the frame")?;
             Ok(mapped
                 .chunks(row as usize)
                 .flat_map(|r| r[..w as usize * 4].iter().copied())
@@ -137,10 +132,6 @@ impl Targets {
             .chunks_exact(4)
             .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
             .collect();
-        Ok(Readback {
-            size: self.size,
-            rgba,
-            depth,
-        })
+        Ok(Readback { rgba, depth })
     }
 }

@@ -405,8 +405,9 @@ fn stage_write(b: &mut Build) -> Result<()> {
 fn finish(b: Build, timings: Vec<StageTiming>) -> Result<Summary> {
     let grid = b.grid.context("grid stage did not run")?;
     let dem = b.dem.context("dem stage did not run")?;
-    let valid_extent = grid.valid_extent().context("the DEM has no valid data")?;
-    let height_range_m = grid.height_range().context("the DEM has no valid data")?;
+    let grid_info = GridInfo::of(&grid, b.cell_size_m, b.region.z_scale)
+        .context("the DEM has no valid data")?;
+    let height_range_m = grid_info.height_range_m;
     let mut inputs = Vec::new();
     let mut record = |role: &str, paths: &[PathBuf]| -> Result<()> {
         for p in paths {
@@ -444,15 +445,7 @@ fn finish(b: Build, timings: Vec<StageTiming>) -> Result<Summary> {
         region: b.name.clone(),
         tool_version: env!("CARGO_PKG_VERSION").into(),
         crs,
-        grid: GridInfo {
-            side: grid.side,
-            geotransform: grid.geotransform,
-            cell_size_m: b.cell_size_m,
-            z_scale: b.region.z_scale,
-            valid_extent,
-            height_range_m,
-            valid_vertices: grid.valid_count(),
-        },
+        grid: grid_info,
         color: color.clone(),
         inputs,
         parameters,

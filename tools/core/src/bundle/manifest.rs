@@ -59,6 +59,22 @@ pub struct GridInfo {
     pub valid_vertices: usize,
 }
 
+impl GridInfo {
+    /// The description of `grid` with `cell_size_m` spacing; `None` when
+    /// it holds no data.
+    pub fn of(grid: &crate::grid::HeightGrid, cell_size_m: f64, z_scale: f64) -> Option<GridInfo> {
+        Some(GridInfo {
+            side: grid.side,
+            geotransform: grid.geotransform,
+            cell_size_m,
+            z_scale,
+            valid_extent: grid.valid_extent()?,
+            height_range_m: grid.height_range()?,
+            valid_vertices: grid.valid_count(),
+        })
+    }
+}
+
 /// The drape image, at its own resolution.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ColorInfo {

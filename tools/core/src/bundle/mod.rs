@@ -20,7 +20,7 @@ pub use manifest::{
 };
 pub use reader::{Array, Bundle, Drape, LpArray};
 pub use validate::validate;
-pub use writer::BundleWriter;
+pub use writer::{write_terrain_bundle, BundleWriter};
 
 /// File name of the manifest inside a bundle.
 pub const MANIFEST_FILE: &str = "manifest.json";

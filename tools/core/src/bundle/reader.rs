@@ -250,13 +250,13 @@ impl Bundle {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bundle::{validate, BundleWriter, Crs, Dtype, GridInfo};
+    use crate::bundle::{validate, write_terrain_bundle, Crs, GridInfo};
     use crate::geo::GeoTransform;
+    use crate::grid::HeightGrid;
     use crate::testdata;
-    use std::collections::BTreeMap;
 
-    /// A bundle of the Fuji crop written through [`BundleWriter`] and read
-    /// back through the typed accessors: same arrays, no copy of the
+    /// A bundle of the Fuji crop written by [`write_terrain_bundle`] and
+    /// read back through the typed accessors: same arrays, no copy of the
     /// hierarchy, valid, and refused when an array's shape disagrees.
     #[test]
     fn bundles_round_trip_through_writer_and_reader() {
@@ -264,63 +264,26 @@ mod tests {
         let side = dem.side;
         let hierarchy = Hierarchy::compute(&dem.heights, side, dem.cell_size_m);
         let mask = vec![1u8; side * side];
+        let grid = HeightGrid {
+            side,
+            heights: dem.heights.clone(),
+            mask: mask.clone(),
+            geotransform: GeoTransform::north_up(0.0, side as f64 * 30.0, 30.0, 30.0),
+        };
         let dir = tempfile::tempdir().unwrap();
         let target = dir.path().join("fuji.relevo");
-        let writer = BundleWriter::create(&target, false).unwrap();
-        let mut artifacts = BTreeMap::new();
-        let sq = [side, side];
-        artifacts.insert(
-            names::HEIGHT.key.to_string(),
-            writer
-                .write_array(names::HEIGHT.file, Dtype::F32, &sq, &dem.heights)
-                .unwrap(),
-        );
-        artifacts.insert(
-            names::MASK.key.to_string(),
-            writer
-                .write_array(names::MASK.file, Dtype::U8, &sq, &mask)
-                .unwrap(),
-        );
-        let pairs: &[f32] = bytemuck::cast_slice(&hierarchy.error_radius);
-        artifacts.insert(
-            names::LP.key.to_string(),
-            writer
-                .write_array(names::LP.file, Dtype::F32, &[side, side, 2], pairs)
-                .unwrap(),
-        );
-        let lo = dem.heights.iter().copied().fold(f32::MAX, f32::min);
-        let hi = dem.heights.iter().copied().fold(f32::MIN, f32::max);
-        let geotransform = GeoTransform::north_up(0.0, side as f64 * 30.0, 30.0, 30.0);
-        let manifest = Manifest {
-            format: FORMAT.into(),
-            format_version: FORMAT_VERSION,
-            region: "fuji".into(),
-            tool_version: "test".into(),
-            crs: Crs {
-                wkt: String::new(),
-                epsg: None,
-            },
-            grid: GridInfo {
-                side,
-                geotransform,
-                cell_size_m: 30.0,
-                z_scale: 1.0,
-                valid_extent: geotransform.bounds(side, side),
-                height_range_m: [lo, hi],
-                valid_vertices: side * side,
-            },
-            color: None,
-            inputs: Vec::new(),
-            parameters: BTreeMap::new(),
-            artifacts,
-            exports: BTreeMap::new(),
-            timings: Vec::new(),
+        let crs = Crs {
+            wkt: String::new(),
+            epsg: None,
         };
-        writer.commit(&manifest).unwrap();
+        write_terrain_bundle(&target, "fuji", &grid, 30.0, crs, false).unwrap();
         assert!(!dir.path().join("fuji.relevo.tmp").exists());
 
         let bundle = Bundle::open(&target).unwrap();
-        assert_eq!(bundle.manifest, manifest);
+        assert_eq!(
+            bundle.manifest.grid,
+            GridInfo::of(&grid, 30.0, 1.0).unwrap()
+        );
         assert_eq!(&bundle.heights().unwrap()[..], &dem.heights[..]);
         assert_eq!(&bundle.mask().unwrap()[..], &mask[..]);
         let lp = bundle.lp().unwrap();

@@ -1,5 +1,11 @@
-use super::{sha256_bytes, sha256_file, Artifact, Dtype, Manifest, MANIFEST_FILE};
+use super::{
+    names, sha256_bytes, sha256_file, Artifact, Crs, Dtype, GridInfo, Manifest, FORMAT,
+    FORMAT_VERSION, MANIFEST_FILE,
+};
+use crate::grid::HeightGrid;
+use crate::lp::Hierarchy;
 use crate::{Error, Result};
+use std::collections::BTreeMap;
 use std::fs;
 use std::path::{Path, PathBuf};
 
@@ -124,6 +130,54 @@ impl Drop for BundleWriter {
             let _ = fs::remove_dir_all(&self.staging);
         }
     }
+}
+
+/// A terrain-only bundle of `grid` (heights, mask, LP errors and radii):
+/// what a program that makes its own heightfield writes, and the viewer's
+/// tests use on real DEM crops. `crs` empty means grid units.
+pub fn write_terrain_bundle(
+    target: &Path,
+    region: &str,
+    grid: &HeightGrid,
+    cell_size_m: f64,
+    crs: Crs,
+    force: bool,
+) -> Result<PathBuf> {
+    let side = grid.side;
+    let info = GridInfo::of(grid, cell_size_m, 1.0)
+        .ok_or_else(|| Error::invalid(target, "the grid holds no data"))?;
+    let writer = BundleWriter::create(target, force)?;
+    let hierarchy = Hierarchy::compute(&grid.heights, side, cell_size_m);
+    let square = [side, side];
+    let mut artifacts = BTreeMap::new();
+    artifacts.insert(
+        names::HEIGHT.key.to_string(),
+        writer.write_array(names::HEIGHT.file, Dtype::F32, &square, &grid.heights)?,
+    );
+    artifacts.insert(
+        names::MASK.key.to_string(),
+        writer.write_array(names::MASK.file, Dtype::U8, &square, &grid.mask)?,
+    );
+    let pairs: &[f32] = bytemuck::cast_slice(&hierarchy.error_radius);
+    artifacts.insert(
+        names::LP.key.to_string(),
+        writer.write_array(names::LP.file, Dtype::F32, &[side, side, 2], pairs)?,
+    );
+    let manifest = Manifest {
+        format: FORMAT.into(),
+        format_version: FORMAT_VERSION,
+        region: region.into(),
+        tool_version: env!("CARGO_PKG_VERSION").into(),
+        crs,
+        grid: info,
+        color: None,
+        inputs: Vec::new(),
+        parameters: BTreeMap::new(),
+        artifacts,
+        exports: BTreeMap::new(),
+        timings: Vec::new(),
+    };
+    writer.commit(&manifest)
 }
 
 /// `TARGET.tmp` beside the target.

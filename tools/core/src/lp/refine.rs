@@ -62,8 +62,7 @@ pub struct Strip {
 impl Strip {
     /// The non-degenerate triangles, all wound the same way as the first.
     pub fn triangles(&self) -> impl Iterator<Item = [u32; 3]> + '_ {
-        self.triangle_entries()
-            .map(|e| e.map(|k| self.indices[k]))
+        self.triangle_entries().map(|e| e.map(|k| self.indices[k]))
     }
 
     /// The non-degenerate triangles as positions in the strip (so that

@@ -1,0 +1,651 @@
+//! The window: the 3D view (the shared offscreen targets shown as an egui
+//! image), the HUD, the side panel and the keys. Flying and drawing go
+//! through [`Flight`] and [`gpu::Renderer`], the same code the headless
+//! renders use; what is on screen comes from relevo-core.
+
+use crate::flight::{Controls, Flight};
+use crate::gpu::{self, FrameStats, Mode, Settings};
+use crate::scene::Scene;
+use eframe::egui;
+use eframe::egui_wgpu::{self, wgpu};
+use relevo_core::horizon::{self, Band};
+use relevo_core::scene::CameraPose;
+use std::collections::VecDeque;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+/// The keys, in the order the help overlay lists them. No two share a key
+/// (the seed's `w` wireframe, `t` texture and F1 objects are kept, so
+/// flying uses the arrows, not WASD).
+pub const KEYS: &[(&str, &str)] = &[
+    ("↑ ↓", "fly forward / back"),
+    ("← →", "turn left / right"),
+    ("PgUp PgDn", "climb / sink along the terrain normal"),
+    ("drag", "turn and look up / down"),
+    (
+        "right-drag",
+        "orbit about the ground point under the pointer",
+    ),
+    ("scroll", "zoom towards the ground point under the pointer"),
+    ("+ −", "faster / slower"),
+    ("[ ]", "finer / coarser mesh (τ)"),
+    ("m", "mesh / raycast"),
+    ("w", "wireframe"),
+    ("t", "drape texture"),
+    ("g", "geomorphing"),
+    ("f", "terrain following"),
+    ("F1", "objects"),
+    ("c", "copy the camera string"),
+    ("Home", "home view"),
+    ("h", "this help"),
+];
+
+/// Frames the frame-time plot keeps.
+const HISTORY: usize = 240;
+
+/// A scripted flight for tests and demos: fly forward while turning for a
+/// number of frames, then save a screenshot of the window and close it.
+pub struct Tour {
+    pub frames: u32,
+    pub screenshot: PathBuf,
+    /// Set by the screenshot callback: `Ok` once written, or why not.
+    pub outcome: Arc<Mutex<Option<Result<(), String>>>>,
+    requested: bool,
+}
+
+impl Tour {
+    pub fn new(frames: u32, screenshot: PathBuf) -> Self {
+        Tour {
+            frames,
+            screenshot,
+            outcome: Arc::new(Mutex::new(None)),
+            requested: false,
+        }
+    }
+}
+
+/// Seconds a tour frame advances the flight, whatever the frame took.
+const TOUR_STEP_S: f64 = 1.0 / 30.0;
+
+/// The viewer application.
+pub struct ViewerApp {
+    scene: Option<Scene>,
+    /// Why the last bundle could not be opened, shown in the window.
+    error: Option<String>,
+    flight: Option<Flight>,
+    pub settings: Settings,
+    renderer: Option<gpu::Renderer>,
+    texture: Option<(egui::TextureId, [u32; 2])>,
+    /// Frame times, seconds, newest last.
+    frame_times: VecDeque<f64>,
+    last_frame: Option<Instant>,
+    pub stats: FrameStats,
+    pub show_help: bool,
+    pub objects: bool,
+    /// The typed camera string in the side panel.
+    camera_text: String,
+    /// World (east, north, height) of the ground under the pointer.
+    pub ground_under_pointer: Option<[f64; 3]>,
+    tour: Option<Tour>,
+}
+
+impl ViewerApp {
+    /// A viewer showing `bundle`, or asking for one.
+    pub fn new(bundle: Option<&Path>) -> Self {
+        let mut app = ViewerApp {
+            scene: None,
+            error: None,
+            flight: None,
+            settings: Settings::default(),
+            renderer: None,
+            texture: None,
+            frame_times: VecDeque::with_capacity(HISTORY),
+            last_frame: None,
+            stats: FrameStats::default(),
+            show_help: false,
+            objects: false,
+            camera_text: String::new(),
+            ground_under_pointer: None,
+            tour: None,
+        };
+        if let Some(path) = bundle {
+            app.open(path);
+        }
+        app
+    }
+
+    /// Open a bundle; on failure keep the current one and show why.
+    pub fn open(&mut self, path: &Path) {
+        match Scene::open(path) {
+            Ok(scene) => {
+                self.flight = Some(Flight::home(&scene));
+                self.scene = Some(scene);
+                self.renderer = None;
+                self.error = None;
+            }
+            Err(e) => self.error = Some(format!("{e:#}")),
+        }
+    }
+
+    /// Fly `tour` instead of waiting for input.
+    pub fn with_tour(mut self, tour: Tour) -> Self {
+        self.tour = Some(tour);
+        self
+    }
+
+    /// The next tour step: its controls while frames remain; the screenshot
+    /// and the close once they are flown.
+    fn tour_step(&mut self, ctx: &egui::Context) -> Option<Controls> {
+        let tour = self.tour.as_mut()?;
+        if tour.frames > 0 {
+            tour.frames -= 1;
+            return Some(Controls {
+                forward: 1.0,
+                turn: 0.3,
+                ..Default::default()
+            });
+        }
+        if !tour.requested {
+            tour.requested = true;
+            let (path, outcome) = (tour.screenshot.clone(), tour.outcome.clone());
+            ctx.request_screenshot(move |image| {
+                let rgba: Vec<u8> = image.pixels.iter().flat_map(|p| p.to_array()).collect();
+                let written =
+                    relevo_core::raster::png::encode_rgba(&rgba, image.size[0], image.size[1])
+                        .and_then(|png| relevo_core::atomic::write_file(&path, &png))
+                        .map_err(|e| e.to_string());
+                *outcome.lock().unwrap_or_else(|p| p.into_inner()) = Some(written);
+            });
+        } else if tour.outcome.lock().map(|o| o.is_some()).unwrap_or(true) {
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+        }
+        ctx.request_repaint();
+        Some(Controls::default())
+    }
+
+    /// The message shown instead of a view, if any.
+    pub fn error(&self) -> Option<&str> {
+        self.error.as_deref()
+    }
+
+    /// The flight, once a bundle is open.
+    pub fn flight(&self) -> Option<&Flight> {
+        self.flight.as_ref()
+    }
+
+    /// Mean frames per second over the plot's history.
+    fn fps(&self) -> f64 {
+        let total: f64 = self.frame_times.iter().sum();
+        if total > 0.0 {
+            self.frame_times.len() as f64 / total
+        } else {
+            0.0
+        }
+    }
+
+    /// The HUD's lines: frame rate, frame time, what was drawn, where the
+    /// camera and the pointer are.
+    pub fn hud_lines(&self) -> Vec<String> {
+        let mut lines = Vec::new();
+        let frame_ms = self.frame_times.back().map_or(0.0, |t| t * 1e3);
+        lines.push(format!("{:.0} fps   {frame_ms:.1} ms", self.fps()));
+        let mode = match self.settings.mode {
+            Mode::Mesh => format!(
+                "mesh τ {:.1} px{}",
+                self.settings.tau_px,
+                if self.settings.morph {
+                    ", geomorphing"
+                } else {
+                    ""
+                }
+            ),
+            Mode::Raycast => "raycast (floating horizon)".to_string(),
+        };
+        lines.push(format!("{mode}   {} triangles", self.stats.triangles));
+        if let (Some(scene), Some(flight)) = (&self.scene, &self.flight) {
+            let pose = flight.pose(scene, self.stats.height.max(1));
+            let [e, n, z] = pose.eye;
+            lines.push(format!("speed {:.0} km/h", flight.speed_mps * 3.6));
+            lines.push(format!(
+                "camera E {e:.1}  N {n:.1}  h {z:.1} m  heading {:.0}°",
+                pose.heading_deg
+            ));
+            match flight.height_above_ground(scene) {
+                Some(h) => lines.push(format!("above ground {h:.1} m")),
+                None => lines.push("above ground: off the data".into()),
+            }
+        }
+        match self.ground_under_pointer {
+            Some([e, n, z]) => lines.push(format!("pointer E {e:.1}  N {n:.1}  ground {z:.1} m")),
+            None => lines.push("pointer: sky".into()),
+        }
+        lines.push(format!(
+            "objects {}   h: help",
+            if self.objects { "on" } else { "off" }
+        ));
+        lines
+    }
+
+    /// Apply the keys pressed this frame; returns the held flight controls.
+    fn keys(&mut self, ctx: &egui::Context) -> Controls {
+        use egui::Key;
+        let mut controls = Controls::default();
+        let typing = ctx.egui_wants_keyboard_input();
+        ctx.input(|i| {
+            if typing {
+                return;
+            }
+            let axis = |plus: Key, minus: Key| {
+                f64::from(u8::from(i.key_down(plus))) - f64::from(u8::from(i.key_down(minus)))
+            };
+            controls.forward = axis(Key::ArrowUp, Key::ArrowDown);
+            controls.turn = axis(Key::ArrowRight, Key::ArrowLeft);
+            controls.climb = axis(Key::PageUp, Key::PageDown);
+            let s = &mut self.settings;
+            if i.key_pressed(Key::M) {
+                s.mode = match s.mode {
+                    Mode::Mesh => Mode::Raycast,
+                    Mode::Raycast => Mode::Mesh,
+                };
+            }
+            if i.key_pressed(Key::W) {
+                s.wireframe = !s.wireframe;
+            }
+            if i.key_pressed(Key::T) {
+                s.texture = !s.texture;
+            }
+            if i.key_pressed(Key::G) {
+                s.morph = !s.morph;
+            }
+            if i.key_pressed(Key::OpenBracket) {
+                s.tau_px = (s.tau_px / 1.5).max(0.25);
+            }
+            if i.key_pressed(Key::CloseBracket) {
+                s.tau_px = (s.tau_px * 1.5).min(64.0);
+            }
+            if i.key_pressed(Key::F1) {
+                self.objects = !self.objects;
+            }
+            if i.key_pressed(Key::H) {
+                self.show_help = !self.show_help;
+            }
+            if let Some(f) = &mut self.flight {
+                if i.key_pressed(Key::Plus) || i.key_pressed(Key::Equals) {
+                    f.speed_mps = (f.speed_mps * 1.5).min(50_000.0);
+                }
+                if i.key_pressed(Key::Minus) {
+                    f.speed_mps = (f.speed_mps / 1.5).max(1.0);
+                }
+                if i.key_pressed(Key::F) {
+                    f.follow_terrain = !f.follow_terrain;
+                }
+            }
+        });
+        if !typing && ctx.input(|i| i.key_pressed(Key::Home)) {
+            if let Some(scene) = &self.scene {
+                self.flight = Some(Flight::home(scene));
+            }
+        }
+        if !typing && ctx.input(|i| i.key_pressed(Key::C)) {
+            self.copy_camera(ctx);
+        }
+        controls
+    }
+
+    fn copy_camera(&self, ctx: &egui::Context) {
+        if let (Some(scene), Some(flight)) = (&self.scene, &self.flight) {
+            ctx.copy_text(flight.pose(scene, self.stats.height.max(1)).to_string());
+        }
+    }
+
+    /// The side panel: the same toggles as the keys, τ, the raycast
+    /// options, the camera typed or copied.
+    fn side_panel(&mut self, ui: &mut egui::Ui) {
+        ui.heading("relevo-view");
+        if let Some(scene) = &self.scene {
+            ui.label(scene.path.display().to_string());
+        }
+        ui.separator();
+        let s = &mut self.settings;
+        ui.horizontal(|ui| {
+            ui.selectable_value(&mut s.mode, Mode::Mesh, "mesh");
+            ui.selectable_value(&mut s.mode, Mode::Raycast, "raycast");
+        });
+        ui.label("Mesh");
+        ui.add(
+            egui::Slider::new(&mut s.tau_px, 0.25..=32.0)
+                .logarithmic(true)
+                .text("τ (px)"),
+        );
+        ui.checkbox(&mut s.morph, "geomorphing (g)");
+        ui.checkbox(&mut s.cull, "frustum culling");
+        ui.checkbox(&mut s.wireframe, "wireframe (w)");
+        ui.checkbox(&mut s.texture, "drape texture (t)");
+        ui.label("Raycast");
+        let mut bands = s.raycast.bands.len() > 1 || s.raycast.bands.iter().any(|b| b.subvoxel);
+        if ui
+            .checkbox(&mut bands, "bands 4 slices/cell + sub-voxel to 3 km")
+            .changed()
+        {
+            s.raycast.bands = if bands {
+                vec![
+                    Band {
+                        until_m: 3000.0,
+                        slices_per_cell: 4.0,
+                        subvoxel: true,
+                    },
+                    Band {
+                        until_m: f64::INFINITY,
+                        slices_per_cell: 1.0,
+                        subvoxel: false,
+                    },
+                ]
+            } else {
+                horizon::RenderOptions::default().bands
+            };
+        }
+        let mut fixed = s.raycast.arithmetic == horizon::Arithmetic::Fixed;
+        if ui.checkbox(&mut fixed, "16.16 fixed point").changed() {
+            s.raycast.arithmetic = if fixed {
+                horizon::Arithmetic::Fixed
+            } else {
+                horizon::Arithmetic::Float
+            };
+        }
+        ui.checkbox(&mut s.raycast.prefilter, "prefiltered colour");
+        ui.separator();
+        if let Some(f) = &mut self.flight {
+            ui.add(
+                egui::Slider::new(&mut f.speed_mps, 1.0..=50_000.0)
+                    .logarithmic(true)
+                    .text("speed (m/s)"),
+            );
+            ui.checkbox(&mut f.follow_terrain, "terrain following (f)");
+            ui.add(egui::Slider::new(&mut f.fov_x_deg, 20.0..=120.0).text("field of view (°)"));
+        }
+        ui.checkbox(&mut self.objects, "objects (F1)");
+        ui.separator();
+        ui.label("Camera X,Y,Z,HEADING[,INCL]");
+        ui.text_edit_singleline(&mut self.camera_text);
+        ui.horizontal(|ui| {
+            if ui.button("Go").clicked() {
+                self.go_to_typed_camera();
+            }
+            if ui.button("Copy camera (c)").clicked() {
+                self.copy_camera(ui.ctx());
+            }
+            if ui.button("Home").clicked() {
+                if let Some(scene) = &self.scene {
+                    self.flight = Some(Flight::home(scene));
+                }
+            }
+        });
+    }
+
+    fn go_to_typed_camera(&mut self) {
+        let Some(scene) = &self.scene else {
+            return;
+        };
+        match CameraPose::parse(&self.camera_text) {
+            Ok(pose) => match Flight::from_pose(scene, &pose, self.stats.height.max(1)) {
+                Some(mut f) => {
+                    if let Some(old) = &self.flight {
+                        f.speed_mps = old.speed_mps;
+                        f.fov_x_deg = old.fov_x_deg;
+                    }
+                    f.keep_above_ground(scene);
+                    self.flight = Some(f);
+                    self.error = None;
+                }
+                None => self.error = Some("the bundle's geotransform cannot be inverted".into()),
+            },
+            Err(e) => self.error = Some(e),
+        }
+    }
+
+    /// Fly, draw and show the 3D view filling `ui`.
+    fn view(
+        &mut self,
+        ui: &mut egui::Ui,
+        render_state: Option<&egui_wgpu::RenderState>,
+        controls: Controls,
+    ) {
+        let rect = ui.available_rect_before_wrap();
+        let ppp = ui.ctx().pixels_per_point();
+        let size = [
+            ((rect.width() * ppp) as u32).max(1),
+            ((rect.height() * ppp) as u32).max(1),
+        ];
+        let response = ui.allocate_rect(rect, egui::Sense::click_and_drag());
+        let (Some(scene), Some(flight), Some(state)) =
+            (&mut self.scene, &mut self.flight, render_state)
+        else {
+            return;
+        };
+        let now = Instant::now();
+        let mut dt = self
+            .last_frame
+            .map_or(0.0, |t| (now - t).as_secs_f64())
+            .min(0.25);
+        self.last_frame = Some(now);
+        if self.frame_times.len() == HISTORY {
+            self.frame_times.pop_front();
+        }
+        if dt > 0.0 {
+            self.frame_times.push_back(dt);
+        }
+
+        let mut controls = controls;
+        if self.tour.is_some() {
+            dt = TOUR_STEP_S;
+        }
+        let drag = response.drag_delta();
+        if response.dragged_by(egui::PointerButton::Primary) {
+            controls.turn += drag.x as f64 / 4.0 / dt.max(1e-3) / 60.0;
+            controls.look += drag.y as f64 / rect.height() as f64 / dt.max(1e-3) / 0.5;
+        }
+        let camera = flight.camera(scene, size);
+        let pointer = response
+            .hover_pos()
+            .map(|p| ((p.x - rect.min.x) * ppp, (p.y - rect.min.y) * ppp));
+        let ground = pointer.and_then(|(px, py)| {
+            let distance = horizon::pick(&scene.terrain, &camera, px as f64, py as f64)?;
+            let ray = horizon::pixel_ray(&camera, px as f64, py as f64);
+            let p = camera.position + glam::DVec3::from_array(ray) * distance;
+            Some(p)
+        });
+        self.ground_under_pointer = ground.map(|p| {
+            let (e, n) = scene.frame.world_from_terrain(p.x, p.y);
+            [e, n, p.z]
+        });
+        if let Some(target) = ground {
+            let scroll = ui.ctx().input(|i| i.smooth_scroll_delta.y) as f64;
+            if scroll != 0.0 {
+                // Zoom: move a fraction of the way towards the point.
+                let fraction = (scroll / 400.0).clamp(-0.5, 0.5);
+                flight.position += (target - flight.position) * fraction;
+            }
+            if response.dragged_by(egui::PointerButton::Secondary) {
+                // Orbit: turn the eye about the vertical through the point.
+                let angle = (drag.x as f64 / 4.0).to_radians();
+                let offset = flight.position - target;
+                let (s, c) = angle.sin_cos();
+                flight.position = target
+                    + glam::DVec3::new(
+                        offset.x * c + offset.y * s,
+                        -offset.x * s + offset.y * c,
+                        offset.z,
+                    );
+                flight.heading_deg += drag.x as f64 / 4.0;
+            }
+        }
+        flight.fly(scene, &controls, dt);
+
+        let camera = flight.camera(scene, size);
+        let (device, queue) = (&state.device, &state.queue);
+        let renderer = self
+            .renderer
+            .get_or_insert_with(|| gpu::Renderer::new(device, queue, scene, size));
+        self.stats = renderer.render(device, queue, scene, &camera, &self.settings, self.objects);
+        let view = &renderer.targets.colour_view;
+        let mut egui_renderer = state.renderer.write();
+        let id = match self.texture {
+            Some((id, registered)) if registered == size => id,
+            Some((id, _)) => {
+                egui_renderer.update_egui_texture_from_wgpu_texture(
+                    device,
+                    view,
+                    wgpu::FilterMode::Nearest,
+                    id,
+                );
+                id
+            }
+            None => egui_renderer.register_native_texture(device, view, wgpu::FilterMode::Nearest),
+        };
+        self.texture = Some((id, size));
+        drop(egui_renderer);
+        ui.painter().image(
+            id,
+            rect,
+            egui::Rect::from_min_max(egui::pos2(0.0, 0.0), egui::pos2(1.0, 1.0)),
+            egui::Color32::WHITE,
+        );
+        self.hud(ui, rect);
+        ui.ctx().request_repaint();
+    }
+
+    /// The HUD over the view: its lines and a frame-time plot.
+    fn hud(&self, ui: &egui::Ui, rect: egui::Rect) {
+        let painter = ui.painter();
+        let lines = self.hud_lines();
+        let font = egui::FontId::monospace(13.0);
+        let height = 16.0 * lines.len() as f32 + 60.0;
+        let panel =
+            egui::Rect::from_min_size(rect.min + egui::vec2(8.0, 8.0), egui::vec2(430.0, height));
+        painter.rect_filled(panel, 4.0, egui::Color32::from_black_alpha(150));
+        for (k, line) in lines.iter().enumerate() {
+            painter.text(
+                panel.min + egui::vec2(8.0, 6.0 + 16.0 * k as f32),
+                egui::Align2::LEFT_TOP,
+                line,
+                font.clone(),
+                egui::Color32::WHITE,
+            );
+        }
+        // Frame time, newest on the right; the line marks 33 ms (30 fps).
+        let plot = egui::Rect::from_min_size(
+            egui::pos2(panel.min.x + 8.0, panel.max.y - 48.0),
+            egui::vec2(panel.width() - 16.0, 40.0),
+        );
+        let to_y = |seconds: f64| plot.max.y - (seconds / 0.1).min(1.0) as f32 * plot.height();
+        painter.line_segment(
+            [
+                egui::pos2(plot.min.x, to_y(1.0 / 30.0)),
+                egui::pos2(plot.max.x, to_y(1.0 / 30.0)),
+            ],
+            egui::Stroke::new(1.0, egui::Color32::from_rgb(200, 120, 60)),
+        );
+        let points: Vec<egui::Pos2> = self
+            .frame_times
+            .iter()
+            .enumerate()
+            .map(|(k, &t)| {
+                egui::pos2(
+                    plot.min.x + plot.width() * k as f32 / HISTORY as f32,
+                    to_y(t),
+                )
+            })
+            .collect();
+        painter.add(egui::Shape::line(
+            points,
+            egui::Stroke::new(1.0, egui::Color32::LIGHT_GREEN),
+        ));
+    }
+
+    fn help(&mut self, ctx: &egui::Context) {
+        let mut open = self.show_help;
+        egui::Window::new("Keys")
+            .open(&mut open)
+            .collapsible(false)
+            .show(ctx, |ui| {
+                egui::Grid::new("keys").striped(true).show(ui, |ui| {
+                    for (key, what) in KEYS {
+                        ui.monospace(*key);
+                        ui.label(*what);
+                        ui.end_row();
+                    }
+                });
+            });
+        self.show_help = open;
+    }
+}
+
+impl eframe::App for ViewerApp {
+    fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
+        let ctx = ui.ctx().clone();
+        let dropped: Option<PathBuf> =
+            ctx.input(|i| i.raw.dropped_files.first().map(|f| f.path().to_path_buf()));
+        if let Some(path) = dropped {
+            self.open(&path);
+        }
+        let keys = self.keys(&ctx);
+        let controls = self.tour_step(&ctx).unwrap_or(keys);
+        egui::Panel::right("settings").show(ui, |ui| self.side_panel(ui));
+        egui::CentralPanel::no_frame().show(ui, |ui| {
+            if let Some(error) = &self.error {
+                ui.colored_label(egui::Color32::from_rgb(230, 90, 80), error);
+            }
+            if self.scene.is_none() {
+                ui.centered_and_justified(|ui| {
+                    ui.heading(
+                        "Drop a bundle folder (NAME.relevo) here, or start relevo-view NAME.relevo",
+                    );
+                });
+                return;
+            }
+            self.view(ui, frame.wgpu_render_state(), controls);
+        });
+        self.help(&ctx);
+    }
+}
+
+/// Open the window on `bundle` (or empty, waiting for a dropped bundle);
+/// with a tour, fly it, save the screenshot and close.
+pub fn run(bundle: Option<PathBuf>, tour: Option<Tour>) -> anyhow::Result<()> {
+    let outcome = tour
+        .as_ref()
+        .map(|t| (t.outcome.clone(), t.screenshot.clone()));
+    let options = eframe::NativeOptions {
+        renderer: eframe::Renderer::Wgpu,
+        viewport: egui::ViewportBuilder::default()
+            .with_title("relevo-view")
+            .with_inner_size([1280.0, 800.0])
+            .with_drag_and_drop(true),
+        ..Default::default()
+    };
+    eframe::run_native(
+        "relevo-view",
+        options,
+        Box::new(move |_| {
+            let app = ViewerApp::new(bundle.as_deref());
+            Ok(Box::new(match tour {
+                Some(tour) => app.with_tour(tour),
+                None => app,
+            }))
+        }),
+    )
+    .map_err(|e| anyhow::anyhow!("cannot open the window: {e}"))?;
+    if let Some((outcome, path)) = outcome {
+        let result = outcome.lock().ok().and_then(|mut o| o.take());
+        match result {
+            Some(Ok(())) => eprintln!("{}: screenshot of the window", path.display()),
+            Some(Err(e)) => anyhow::bail!("{}: {e}", path.display()),
+            None => anyhow::bail!(
+                "{}: the window closed before its screenshot",
+                path.display()
+            ),
+        }
+    }
+    Ok(())
+}

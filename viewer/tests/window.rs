@@ -1,0 +1,172 @@
+//! The viewer as a process on Mesa's lavapipe: a real window under Xvfb
+//! flies a scripted tour over a real DEM and its screenshot shows terrain
+//! and the HUD; bad bundles end with a message naming them and exit 1.
+// Test code: a failed unwrap is a failed test.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use relevo_core::bundle::{write_terrain_bundle, Crs};
+use relevo_core::geo::GeoTransform;
+use relevo_core::grid::HeightGrid;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// A terrain-only bundle of the committed Copernicus crop of Grenoble
+/// (257², 150 m nominal cells, 179–1908 m).
+fn grenoble_bundle(dir: &Path) -> PathBuf {
+    let crop =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/crops/copernicus_grenoble_257.f32");
+    let heights: Vec<f32> = std::fs::read(crop)
+        .unwrap()
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    let side = 257;
+    let grid = HeightGrid {
+        side,
+        heights,
+        mask: vec![1; side * side],
+        geotransform: GeoTransform::north_up(700_000.0, 5_050_000.0, 150.0, 150.0),
+    };
+    let crs = Crs {
+        wkt: String::new(),
+        epsg: None,
+    };
+    write_terrain_bundle(
+        &dir.join("grenoble.relevo"),
+        "grenoble",
+        &grid,
+        150.0,
+        crs,
+        false,
+    )
+    .unwrap()
+}
+
+/// `relevo-view ARGS…` on lavapipe.
+fn viewer(args: &[&std::ffi::OsStr], xvfb: bool, runtime: &Path) -> Output {
+    let binary = env!("CARGO_BIN_EXE_relevo-view");
+    let mut command = if xvfb {
+        let mut c = Command::new("xvfb-run");
+        c.args(["-a", "-s", "-screen 0 1280x800x24", binary]);
+        c
+    } else {
+        Command::new(binary)
+    };
+    command
+        .args(args)
+        .env("VK_ICD_FILENAMES", relevo_view::LAVAPIPE_ICD)
+        .env("XDG_RUNTIME_DIR", runtime)
+        .output()
+        .expect("relevo-view runs (xvfb-run is installed by scripts/setup)")
+}
+
+fn decode_png(path: &Path) -> (Vec<u8>, usize, usize) {
+    let file = std::fs::File::open(path).unwrap();
+    let mut reader = png::Decoder::new(std::io::BufReader::new(file))
+        .read_info()
+        .unwrap();
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    buf.truncate(info.buffer_size());
+    (buf, info.width as usize, info.height as usize)
+}
+
+#[test]
+fn a_real_window_flies_a_tour_and_shows_terrain_and_the_hud() {
+    let dir = tempfile::tempdir().unwrap();
+    let bundle = grenoble_bundle(dir.path());
+    let shot = dir.path().join("window.png");
+    let out = viewer(
+        &[
+            bundle.as_os_str(),
+            "--tour".as_ref(),
+            "45".as_ref(),
+            "--screenshot".as_ref(),
+            shot.as_os_str(),
+        ],
+        true,
+        dir.path(),
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let (rgba, w, h) = decode_png(&shot);
+    assert!(w >= 640 && h >= 400, "{w}×{h}");
+    let pixel = |x: usize, y: usize| &rgba[(y * w + x) * 4..(y * w + x) * 4 + 3];
+    // The view (left of the side panel): sky above, terrain below.
+    let sky = [135u8, 170, 215];
+    let lower: Vec<&[u8]> = (h * 3 / 4..h - 10)
+        .flat_map(|y| (w / 8..w / 2).map(move |x| (x, y)))
+        .map(|(x, y)| pixel(x, y))
+        .collect();
+    let terrain = lower.iter().filter(|p| **p != sky).count();
+    assert!(
+        terrain * 10 > lower.len() * 9,
+        "{terrain} of {} lower pixels are terrain",
+        lower.len()
+    );
+    // The HUD: a dark translucent panel in the top-left corner with text.
+    let hud: Vec<&[u8]> = (14..60)
+        .flat_map(|y| (14..300).map(move |x| (x, y)))
+        .map(|(x, y)| pixel(x, y))
+        .collect();
+    let dark = hud.iter().filter(|p| p.iter().all(|&c| c < 90)).count();
+    let bright = hud.iter().filter(|p| p.iter().all(|&c| c > 200)).count();
+    assert!(
+        dark > hud.len() / 2 && bright > 50,
+        "HUD: {dark} dark, {bright} bright pixels"
+    );
+}
+
+#[test]
+fn bad_bundles_are_refused_with_their_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_png = dir.path().join("x.png");
+    let broken = dir.path().join("broken.relevo");
+    std::fs::create_dir_all(&broken).unwrap();
+    std::fs::write(broken.join("manifest.json"), "{ not json").unwrap();
+    let truncated = grenoble_bundle(dir.path());
+    std::fs::write(truncated.join("height.f32"), [0u8; 16]).unwrap();
+    for (bundle, needle) in [
+        (dir.path().join("missing.relevo"), "missing.relevo"),
+        (broken.clone(), "invalid manifest"),
+        (truncated.clone(), "height.f32"),
+    ] {
+        let out = viewer(
+            &[
+                "render".as_ref(),
+                bundle.as_os_str(),
+                "--out".as_ref(),
+                out_png.as_os_str(),
+            ],
+            false,
+            dir.path(),
+        );
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{}: {stderr}", bundle.display());
+        assert!(
+            stderr.contains(needle) && !stderr.contains("panicked"),
+            "{stderr}"
+        );
+        assert!(!out_png.exists());
+    }
+    // Bad arguments, refused before any work.
+    let good = dir.path().join("good");
+    std::fs::create_dir_all(&good).unwrap();
+    let bundle = grenoble_bundle(&good);
+    for (args, needle) in [
+        (vec!["--camera", "1,2"], "--camera"),
+        (vec!["--fov", "0"], "--fov"),
+        (vec!["--size", "0x5"], "WIDTHxHEIGHT"),
+    ] {
+        let mut all: Vec<&std::ffi::OsStr> = vec![
+            "render".as_ref(),
+            bundle.as_os_str(),
+            "--out".as_ref(),
+            out_png.as_os_str(),
+        ];
+        all.extend(args.iter().map(|a| std::ffi::OsStr::new(a)));
+        let out = viewer(&all, false, dir.path());
+        assert!(!out.status.success());
+        assert!(String::from_utf8_lossy(&out.stderr).contains(needle));
+    }
+}
