@@ -164,7 +164,7 @@ fn bad_bundles_are_refused_with_their_name() {
             "--out".as_ref(),
             out_png.as_os_str(),
         ];
-        all.extend(args.iter().map(|a| std::ffi::OsStr::new(a)));
+        all.extend(args.iter().map(std::ffi::OsStr::new));
         let out = viewer(&all, false, dir.path());
         assert!(!out.status.success());
         assert!(String::from_utf8_lossy(&out.stderr).contains(needle));

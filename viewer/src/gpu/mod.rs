@@ -11,10 +11,13 @@ pub use targets::{Readback, Targets};
 
 use crate::scene::Scene;
 use eframe::egui_wgpu::wgpu;
+
 use relevo_core::camera::Camera;
 use relevo_core::horizon::RenderOptions;
 use serde::Serialize;
 use std::time::Instant;
+/// The GPU device and queue types the viewer draws with.
+pub use wgpu::{Device, Queue};
 
 /// How the terrain is drawn.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
@@ -93,7 +96,7 @@ pub fn sky_colour(options: &RenderOptions) -> wgpu::Color {
 
 impl Renderer {
     /// Resources for `scene` drawing into a `size` target.
-    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, scene: &Scene, size: [u32; 2]) -> Self {
+    pub fn new(device: &Device, queue: &Queue, scene: &Scene, size: [u32; 2]) -> Self {
         Renderer {
             targets: Targets::new(device, size),
             mesh: mesh::MeshPass::new(device, queue, scene),
@@ -105,8 +108,8 @@ impl Renderer {
     /// (resized to the camera's viewport when needed).
     pub fn render(
         &mut self,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
+        device: &Device,
+        queue: &Queue,
         scene: &mut Scene,
         camera: &Camera,
         settings: &Settings,
