@@ -170,3 +170,115 @@ fn raycast_depth_agrees_with_the_full_resolution_mesh() {
     );
     assert!(disagree * 100 <= pixels, "{disagree} pixels disagree");
 }
+
+/// A building placed behind a ridge of the Alps is hidden exactly where
+/// the terrain is in front of it, in both modes: the pixels where the
+/// composited frame shows the building are those where the building alone
+/// is nearer than the terrain alone.
+#[test]
+fn composited_objects_are_hidden_exactly_where_the_terrain_covers_them() {
+    use relevo_tests::{prep_dem, shared};
+    let d = tempfile::tempdir().unwrap();
+    let bundle = prep_dem(
+        &shared("dem/Copernicus_DSM_10_N45_00_E005_00_DEM.tif"),
+        d.path(),
+    );
+    let mut scene = Scene::open(&bundle).unwrap();
+    let (device, queue) = lavapipe();
+    // Low over the valley floor, looking level at the mountains.
+    let mut flight = Flight::home(&scene);
+    flight.position.z = scene
+        .ground_height(flight.position.x, flight.position.y)
+        .unwrap()
+        + 30.0;
+    flight.horizon_frac = 0.5;
+    let camera = flight.camera(&scene, SIZE);
+    // The ground just below the screen's centre, and 3 km beyond it.
+    let (px, py) = (SIZE[0] as f64 / 2.0, SIZE[1] as f64 * 0.55);
+    let distance =
+        relevo_core::horizon::pick(&scene.terrain, &camera, px, py).expect("terrain at the centre");
+    let ray = relevo_core::horizon::pixel_ray(&camera, px, py);
+    let heading = flight.heading_deg.to_radians();
+    let centre = [
+        camera.position.x + ray[0] * distance + heading.sin() * 3000.0,
+        camera.position.y + ray[1] * distance + heading.cos() * 3000.0,
+    ];
+    let corner = |dx: f64, dy: f64| {
+        let (e, n) = scene
+            .frame
+            .world_from_terrain(centre[0] + dx, centre[1] + dy);
+        format!("[{e}, {n}]")
+    };
+    let placement = d.path().join("tower.geojson");
+    std::fs::write(
+        &placement,
+        format!(
+            r#"{{"type": "FeatureCollection", "features": [{{"type": "Feature",
+               "properties": {{"height_m": 1500, "color": [255, 0, 255]}},
+               "geometry": {{"type": "Polygon", "coordinates": [[{}, {}, {}, {}, {}]]}}}}]}}"#,
+            corner(-500.0, -500.0),
+            corner(500.0, -500.0),
+            corner(500.0, 500.0),
+            corner(-500.0, 500.0),
+            corner(-500.0, -500.0)
+        ),
+    )
+    .unwrap();
+    scene.load_objects(&placement).unwrap();
+    for (name, mode) in [("mesh", Mode::Mesh), ("raycast", Mode::Raycast)] {
+        let mut settings = Settings {
+            mode,
+            tau_px: 1.0,
+            ..Default::default()
+        };
+        settings.raycast.bands = fine_bands();
+        let terrain_only = Settings {
+            objects: false,
+            ..settings.clone()
+        };
+        let objects_only = Settings {
+            terrain: false,
+            ..settings.clone()
+        };
+        let render = |scene: &mut Scene, s: &Settings| {
+            render_once(&device, &queue, scene, &flight, s, SIZE)
+                .unwrap()
+                .0
+        };
+        let (both, terrain, object) = (
+            render(&mut scene, &settings),
+            render(&mut scene, &terrain_only),
+            render(&mut scene, &objects_only),
+        );
+        let (mut expected, mut shown, mut wrong, mut ambiguous) = (0usize, 0usize, 0usize, 0usize);
+        let mut hidden = 0usize;
+        for i in 0..(SIZE[0] * SIZE[1]) as usize {
+            if object.depth[i] >= 1.0 {
+                continue;
+            }
+            let nearer = object.depth[i] < terrain.depth[i];
+            let visible = both.rgba[i * 4..i * 4 + 3] != terrain.rgba[i * 4..i * 4 + 3];
+            expected += usize::from(nearer);
+            hidden += usize::from(!nearer);
+            shown += usize::from(visible);
+            if nearer != visible {
+                // Where the two depths are within a hair, either answer is right.
+                if (object.depth[i] - terrain.depth[i]).abs() < 1e-5 {
+                    ambiguous += 1;
+                } else {
+                    wrong += 1;
+                }
+            }
+        }
+        let total = expected + hidden;
+        eprintln!("{name}: building covers {total} px, {expected} nearer than the terrain, {shown} shown, {wrong} wrong, {ambiguous} within 1e-5 of the terrain's depth");
+        assert!(
+            expected * 20 > total && hidden * 20 > total,
+            "{name}: the building should be partly hidden ({expected} of {total} visible)"
+        );
+        assert!(
+            wrong * 200 <= total,
+            "{name}: {wrong} of {total} pixels composited wrongly"
+        );
+    }
+}

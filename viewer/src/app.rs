@@ -82,7 +82,6 @@ pub struct ViewerApp {
     last_frame: Option<Instant>,
     pub stats: FrameStats,
     pub show_help: bool,
-    pub objects: bool,
     /// The typed camera string in the side panel.
     camera_text: String,
     /// World (east, north, height) of the ground under the pointer.
@@ -104,7 +103,6 @@ impl ViewerApp {
             last_frame: None,
             stats: FrameStats::default(),
             show_help: false,
-            objects: false,
             camera_text: String::new(),
             ground_under_pointer: None,
             tour: None,
@@ -220,10 +218,15 @@ impl ViewerApp {
             Some([e, n, z]) => lines.push(format!("pointer E {e:.1}  N {n:.1}  ground {z:.1} m")),
             None => lines.push("pointer: sky".into()),
         }
-        lines.push(format!(
-            "objects {}   h: help",
-            if self.objects { "on" } else { "off" }
-        ));
+        let objects = match self.scene.as_ref().and_then(|s| s.objects.as_ref()) {
+            None => "objects: none loaded".to_string(),
+            Some(o) if self.settings.objects => format!(
+                "objects on: {} features, {} triangles",
+                o.features, self.stats.object_triangles
+            ),
+            Some(o) => format!("objects off ({} features)", o.features),
+        };
+        lines.push(format!("{objects}   h: help"));
         lines
     }
 
@@ -265,7 +268,7 @@ impl ViewerApp {
                 s.tau_px = (s.tau_px * 1.5).min(64.0);
             }
             if i.key_pressed(Key::F1) {
-                self.objects = !self.objects;
+                s.objects = !s.objects;
             }
             if i.key_pressed(Key::H) {
                 self.show_help = !self.show_help;
@@ -364,7 +367,8 @@ impl ViewerApp {
             ui.checkbox(&mut f.follow_terrain, "terrain following (f)");
             ui.add(egui::Slider::new(&mut f.fov_x_deg, 20.0..=120.0).text("field of view (°)"));
         }
-        ui.checkbox(&mut self.objects, "objects (F1)");
+        ui.checkbox(&mut self.settings.objects, "objects (F1)");
+        ui.checkbox(&mut self.settings.terrain, "terrain");
         ui.separator();
         ui.label("Camera X,Y,Z,HEADING[,INCL]");
         ui.text_edit_singleline(&mut self.camera_text);
@@ -487,7 +491,7 @@ impl ViewerApp {
         let renderer = self
             .renderer
             .get_or_insert_with(|| gpu::Renderer::new(device, queue, scene, size));
-        self.stats = renderer.render(device, queue, scene, &camera, &self.settings, self.objects);
+        self.stats = renderer.render(device, queue, scene, &camera, &self.settings);
         let view = &renderer.targets.colour_view;
         let mut egui_renderer = state.renderer.write();
         let id = match self.texture {

@@ -55,6 +55,12 @@ pub struct RenderArgs {
     /// Raycast mode: prefiltered colour levels by slice footprint.
     #[arg(long)]
     pub prefilter: bool,
+    /// Objects to composite: a GeoJSON placement file (see docs/formats.md).
+    #[arg(long)]
+    pub objects: Option<PathBuf>,
+    /// Draw the objects alone, without the terrain.
+    #[arg(long, requires = "objects")]
+    pub no_terrain: bool,
     /// Output PNG.
     #[arg(long, short)]
     pub out: PathBuf,
@@ -113,10 +119,9 @@ pub fn render_once(
 ) -> Result<(Readback, FrameStats)> {
     let camera = flight.camera(scene, size);
     let mut renderer = Renderer::new(device, queue, scene, size);
-    let stats = renderer.render(device, queue, scene, &camera, settings, false);
+    let stats = renderer.render(device, queue, scene, &camera, settings);
     let mut readback = renderer.targets.read(device, queue)?;
-    // The raycast's depth is the CPU buffer itself (a terrain-only frame does
-    // not upload it).
+    // A terrain-only raycast's depth is the CPU buffer itself (not uploaded).
     if let Some(depth) = renderer.raycast_depth(scene, settings) {
         readback.depth.copy_from_slice(depth);
     }
@@ -151,6 +156,9 @@ pub fn run(a: RenderArgs) -> Result<()> {
         .transpose()
         .map_err(anyhow::Error::msg)?;
     let mut scene = Scene::open(&a.bundle)?;
+    if let Some(path) = &a.objects {
+        scene.load_objects(path)?;
+    }
     let mut flight = match &pose {
         None => Flight::home(&scene),
         Some(pose) => Flight::from_pose(&scene, pose, a.size[1]).with_context(|| {
@@ -168,6 +176,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         morph: !a.no_morph,
         wireframe: a.wireframe,
         texture: !a.no_texture,
+        terrain: !a.no_terrain,
         ..Default::default()
     };
     settings.raycast.prefilter = a.prefilter;
@@ -195,12 +204,13 @@ pub fn run(a: RenderArgs) -> Result<()> {
         relevo_core::atomic::write_file(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     eprintln!(
-        "{}: {}×{} {:?} on {adapter}, {} triangles, camera {camera}",
+        "{}: {}×{} {:?} on {adapter}, {} terrain and {} object triangles, camera {camera}",
         a.out.display(),
         a.size[0],
         a.size[1],
         a.mode,
-        stats.triangles
+        stats.triangles,
+        stats.object_triangles
     );
     Ok(())
 }

@@ -8,6 +8,7 @@ use relevo_core::bundle::{Array, Bundle, LpArray};
 use relevo_core::geo::TerrainFrame;
 use relevo_core::horizon::{self, Terrain};
 use relevo_core::lp::refine::Refiner;
+use relevo_core::objects::{read_placement, ObjectMesh};
 use std::path::{Path, PathBuf};
 
 /// The drape image and the affine map from the terrain frame to its
@@ -35,6 +36,8 @@ pub struct Scene {
     /// once warm.
     pub refiner: Refiner,
     pub raycaster: horizon::Renderer,
+    /// Objects placed on the terrain, when a placement file was loaded.
+    pub objects: Option<ObjectMesh>,
 }
 
 impl Scene {
@@ -93,7 +96,16 @@ impl Scene {
             terrain,
             refiner: Refiner::new(),
             raycaster: horizon::Renderer::default(),
+            objects: None,
         })
+    }
+
+    /// Place the objects of a GeoJSON placement file on the terrain.
+    pub fn load_objects(&mut self, path: &Path) -> Result<()> {
+        let terrain = &self.terrain;
+        let mesh = read_placement(path, &self.frame, &|x, y| terrain.surface(x, y))?;
+        self.objects = Some(mesh);
+        Ok(())
     }
 
     /// Side of the terrain frame's square, metres.

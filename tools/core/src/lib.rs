@@ -11,6 +11,8 @@
 //!   hole filling and elevation tile encodings.
 //! - [`grid`]: the square (2^n+1)² height grid with its data mask.
 //! - [`lp`]: the Lindstrom–Pascucci hierarchy, extraction and refinement.
+//! - [`objects`]: objects placed on the terrain (GeoJSON placement,
+//!   buildings, cables, OBJ models) as triangles to composite.
 //! - [`camera`]: the camera shared by the CPU and GPU renderers.
 //! - [`horizon`]: the floating-horizon raycaster and its depth buffer.
 //! - [`scene`]: cameras in world coordinates, the camera string, the
@@ -26,6 +28,7 @@ pub mod geo;
 pub mod grid;
 pub mod horizon;
 pub mod lp;
+pub mod objects;
 pub mod raster;
 pub mod scene;
 pub mod veg;

@@ -4,7 +4,7 @@
 //! largest frame seen and is reused; nothing else is allocated per frame.
 
 use super::targets::{Targets, COLOUR_FORMAT, DEPTH_FORMAT};
-use super::{FrameStats, Settings};
+use super::{eye_relative_view_projection, FrameStats, Settings, SUN};
 use crate::scene::Scene;
 use bytemuck::{Pod, Zeroable};
 use eframe::egui_wgpu::wgpu;
@@ -17,8 +17,6 @@ use std::time::Instant;
 
 /// Geomorphing band: a vertex blends in between τ and this multiple of τ.
 const MORPH_BAND: f64 = 3.0;
-/// Sun for the shaded height ramp: azimuth 315°, elevation 45°, 35 % ambient.
-const SUN: [f32; 4] = [-0.5, 0.5, std::f32::consts::FRAC_1_SQRT_2, 0.35];
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -249,11 +247,9 @@ impl MeshPass {
         self.vertex_count = self.vertices.len() as u32;
         stats.triangles = self.vertices.len() / 3;
 
-        let mut at_origin = *camera;
-        at_origin.position = DVec3::ZERO;
         let [lo, hi] = scene.bundle.manifest.grid.height_range_m;
         let uniforms = Uniforms {
-            view_proj: at_origin.view_projection().as_mat4().to_cols_array_2d(),
+            view_proj: eye_relative_view_projection(camera),
             sun: SUN,
             options: [
                 f32::from(u8::from(settings.texture && self.has_drape)),

@@ -4,6 +4,7 @@
 //! ([`mesh`]) or as the CPU raycast composited with its depth ([`raycast`]).
 
 mod mesh;
+mod objects;
 mod raycast;
 mod targets;
 
@@ -18,6 +19,19 @@ use serde::Serialize;
 use std::time::Instant;
 /// The GPU device and queue types the viewer draws with.
 pub use wgpu::{Device, Queue};
+
+/// The sun that shades the height ramp and the objects: azimuth 315°,
+/// elevation 45° (a unit vector in the terrain frame), 35 % ambient light.
+const SUN: [f32; 4] = [-0.5, 0.5, std::f32::consts::FRAC_1_SQRT_2, 0.35];
+
+/// The camera's view-projection with the eye at the origin: vertices are
+/// uploaded relative to the eye, so f32 keeps centimetres at any distance
+/// from the terrain frame's origin.
+fn eye_relative_view_projection(camera: &Camera) -> [[f32; 4]; 4] {
+    let mut at_origin = *camera;
+    at_origin.position = glam::DVec3::ZERO;
+    at_origin.view_projection().as_mat4().to_cols_array_2d()
+}
 
 /// How the terrain is drawn.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
@@ -44,6 +58,10 @@ pub struct Settings {
     pub texture: bool,
     /// The raycaster's options (bands, fixed point, prefilter).
     pub raycast: RenderOptions,
+    /// Draw the scene's objects (the seed's F1).
+    pub objects: bool,
+    /// Draw the terrain (off: objects alone, to check composition).
+    pub terrain: bool,
 }
 
 impl Default for Settings {
@@ -56,6 +74,8 @@ impl Default for Settings {
             wireframe: false,
             texture: true,
             raycast: RenderOptions::default(),
+            objects: true,
+            terrain: true,
         }
     }
 }
@@ -65,8 +85,10 @@ impl Default for Settings {
 pub struct FrameStats {
     pub width: u32,
     pub height: u32,
-    /// Triangles submitted to the GPU.
+    /// Terrain triangles submitted to the GPU.
     pub triangles: usize,
+    /// Object triangles submitted to the GPU.
+    pub object_triangles: usize,
     /// Refinement (mesh mode), milliseconds.
     pub refine_ms: f64,
     /// Building and uploading the vertex buffer (mesh mode).
@@ -86,6 +108,8 @@ pub struct Renderer {
     pub targets: Targets,
     mesh: mesh::MeshPass,
     raycast: raycast::RaycastPass,
+    /// Built on the first frame that draws objects.
+    objects: Option<objects::ObjectPass>,
 }
 
 /// The sky: the raycaster's colour for pixels without terrain.
@@ -101,11 +125,13 @@ impl Renderer {
             targets: Targets::new(device, size),
             mesh: mesh::MeshPass::new(device, queue, scene),
             raycast: raycast::RaycastPass::new(device),
+            objects: None,
         }
     }
 
-    /// Draw the terrain of `scene` seen by `camera` into the targets
-    /// (resized to the camera's viewport when needed).
+    /// Draw `scene` seen by `camera` into the targets (resized to the
+    /// camera's viewport when needed): the terrain, then its objects
+    /// depth-tested against it.
     pub fn render(
         &mut self,
         device: &Device,
@@ -113,7 +139,6 @@ impl Renderer {
         scene: &mut Scene,
         camera: &Camera,
         settings: &Settings,
-        objects_drawn: bool,
     ) -> FrameStats {
         let size = [camera.width, camera.height];
         if self.targets.size != size {
@@ -127,7 +152,11 @@ impl Renderer {
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("relevo-view frame"),
         });
+        let objects_drawn = settings.objects && scene.objects.is_some();
         match settings.mode {
+            _ if !settings.terrain => self
+                .targets
+                .clear(&mut encoder, sky_colour(&settings.raycast)),
             Mode::Mesh => {
                 self.mesh
                     .prepare(device, queue, scene, camera, settings, &mut stats);
@@ -147,15 +176,25 @@ impl Renderer {
                 self.raycast.draw(&mut encoder, &self.targets);
             }
         }
+        if let Some(objects) = scene.objects.as_ref().filter(|_| settings.objects) {
+            let pass = self
+                .objects
+                .get_or_insert_with(|| objects::ObjectPass::new(device, objects));
+            pass.prepare(queue, objects, camera);
+            pass.draw(&mut encoder, &self.targets);
+            stats.object_triangles = objects.triangles();
+        }
         let start = Instant::now();
         queue.submit([encoder.finish()]);
         stats.submit_ms = start.elapsed().as_secs_f64() * 1e3;
         stats
     }
 
-    /// The depth of the last raycast frame, when the last frame was one:
-    /// exactly the CPU depth buffer that was composited.
+    /// The depth of the last frame when it was a terrain-only raycast:
+    /// exactly the CPU depth buffer (not uploaded for such frames).
     pub fn raycast_depth<'a>(&self, scene: &'a Scene, settings: &Settings) -> Option<&'a [f32]> {
-        (settings.mode == Mode::Raycast).then(|| scene.raycaster.frame().depth.as_slice())
+        let objects_drawn = settings.objects && scene.objects.is_some();
+        (settings.mode == Mode::Raycast && settings.terrain && !objects_drawn)
+            .then(|| scene.raycaster.frame().depth.as_slice())
     }
 }

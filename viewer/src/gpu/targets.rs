@@ -65,6 +65,31 @@ impl Targets {
         }
     }
 
+    /// Clear colour to `sky` and depth to 1 (nothing drawn).
+    pub fn clear(&self, encoder: &mut wgpu::CommandEncoder, sky: wgpu::Color) {
+        encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("clear"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &self.colour_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(sky),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &self.depth_view,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            ..Default::default()
+        });
+    }
+
     /// Copy colour and depth back to the CPU (waits for the GPU).
     pub fn read(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Readback> {
         let [w, h] = self.size;
