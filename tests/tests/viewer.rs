@@ -41,9 +41,12 @@ fn fine_bands() -> Vec<Band> {
     }]
 }
 
-/// References: `data/golden/viewer/NAME.png`, made on lavapipe and looked
-/// at before they were committed. Tolerance: at most 1 % of pixels with a
-/// channel more than 24 levels off, and a mean difference under 1.5 levels.
+/// References: `data/golden/viewer/NAME.png` — mesh, mesh wireframe,
+/// raycast, raycast with bands, Z-buffer baselines [c] and [g], and the
+/// sample placement composited in mesh and raycast modes — made on lavapipe
+/// and looked at before they were committed. Tolerance: at most 1 % of
+/// pixels with a channel more than 24 levels off, and a mean difference
+/// under 1.5 levels.
 #[test]
 fn headless_frames_of_each_mode_match_their_references() {
     let d = tempfile::tempdir().unwrap();
@@ -97,7 +100,53 @@ fn headless_frames_of_each_mode_match_their_references() {
             s
         }),
     ];
-    for (name, settings) in cases {
+    let zbuffer = |letter| Settings {
+        mode: Mode::parse(&format!("zbuffer:{letter}")).unwrap(),
+        ..Default::default()
+    };
+    let terrain_only = cases
+        .into_iter()
+        .chain([("zbuffer_c", zbuffer('c')), ("zbuffer_g", zbuffer('g'))])
+        .map(|(name, settings)| {
+            (
+                name,
+                Settings {
+                    objects: false,
+                    ..settings
+                },
+                flight,
+            )
+        });
+    // The sample placement seen from 1.2 km closer, 60 m above the ground.
+    scene
+        .load_objects(&repo("data/olinda/objects.geojson"))
+        .unwrap();
+    let pose = relevo_core::scene::CameraPose::parse("290963,9112753,0,35,135").unwrap();
+    let mut near = Flight::from_pose(&scene, &pose, SIZE[1]).unwrap();
+    near.position.z = scene
+        .ground_height(near.position.x, near.position.y)
+        .unwrap()
+        + 60.0;
+    let with_objects = [
+        (
+            "mesh_objects",
+            Settings {
+                mode: Mode::Mesh,
+                tau_px: 1.0,
+                ..Default::default()
+            },
+            near,
+        ),
+        (
+            "raycast_objects",
+            Settings {
+                mode: Mode::Raycast,
+                ..Default::default()
+            },
+            near,
+        ),
+    ];
+    for (name, settings, flight) in terrain_only.chain(with_objects) {
         let (frame, stats) =
             render_once(&device, &queue, &mut scene, &flight, &settings, SIZE).unwrap();
         let reference = repo(&format!("data/golden/viewer/{name}.png"));
@@ -105,14 +154,21 @@ fn headless_frames_of_each_mode_match_their_references() {
             d.pixels_off * 100 <= (SIZE[0] * SIZE[1]) as usize && d.mean < 1.5
         });
         eprintln!(
-            "{name}: {} pixels off, mean {:.3} levels; {} triangles",
-            d.pixels_off, d.mean, stats.triangles
+            "{name}: {} pixels off, mean {:.3} levels; {} terrain, {} object triangles",
+            d.pixels_off, d.mean, stats.triangles, stats.object_triangles
         );
         if settings.mode == Mode::Mesh {
             assert!(
                 stats.triangles > 100,
                 "{name}: {} triangles",
                 stats.triangles
+            );
+        }
+        if settings.objects {
+            assert!(
+                stats.object_triangles > 90,
+                "{name}: {} object triangles",
+                stats.object_triangles
             );
         }
     }

@@ -10,6 +10,7 @@ use eframe::egui;
 use eframe::egui_wgpu::{self, wgpu};
 use relevo_core::horizon::{self, Band};
 use relevo_core::scene::CameraPose;
+use relevo_core::zbuffer::Representation;
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -199,6 +200,7 @@ impl ViewerApp {
                 }
             ),
             Mode::Raycast => "raycast (floating horizon)".to_string(),
+            Mode::ZBuffer(r) => format!("z-buffer baseline [{}] {r:?}", r.letter()),
         };
         lines.push(format!("{mode}   {} triangles", self.stats.triangles));
         if let (Some(scene), Some(flight)) = (&self.scene, &self.flight) {
@@ -249,7 +251,7 @@ impl ViewerApp {
             if i.key_pressed(Key::M) {
                 s.mode = match s.mode {
                     Mode::Mesh => Mode::Raycast,
-                    Mode::Raycast => Mode::Mesh,
+                    Mode::Raycast | Mode::ZBuffer(_) => Mode::Mesh,
                 };
             }
             if i.key_pressed(Key::W) {
@@ -314,6 +316,13 @@ impl ViewerApp {
         ui.horizontal(|ui| {
             ui.selectable_value(&mut s.mode, Mode::Mesh, "mesh");
             ui.selectable_value(&mut s.mode, Mode::Raycast, "raycast");
+        });
+        ui.horizontal_wrapped(|ui| {
+            ui.label("z-buffer");
+            for r in Representation::ALL {
+                ui.selectable_value(&mut s.mode, Mode::ZBuffer(r), r.letter().to_string())
+                    .on_hover_text(format!("{r:?}"));
+            }
         });
         ui.label("Mesh");
         ui.add(
@@ -491,7 +500,13 @@ impl ViewerApp {
         let renderer = self
             .renderer
             .get_or_insert_with(|| gpu::Renderer::new(device, queue, scene, size));
-        self.stats = renderer.render(device, queue, scene, &camera, &self.settings);
+        match renderer.render(device, queue, scene, &camera, &self.settings) {
+            Ok(stats) => self.stats = stats,
+            Err(e) => {
+                self.error = Some(format!("{e:#}"));
+                self.settings.mode = Mode::Mesh;
+            }
+        }
         let view = &renderer.targets.colour_view;
         let mut egui_renderer = state.renderer.write();
         let id = match self.texture {

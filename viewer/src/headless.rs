@@ -17,8 +17,10 @@ use std::path::PathBuf;
 pub struct RenderArgs {
     /// The bundle to render.
     pub bundle: PathBuf,
-    /// How the terrain is drawn.
-    #[arg(long, value_enum, default_value_t = Mode::Mesh)]
+    /// How the terrain is drawn: mesh, raycast, or a Z-buffer baseline
+    /// zbuffer:a … zbuffer:g (points, top faces, front faces, segments,
+    /// blocks, flat triangles, smooth triangles).
+    #[arg(long, default_value = "mesh", value_parser = Mode::parse)]
     pub mode: Mode,
     /// Eye easting, northing (bundle CRS), height (m), heading (° clockwise
     /// from north) and incl (the horizon's screen row in pixels from the
@@ -119,7 +121,7 @@ pub fn render_once(
 ) -> Result<(Readback, FrameStats)> {
     let camera = flight.camera(scene, size);
     let mut renderer = Renderer::new(device, queue, scene, size);
-    let stats = renderer.render(device, queue, scene, &camera, settings);
+    let stats = renderer.render(device, queue, scene, &camera, settings)?;
     let mut readback = renderer.targets.read(device, queue)?;
     // A terrain-only raycast's depth is the CPU buffer itself (not uploaded).
     if let Some(depth) = renderer.raycast_depth(scene, settings) {
@@ -204,7 +206,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         relevo_core::atomic::write_file(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     eprintln!(
-        "{}: {}×{} {:?} on {adapter}, {} terrain and {} object triangles, camera {camera}",
+        "{}: {}×{} {} on {adapter}, {} terrain and {} object triangles, camera {camera}",
         a.out.display(),
         a.size[0],
         a.size[1],

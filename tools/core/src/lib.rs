@@ -19,6 +19,8 @@
 //!   raycast of a bundle.
 //! - [`veg`]: vegetation from imagery: split-and-merge, Haar signatures,
 //!   classification from samples, objects, the vegetation database.
+//! - [`zbuffer`]: the grid as geometry in the seven Z-buffer
+//!   representations the floating horizon is compared with.
 //! - [`bundle`]: the `NAME.relevo/` directory: manifest, artifacts, validation.
 
 pub mod atomic;
@@ -32,6 +34,7 @@ pub mod objects;
 pub mod raster;
 pub mod scene;
 pub mod veg;
+pub mod zbuffer;
 
 mod error;
 #[cfg(test)]

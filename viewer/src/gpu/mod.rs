@@ -7,6 +7,7 @@ mod mesh;
 mod objects;
 mod raycast;
 mod targets;
+mod zbuffer;
 
 pub use targets::{Readback, Targets};
 
@@ -15,6 +16,7 @@ use eframe::egui_wgpu::wgpu;
 
 use relevo_core::camera::Camera;
 use relevo_core::horizon::RenderOptions;
+use relevo_core::zbuffer::Representation;
 use serde::Serialize;
 use std::time::Instant;
 /// The GPU device and queue types the viewer draws with.
@@ -34,13 +36,48 @@ fn eye_relative_view_projection(camera: &Camera) -> [[f32; 4]; 4] {
 }
 
 /// How the terrain is drawn.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
-#[serde(rename_all = "lowercase")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Mode {
     /// relevo-core's view-dependent refinement, drawn as triangles.
     Mesh,
     /// relevo-core's floating-horizon raycast, composited with its depth.
     Raycast,
+    /// A Z-buffer baseline of the whole grid (Szenberg 1997, ch. 3).
+    ZBuffer(Representation),
+}
+
+impl Mode {
+    /// Parse `mesh`, `raycast` or `zbuffer:a` … `zbuffer:g`.
+    pub fn parse(text: &str) -> Result<Mode, String> {
+        match text {
+            "mesh" => Ok(Mode::Mesh),
+            "raycast" => Ok(Mode::Raycast),
+            _ => text
+                .strip_prefix("zbuffer:")
+                .and_then(|l| l.chars().next().filter(|_| l.len() == 1))
+                .and_then(Representation::from_letter)
+                .map(Mode::ZBuffer)
+                .ok_or_else(|| {
+                    format!("{text:?}: expected mesh, raycast or zbuffer:a … zbuffer:g")
+                }),
+        }
+    }
+}
+
+impl std::fmt::Display for Mode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Mode::Mesh => write!(f, "mesh"),
+            Mode::Raycast => write!(f, "raycast"),
+            Mode::ZBuffer(r) => write!(f, "zbuffer:{}", r.letter()),
+        }
+    }
+}
+
+impl Serialize for Mode {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_str(self)
+    }
 }
 
 /// Everything a frame is drawn with besides the camera.
@@ -85,7 +122,8 @@ impl Default for Settings {
 pub struct FrameStats {
     pub width: u32,
     pub height: u32,
-    /// Terrain triangles submitted to the GPU.
+    /// Terrain triangles submitted to the GPU (points or segments for the
+    /// baselines that draw those).
     pub triangles: usize,
     /// Object triangles submitted to the GPU.
     pub object_triangles: usize,
@@ -108,6 +146,7 @@ pub struct Renderer {
     pub targets: Targets,
     mesh: mesh::MeshPass,
     raycast: raycast::RaycastPass,
+    zbuffer: zbuffer::ZBufferPass,
     /// Built on the first frame that draws objects.
     objects: Option<objects::ObjectPass>,
 }
@@ -125,13 +164,15 @@ impl Renderer {
             targets: Targets::new(device, size),
             mesh: mesh::MeshPass::new(device, queue, scene),
             raycast: raycast::RaycastPass::new(device),
+            zbuffer: zbuffer::ZBufferPass::new(device),
             objects: None,
         }
     }
 
     /// Draw `scene` seen by `camera` into the targets (resized to the
     /// camera's viewport when needed): the terrain, then its objects
-    /// depth-tested against it.
+    /// depth-tested against it. Fails only when a Z-buffer baseline is asked
+    /// of a grid too large for it.
     pub fn render(
         &mut self,
         device: &Device,
@@ -139,7 +180,7 @@ impl Renderer {
         scene: &mut Scene,
         camera: &Camera,
         settings: &Settings,
-    ) -> FrameStats {
+    ) -> anyhow::Result<FrameStats> {
         let size = [camera.width, camera.height];
         if self.targets.size != size {
             self.targets = Targets::new(device, size);
@@ -154,9 +195,16 @@ impl Renderer {
         });
         let objects_drawn = settings.objects && scene.objects.is_some();
         match settings.mode {
-            _ if !settings.terrain => self
-                .targets
-                .clear(&mut encoder, sky_colour(&settings.raycast)),
+            _ if !settings.terrain => {
+                self.targets
+                    .begin(&mut encoder, Some(sky_colour(&settings.raycast)), "clear");
+            }
+            Mode::ZBuffer(representation) => {
+                self.zbuffer
+                    .prepare(device, queue, scene, camera, representation, &mut stats)?;
+                self.zbuffer
+                    .draw(&mut encoder, &self.targets, sky_colour(&settings.raycast));
+            }
             Mode::Mesh => {
                 self.mesh
                     .prepare(device, queue, scene, camera, settings, &mut stats);
@@ -187,7 +235,7 @@ impl Renderer {
         let start = Instant::now();
         queue.submit([encoder.finish()]);
         stats.submit_ms = start.elapsed().as_secs_f64() * 1e3;
-        stats
+        Ok(stats)
     }
 
     /// The depth of the last frame when it was a terrain-only raycast:

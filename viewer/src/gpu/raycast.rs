@@ -143,27 +143,7 @@ impl RaycastPass {
         let Some(uploads) = &self.uploads else {
             return;
         };
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("raycast composite"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &targets.colour_view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &targets.depth_view,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
-                    store: wgpu::StoreOp::Store,
-                }),
-                stencil_ops: None,
-            }),
-            ..Default::default()
-        });
+        let mut pass = targets.begin(encoder, Some(wgpu::Color::BLACK), "raycast composite");
         pass.set_pipeline(if self.depth_uploaded {
             &self.with_depth
         } else {

@@ -65,29 +65,39 @@ impl Targets {
         }
     }
 
-    /// Clear colour to `sky` and depth to 1 (nothing drawn).
-    pub fn clear(&self, encoder: &mut wgpu::CommandEncoder, sky: wgpu::Color) {
+    /// A render pass over both targets, clearing colour to `clear` and
+    /// depth to 1 — or keeping what they hold when `clear` is `None`.
+    pub fn begin<'e>(
+        &self,
+        encoder: &'e mut wgpu::CommandEncoder,
+        clear: Option<wgpu::Color>,
+        label: &str,
+    ) -> wgpu::RenderPass<'e> {
+        let (colour_load, depth_load) = match clear {
+            Some(colour) => (wgpu::LoadOp::Clear(colour), wgpu::LoadOp::Clear(1.0)),
+            None => (wgpu::LoadOp::Load, wgpu::LoadOp::Load),
+        };
         encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("clear"),
+            label: Some(label),
             color_attachments: &[Some(wgpu::RenderPassColorAttachment {
                 view: &self.colour_view,
                 depth_slice: None,
                 resolve_target: None,
                 ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(sky),
+                    load: colour_load,
                     store: wgpu::StoreOp::Store,
                 },
             })],
             depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                 view: &self.depth_view,
                 depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
+                    load: depth_load,
                     store: wgpu::StoreOp::Store,
                 }),
                 stencil_ops: None,
             }),
             ..Default::default()
-        });
+        })
     }
 
     /// Copy colour and depth back to the CPU (waits for the GPU).
