@@ -110,6 +110,14 @@ pub fn device() -> Result<(wgpu::Device, wgpu::Queue, String)> {
     Ok((device, queue, format!("{} ({:?})", info.name, info.backend)))
 }
 
+/// Wait until the GPU has finished everything submitted.
+pub fn wait_for_gpu(device: &wgpu::Device) -> Result<()> {
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .context("waiting for the GPU")?;
+    Ok(())
+}
+
 /// Render `scene` once for `flight` and read the targets back.
 pub fn render_once(
     device: &wgpu::Device,

@@ -15,7 +15,7 @@ use std::process::Command;
 use std::time::Instant;
 
 /// Median of a non-empty set of values (mean of the middle two when even).
-fn median(values: &[f64]) -> f64 {
+pub fn median(values: &[f64]) -> f64 {
     let mut v = values.to_vec();
     v.sort_by(f64::total_cmp);
     let n = v.len();
@@ -37,7 +37,7 @@ pub fn median_ms(runs: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> 
     Ok(median(&times))
 }
 
-fn emit(json_lines: bool, value: serde_json::Value, text: String) {
+pub fn emit(json_lines: bool, value: serde_json::Value, text: String) {
     if json_lines {
         println!("{value}");
     } else {

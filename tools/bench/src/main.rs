@@ -5,6 +5,7 @@
 //! `relevo` binary.
 
 mod bench;
+mod view;
 
 use clap::{Args, Parser, Subcommand};
 use std::path::PathBuf;
@@ -19,7 +20,8 @@ use std::process::ExitCode;
   cargo run --release -p relevo-bench -- ingest --json
   cargo run --release -p relevo-bench -- hierarchy --max-side 8193 --runs 3
   cargo run --release -p relevo-bench -- render --json --runs 3
-  cargo run --release -p relevo-bench -- veg --json --runs 3 --max-side 10000"
+  cargo run --release -p relevo-bench -- veg --json --runs 3 --max-side 10000
+  cargo run --release -p relevo-bench -- view --json --runs 3"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -61,6 +63,21 @@ enum BenchCommand {
         #[arg(long, default_value_t = 10000)]
         max_side: usize,
     },
+    /// The viewer's renderer: frame time of every mode at 1280×720 and
+    /// 1920×1080 on the GPU found (lavapipe without one).
+    #[command(after_help = "Examples:
+  VK_ICD_FILENAMES=/usr/share/vulkan/icd.d/lvp_icd.x86_64.json relevo-bench view --json --runs 3
+  relevo-bench view --max-side 2049")]
+    View(ViewArgs),
+}
+
+#[derive(Args, Debug)]
+struct ViewArgs {
+    #[command(flatten)]
+    common: BenchArgs,
+    /// Largest grid side: 4097 adds a fractal 4097² terrain.
+    #[arg(long, default_value_t = 4097)]
+    max_side: usize,
 }
 
 #[derive(Args, Debug)]
@@ -84,6 +101,13 @@ fn main() -> ExitCode {
     relevo::commands::init_logging(0, false);
     relevo::ingest::gdalio::init();
     let result = match cli.command {
+        BenchCommand::View(a) => view::view(
+            &a.common.repo,
+            &a.common.data,
+            a.common.runs.max(1),
+            a.max_side,
+            a.common.json,
+        ),
         BenchCommand::Ingest(a) => bench::ingest(&a.repo, &a.data, a.runs.max(1), a.json),
         BenchCommand::Render(a) => bench::render(&a.data, a.runs.max(1), a.json),
         BenchCommand::Veg {
