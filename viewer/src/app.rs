@@ -84,7 +84,9 @@ pub struct ViewerApp {
     pub stats: FrameStats,
     pub show_help: bool,
     /// The typed camera string in the side panel.
-    camera_text: String,
+    pub camera_text: String,
+    /// A camera to move to once the view's size is known.
+    pending_pose: Option<CameraPose>,
     /// World (east, north, height) of the ground under the pointer.
     pub ground_under_pointer: Option<[f64; 3]>,
     tour: Option<Tour>,
@@ -105,6 +107,7 @@ impl ViewerApp {
             stats: FrameStats::default(),
             show_help: false,
             camera_text: String::new(),
+            pending_pose: None,
             ground_under_pointer: None,
             tour: None,
         };
@@ -124,6 +127,17 @@ impl ViewerApp {
                 self.error = None;
             }
             Err(e) => self.error = Some(format!("{e:#}")),
+        }
+    }
+
+    /// Place the objects of a placement file on the open bundle; on failure
+    /// show why.
+    pub fn load_objects(&mut self, path: &Path) {
+        let Some(scene) = &mut self.scene else {
+            return;
+        };
+        if let Err(e) = scene.load_objects(path) {
+            self.error = Some(format!("{e:#}"));
         }
     }
 
@@ -396,24 +410,33 @@ impl ViewerApp {
         });
     }
 
-    fn go_to_typed_camera(&mut self) {
+    /// Move to the camera string typed in the side panel.
+    pub fn go_to_typed_camera(&mut self) {
+        match CameraPose::parse(&self.camera_text) {
+            Ok(pose) => {
+                self.pending_pose = Some(pose);
+                self.error = None;
+            }
+            Err(e) => self.error = Some(e),
+        }
+    }
+
+    /// Move to a camera string's pose, its INCL read for a view
+    /// `height_px` tall.
+    fn go_to(&mut self, pose: &CameraPose, height_px: u32) {
         let Some(scene) = &self.scene else {
             return;
         };
-        match CameraPose::parse(&self.camera_text) {
-            Ok(pose) => match Flight::from_pose(scene, &pose, self.stats.height.max(1)) {
-                Some(mut f) => {
-                    if let Some(old) = &self.flight {
-                        f.speed_mps = old.speed_mps;
-                        f.fov_x_deg = old.fov_x_deg;
-                    }
-                    f.keep_above_ground(scene);
-                    self.flight = Some(f);
-                    self.error = None;
+        match Flight::from_pose(scene, pose, height_px) {
+            Some(mut f) => {
+                if let Some(old) = &self.flight {
+                    f.speed_mps = old.speed_mps;
+                    f.fov_x_deg = old.fov_x_deg;
                 }
-                None => self.error = Some("the bundle's geotransform cannot be inverted".into()),
-            },
-            Err(e) => self.error = Some(e),
+                f.keep_above_ground(scene);
+                self.flight = Some(f);
+            }
+            None => self.error = Some("the bundle's geotransform cannot be inverted".into()),
         }
     }
 
@@ -431,6 +454,9 @@ impl ViewerApp {
             ((rect.height() * ppp) as u32).max(1),
         ];
         let response = ui.allocate_rect(rect, egui::Sense::click_and_drag());
+        if let Some(pose) = self.pending_pose.take() {
+            self.go_to(&pose, size[1]);
+        }
         let (Some(scene), Some(flight), Some(state)) =
             (&mut self.scene, &mut self.flight, render_state)
         else {
@@ -629,9 +655,29 @@ impl eframe::App for ViewerApp {
     }
 }
 
-/// Open the window on `bundle` (or empty, waiting for a dropped bundle);
-/// with a tour, fly it, save the screenshot and close.
-pub fn run(bundle: Option<PathBuf>, tour: Option<Tour>) -> anyhow::Result<()> {
+/// What the window starts with.
+#[derive(Default)]
+pub struct Start {
+    /// The bundle (none: wait for one dropped on the window).
+    pub bundle: Option<PathBuf>,
+    /// A placement file of objects to composite.
+    pub objects: Option<PathBuf>,
+    /// A camera string to start at instead of the home view.
+    pub camera: Option<String>,
+    /// A scripted flight ending with a screenshot.
+    pub tour: Option<Tour>,
+}
+
+/// Open the window as `start` says; with a tour, fly it, save the
+/// screenshot and close. Problems with the bundle, objects or camera are
+/// shown in the window.
+pub fn run(start: Start) -> anyhow::Result<()> {
+    let Start {
+        bundle,
+        objects,
+        camera,
+        tour,
+    } = start;
     let outcome = tour
         .as_ref()
         .map(|t| (t.outcome.clone(), t.screenshot.clone()));
@@ -647,7 +693,14 @@ pub fn run(bundle: Option<PathBuf>, tour: Option<Tour>) -> anyhow::Result<()> {
         "relevo-view",
         options,
         Box::new(move |_| {
-            let app = ViewerApp::new(bundle.as_deref());
+            let mut app = ViewerApp::new(bundle.as_deref());
+            if let Some(path) = &objects {
+                app.load_objects(path);
+            }
+            if let Some(text) = camera {
+                app.camera_text = text;
+                app.go_to_typed_camera();
+            }
             Ok(Box::new(match tour {
                 Some(tour) => app.with_tour(tour),
                 None => app,

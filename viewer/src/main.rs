@@ -15,6 +15,7 @@ use std::process::ExitCode;
     args_conflicts_with_subcommands = true,
     after_help = "Examples:
   relevo-view olinda.relevo
+  relevo-view olinda.relevo --objects data/olinda/objects.geojson --camera 290963,9112753,100,35
   relevo-view olinda.relevo --tour 90 --screenshot window.png   # scripted flight, screenshot, exit
   relevo-view render olinda.relevo --mode raycast --size 1920x1080 --out shot.png
   relevo-view render olinda.relevo --mode mesh --tau 1 --wireframe --camera 289000,9111000,400,40,420 --out mesh.png
@@ -23,6 +24,12 @@ use std::process::ExitCode;
 struct Cli {
     /// The bundle to open in the window.
     bundle: Option<PathBuf>,
+    /// Objects to composite: a GeoJSON placement file (see docs/formats.md).
+    #[arg(long, requires = "bundle")]
+    objects: Option<PathBuf>,
+    /// Start at this camera, X,Y,Z,HEADING[,INCL] (default: the home view).
+    #[arg(long, requires = "bundle", allow_hyphen_values = true)]
+    camera: Option<String>,
     /// Fly a scripted tour of this many frames (forward, turning), then
     /// save a screenshot of the window to --screenshot and close.
     #[arg(long, requires = "screenshot", value_name = "FRAMES")]
@@ -56,7 +63,13 @@ fn main() -> ExitCode {
                 .tour
                 .zip(cli.screenshot)
                 .map(|(frames, path)| relevo_view::app::Tour::new(frames, path));
-            relevo_view::app::run(cli.bundle, tour)
+            let start = relevo_view::app::Start {
+                bundle: cli.bundle,
+                objects: cli.objects,
+                camera: cli.camera,
+                tour,
+            };
+            relevo_view::app::run(start)
         }
     };
     match result {
