@@ -223,7 +223,11 @@ pub fn fractal_heights(side: usize, seed: u64) -> Vec<f32> {
             }
         }
         for r in (0..side).step_by(half) {
-            let start = if (r / half) % 2 == 0 { half } else { 0 };
+            let start = if (r / half).is_multiple_of(2) {
+                half
+            } else {
+                0
+            };
             for c in (start..side).step_by(step) {
                 let mut sum = 0.0;
                 let mut n = 0.0;

@@ -201,7 +201,7 @@ impl Bundle {
         let artifact = self.artifact(name)?;
         let path = self.dir.join(&artifact.file);
         let element = match artifact.dtype.size() {
-            Some(e) if size_of::<T>() % e == 0 => e,
+            Some(e) if size_of::<T>().is_multiple_of(e) => e,
             _ => {
                 return Err(Error::invalid(
                     &path,
@@ -226,7 +226,7 @@ impl Bundle {
                 ),
             ));
         }
-        if len as usize % size_of::<T>() != 0 {
+        if !(len as usize).is_multiple_of(size_of::<T>()) {
             return Err(Error::invalid(
                 &path,
                 format!("{len} bytes do not divide into elements of this type"),

@@ -124,7 +124,7 @@ pub fn to_glb(mesh: &ExportMesh, crs_wkt: &str) -> Result<Vec<u8>> {
     let mut bin: Vec<u8> = Vec::new();
     let mut views = Vec::new();
     let mut add_view = |bin: &mut Vec<u8>, bytes: &[u8], target: Option<u32>| {
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         let mut view = json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": bytes.len()});
@@ -181,7 +181,7 @@ pub fn to_glb(mesh: &ExportMesh, crs_wkt: &str) -> Result<Vec<u8>> {
         doc["textures"] = json!([{"sampler": 0, "source": 0}]);
         doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = json!({"index": 0});
     }
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     doc["bufferViews"] = json!(views);

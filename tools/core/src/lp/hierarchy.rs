@@ -272,7 +272,7 @@ fn finest_levels(heights: &[f32], side: usize, cell: f64, out: &mut [[f32; 2]]) 
         let at = |c: usize, r: usize| r * side + c;
         let edge_error = |c: usize, r: usize| {
             let m = at(c, r);
-            if r % 2 == 0 {
+            if r.is_multiple_of(2) {
                 own_error(heights, m - 1, m + 1, m)
             } else {
                 own_error(heights, m - side, m + side, m)
@@ -399,12 +399,12 @@ pub fn visit_bottom_up(side: usize, mut f: impl FnMut(&Diamond)) {
 fn hypotenuse(side: usize, c: usize, r: usize, h: usize, edge: bool) -> (usize, usize) {
     let m = r * side + c;
     if edge {
-        if (r / h) % 2 == 0 {
+        if (r / h).is_multiple_of(2) {
             (m - h, m + h)
         } else {
             (m - h * side, m + h * side)
         }
-    } else if (c / (2 * h) + r / (2 * h)) % 2 == 0 {
+    } else if (c / (2 * h) + r / (2 * h)).is_multiple_of(2) {
         (m - h * side - h, m + h * side + h)
     } else {
         (m - h * side + h, m + h * side - h)
@@ -413,7 +413,7 @@ fn hypotenuse(side: usize, c: usize, r: usize, h: usize, edge: bool) -> (usize, 
 
 /// Columns of edge vertices on row r: c ≡ h (mod 2h) on rows r ≡ 0, else c ≡ 0.
 fn edge_columns(r: usize, h: usize) -> (usize, usize) {
-    if (r / h) % 2 == 0 {
+    if (r / h).is_multiple_of(2) {
         (h, 2 * h)
     } else {
         (0, 2 * h)

@@ -1,0 +1,39 @@
+//! A real terrain for the viewer's tests, written by relevo-core (no GDAL).
+
+use relevo_core::bundle::{write_terrain_bundle, Crs};
+use relevo_core::geo::GeoTransform;
+use relevo_core::grid::HeightGrid;
+use std::path::{Path, PathBuf};
+
+/// A terrain-only bundle of the committed Copernicus crop of Grenoble
+/// (257², 150 m nominal cells, 179–1908 m).
+pub fn grenoble_bundle(dir: &Path) -> PathBuf {
+    let crop =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/crops/copernicus_grenoble_257.f32");
+    let heights: Vec<f32> = std::fs::read(crop)
+        .unwrap()
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    let side = 257;
+    let grid = HeightGrid {
+        side,
+        heights,
+        mask: vec![1; side * side],
+        geotransform: GeoTransform::north_up(700_000.0, 5_050_000.0, 150.0, 150.0),
+    };
+    let crs = Crs {
+        wkt: String::new(),
+        epsg: None,
+    };
+    write_terrain_bundle(
+        &dir.join("grenoble.relevo"),
+        "grenoble",
+        &grid,
+        150.0,
+        crs,
+        false,
+    )
+    .unwrap()
+}
+

@@ -1,0 +1,81 @@
+//! The window's UI driven by egui_kittest with the wgpu renderer (Mesa's
+//! lavapipe): keys switch modes and toggles, arrows fly, the HUD shows the
+//! frame's numbers, the help lists the keys, and the rendered window shows
+//! terrain under the HUD.
+// Test code: a failed unwrap is a failed test.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+mod common;
+use eframe::egui::Key;
+use egui_kittest::kittest::Queryable;
+use egui_kittest::Harness;
+use relevo_view::app::ViewerApp;
+use relevo_view::gpu::Mode;
+
+#[test]
+fn keys_switch_modes_and_the_hud_shows_the_numbers() {
+    if std::env::var_os("VK_ICD_FILENAMES").is_none() {
+        std::env::set_var("VK_ICD_FILENAMES", relevo_view::LAVAPIPE_ICD);
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let bundle = common::grenoble_bundle(dir.path());
+    let mut harness = Harness::builder()
+        .with_size([1000.0, 640.0])
+        .wgpu()
+        .build_eframe(|_| ViewerApp::new(Some(&bundle)));
+    harness.run_steps(3);
+    let app = harness.state();
+    assert_eq!(app.error(), None);
+    assert_eq!(app.settings.mode, Mode::Mesh);
+    assert!(app.stats.triangles > 100, "{} triangles", app.stats.triangles);
+    let hud = app.hud_lines().join("\n");
+    assert!(hud.contains(&format!("{} triangles", app.stats.triangles)), "{hud}");
+    assert!(hud.contains("above ground") && hud.contains("km/h") && hud.contains("camera E"), "{hud}");
+
+    // Toggles, one key each.
+    for (key, check) in [
+        (Key::M, &(|a: &ViewerApp| a.settings.mode == Mode::Raycast) as &dyn Fn(&ViewerApp) -> bool),
+        (Key::W, &|a: &ViewerApp| a.settings.wireframe),
+        (Key::T, &|a: &ViewerApp| !a.settings.texture),
+        (Key::G, &|a: &ViewerApp| !a.settings.morph),
+        (Key::F1, &|a: &ViewerApp| !a.settings.objects),
+    ] {
+        harness.key_press(key);
+        harness.run_steps(2);
+        assert!(check(harness.state()), "{key:?} did not switch");
+    }
+    let hud = harness.state().hud_lines().join("\n");
+    assert!(hud.contains("raycast (floating horizon)"), "{hud}");
+    assert_eq!(harness.state().stats.triangles, 0, "the raycast draws no triangles");
+
+    // Flying forward moves the eye along the heading.
+    let before = harness.state().flight().unwrap().position;
+    harness.key_down(Key::ArrowUp);
+    harness.run_steps(5);
+    harness.key_up(Key::ArrowUp);
+    harness.run_steps(1);
+    let after = harness.state().flight().unwrap().position;
+    assert!((after - before).truncate().length() > 1.0, "{before} → {after}");
+
+    // The help lists the keys.
+    harness.key_press(Key::H);
+    harness.run_steps(2);
+    assert!(harness.state().show_help);
+    harness.get_by_label("fly forward / back");
+
+    // The window as rendered: terrain below the HUD's dark panel.
+    let image = harness.render().unwrap();
+    let (w, h) = image.dimensions();
+    let sky = [135u8, 170, 215];
+    let lower: Vec<[u8; 3]> = (h * 3 / 4..h - 10)
+        .flat_map(|y| (20..w / 2).map(move |x| (x, y)))
+        .map(|(x, y)| {
+            let p = image.get_pixel(x, y).0;
+            [p[0], p[1], p[2]]
+        })
+        .collect();
+    let terrain = lower.iter().filter(|p| **p != sky).count();
+    assert!(terrain * 10 > lower.len() * 9, "{terrain} of {} pixels", lower.len());
+    let hud_pixel = image.get_pixel(20, 30).0;
+    assert!(hud_pixel[..3].iter().all(|&c| c < 120), "HUD panel at (20, 30): {hud_pixel:?}");
+}
