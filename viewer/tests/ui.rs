@@ -27,14 +27,27 @@ fn keys_switch_modes_and_the_hud_shows_the_numbers() {
     let app = harness.state();
     assert_eq!(app.error(), None);
     assert_eq!(app.settings.mode, Mode::Mesh);
-    assert!(app.stats.triangles > 100, "{} triangles", app.stats.triangles);
+    assert!(
+        app.stats.triangles > 100,
+        "{} triangles",
+        app.stats.triangles
+    );
     let hud = app.hud_lines().join("\n");
-    assert!(hud.contains(&format!("{} triangles", app.stats.triangles)), "{hud}");
-    assert!(hud.contains("above ground") && hud.contains("km/h") && hud.contains("camera E"), "{hud}");
+    assert!(
+        hud.contains(&format!("{} triangles", app.stats.triangles)),
+        "{hud}"
+    );
+    assert!(
+        hud.contains("above ground") && hud.contains("km/h") && hud.contains("camera E"),
+        "{hud}"
+    );
 
     // Toggles, one key each.
     for (key, check) in [
-        (Key::M, &(|a: &ViewerApp| a.settings.mode == Mode::Raycast) as &dyn Fn(&ViewerApp) -> bool),
+        (
+            Key::M,
+            &(|a: &ViewerApp| a.settings.mode == Mode::Raycast) as &dyn Fn(&ViewerApp) -> bool,
+        ),
         (Key::W, &|a: &ViewerApp| a.settings.wireframe),
         (Key::T, &|a: &ViewerApp| !a.settings.texture),
         (Key::G, &|a: &ViewerApp| !a.settings.morph),
@@ -46,7 +59,11 @@ fn keys_switch_modes_and_the_hud_shows_the_numbers() {
     }
     let hud = harness.state().hud_lines().join("\n");
     assert!(hud.contains("raycast (floating horizon)"), "{hud}");
-    assert_eq!(harness.state().stats.triangles, 0, "the raycast draws no triangles");
+    assert_eq!(
+        harness.state().stats.triangles,
+        0,
+        "the raycast draws no triangles"
+    );
 
     // Flying forward moves the eye along the heading.
     let before = harness.state().flight().unwrap().position;
@@ -55,7 +72,10 @@ fn keys_switch_modes_and_the_hud_shows_the_numbers() {
     harness.key_up(Key::ArrowUp);
     harness.run_steps(1);
     let after = harness.state().flight().unwrap().position;
-    assert!((after - before).truncate().length() > 1.0, "{before} → {after}");
+    assert!(
+        (after - before).truncate().length() > 1.0,
+        "{before} → {after}"
+    );
 
     // The help lists the keys.
     harness.key_press(Key::H);
@@ -75,7 +95,14 @@ fn keys_switch_modes_and_the_hud_shows_the_numbers() {
         })
         .collect();
     let terrain = lower.iter().filter(|p| **p != sky).count();
-    assert!(terrain * 10 > lower.len() * 9, "{terrain} of {} pixels", lower.len());
+    assert!(
+        terrain * 10 > lower.len() * 9,
+        "{terrain} of {} pixels",
+        lower.len()
+    );
     let hud_pixel = image.get_pixel(20, 30).0;
-    assert!(hud_pixel[..3].iter().all(|&c| c < 120), "HUD panel at (20, 30): {hud_pixel:?}");
+    assert!(
+        hud_pixel[..3].iter().all(|&c| c < 120),
+        "HUD panel at (20, 30): {hud_pixel:?}"
+    );
 }

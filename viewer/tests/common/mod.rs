@@ -36,4 +36,3 @@ pub fn grenoble_bundle(dir: &Path) -> PathBuf {
     )
     .unwrap()
 }
-
