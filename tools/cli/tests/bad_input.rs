@@ -198,6 +198,11 @@ fn region_file_errors() {
             "[vegetation] needs [image]",
         ),
         (
+            "twodrapes.toml",
+            "terrain_drape = true\n[dem]\nfiles = [\"a.tif\"]\n[image]\nfiles = [\"b.tif\"]\n",
+            "terrain_drape and [image] both give the drape",
+        ),
+        (
             "vegoption.toml",
             "[dem]\nfiles = [\"a.tif\"]\n[image]\nfiles = [\"b.tif\"]\n[vegetation]\nsamples = \"s.csv\"\n[vegetation.options]\nthreshold = 3\n",
             "unknown field `threshold`",

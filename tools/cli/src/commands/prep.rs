@@ -27,6 +27,10 @@ pub struct PrepArgs {
     /// Imagery tiles to drape (quick form).
     #[arg(long, num_args = 1..)]
     pub image: Vec<PathBuf>,
+    /// Without imagery: drape a hypsometric tint with a baked hillshade
+    /// derived from the heights (quick form).
+    #[arg(long, conflicts_with = "image")]
+    pub terrain_drape: bool,
     /// Image bands shown as red, green, blue (quick form), e.g. 3,2,1.
     #[arg(long, value_delimiter = ',', value_name = "R,G,B")]
     pub bands: Option<Vec<usize>>,
@@ -88,6 +92,7 @@ pub fn run(a: PrepArgs) -> Result<()> {
                     resampling: Resampling::Bilinear,
                     stretch: a.stretch,
                 }),
+                terrain_drape: a.terrain_drape,
                 vegetation: a.samples.map(|samples| VegetationSection {
                     samples,
                     options: Default::default(),

@@ -24,6 +24,7 @@ use relevo_core::grid::HeightGrid;
 use relevo_core::lp::Hierarchy;
 use relevo_core::raster::fill::{fill_holes, FillReport};
 use relevo_core::raster::stretch::{stretch_or_default, to_rgba8};
+use relevo_core::raster::tint::terrain_drape;
 use relevo_core::raster::Raster;
 use relevo_core::veg::db;
 use relevo_core::veg::pipeline::{self, Extraction, VegImage};
@@ -74,7 +75,9 @@ struct Build<'a> {
     fill: FillReport,
     grid: Option<HeightGrid>,
     hierarchy: Option<Hierarchy<'static>>,
-    color: Option<(Mosaic, [usize; 3])>,
+    /// The drape's grid and the source bands shown as R, G, B (0 for a
+    /// drape derived from the terrain).
+    color: Option<(GridSpec, [usize; 3])>,
     /// The drape as RGBA8, as written to `color.rgba8`.
     rgba: Vec<u8>,
     vegetation: Option<(VegImage, Extraction)>,
@@ -220,6 +223,9 @@ fn stage_hierarchy(b: &mut Build) -> Result<()> {
 /// Bring the imagery onto the bundle CRS at its own resolution, cropped to the DEM.
 fn stage_drape(b: &mut Build) -> Result<()> {
     let Some(image) = &b.region.image else {
+        if b.region.terrain_drape {
+            derive_drape(b)?;
+        }
         return Ok(());
     };
     let dem = b.dem.as_ref().context("dem stage did not run")?;
@@ -248,7 +254,24 @@ fn stage_drape(b: &mut Build) -> Result<()> {
         &mosaic.raster,
         stretch_or_default(image.stretch, mosaic.band_type == GdalDataType::UInt8),
     );
-    b.color = Some((mosaic, bands));
+    b.color = Some((mosaic.grid, bands));
+    Ok(())
+}
+
+/// The drape derived from the terrain: one pixel per grid vertex, on the
+/// grid's own georeferencing.
+fn derive_drape(b: &mut Build) -> Result<()> {
+    let grid = b.grid.as_ref().context("grid stage did not run")?;
+    let dem = b.dem.as_ref().context("dem stage did not run")?;
+    let range = grid.height_range().context("the DEM has no valid data")?;
+    b.rgba = terrain_drape(&grid.heights, &grid.mask, grid.side, b.cell_size_m, range);
+    let spec = GridSpec {
+        crs_wkt: dem.grid.crs_wkt.clone(),
+        geotransform: grid.geotransform,
+        width: grid.side,
+        height: grid.side,
+    };
+    b.color = Some((spec, [0, 0, 0]));
     Ok(())
 }
 
@@ -259,8 +282,7 @@ fn stage_vegetation(b: &mut Build) -> Result<()> {
     let (Some(section), Some(image_section)) = (&b.region.vegetation, &b.region.image) else {
         return Ok(());
     };
-    let (mosaic, _) = b.color.as_ref().context("drape stage did not run")?;
-    let grid = &mosaic.grid;
+    let (grid, _) = b.color.as_ref().context("drape stage did not run")?;
     let image = VegImage::from_drape(
         &b.rgba,
         grid.width,
@@ -360,9 +382,9 @@ fn stage_write(b: &mut Build) -> Result<()> {
     b.exports
         .insert(export.key.into(), b.writer.record_file(export.file)?);
 
-    if let Some((mosaic, _)) = &b.color {
+    if let Some((drape_grid, _)) = &b.color {
         let rgba = &b.rgba;
-        let (w, h) = (mosaic.grid.width, mosaic.grid.height);
+        let (w, h) = (drape_grid.width, drape_grid.height);
         let (key, file) = array(names::COLOR);
         b.artifacts.insert(
             key,
@@ -376,7 +398,7 @@ fn stage_write(b: &mut Build) -> Result<()> {
         gdalio::write_geotiff(
             &b.writer.dir().join(export.file),
             &raster,
-            &mosaic.grid,
+            drape_grid,
             GdalDataType::UInt8,
             None,
         )?;
@@ -433,10 +455,10 @@ fn finish(b: Build, timings: Vec<StageTiming>) -> Result<Summary> {
         wkt: dem.grid.crs_wkt.clone(),
         epsg: dem.srs.as_ref().and_then(crs::epsg),
     };
-    let color = b.color.as_ref().map(|(m, bands)| ColorInfo {
-        width: m.grid.width,
-        height: m.grid.height,
-        geotransform: m.grid.geotransform,
+    let color = b.color.as_ref().map(|(grid, bands)| ColorInfo {
+        width: grid.width,
+        height: grid.height,
+        geotransform: grid.geotransform,
         bands: *bands,
     });
     let manifest = Manifest {

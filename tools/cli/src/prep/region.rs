@@ -31,6 +31,10 @@ pub struct Region {
     #[serde(default)]
     pub grid: GridSection,
     pub image: Option<ImageSection>,
+    /// Without imagery: drape the terrain with a hypsometric tint and a
+    /// baked hillshade derived from the heights.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub terrain_drape: bool,
     pub vegetation: Option<VegetationSection>,
 }
 
@@ -189,6 +193,9 @@ impl Region {
                     );
                 }
             }
+        }
+        if self.terrain_drape && self.image.is_some() {
+            bail!("terrain_drape and [image] both give the drape: choose one");
         }
         if self.vegetation.is_some() && self.image.is_none() {
             bail!("[vegetation] needs [image]: vegetation is extracted from the imagery");

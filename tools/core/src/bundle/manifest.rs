@@ -81,7 +81,8 @@ pub struct ColorInfo {
     pub width: usize,
     pub height: usize,
     pub geotransform: GeoTransform,
-    /// Source bands used for red, green and blue (1-based).
+    /// Source bands used for red, green and blue (1-based); `[0, 0, 0]` for
+    /// a drape derived from the terrain.
     pub bands: [usize; 3],
 }
 

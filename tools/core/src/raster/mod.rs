@@ -1,7 +1,7 @@
 //! In-memory multiband rasters and the algorithms that turn tiles into one
 //! clean grid: mosaicking with feathered overlaps, no-data filling, and the
 //! decoding of RGB-encoded elevation tiles; 8-bit stretching and PNG
-//! encoding for what people look at.
+//! encoding for what people look at; a drape derived from the terrain.
 
 pub mod distance;
 pub mod encoding;
@@ -9,6 +9,7 @@ pub mod fill;
 pub mod mosaic;
 pub mod png;
 pub mod stretch;
+pub mod tint;
 
 /// The up-to-four edge neighbours of cell `i` (row-major) of a
 /// `width`×`height` grid.
