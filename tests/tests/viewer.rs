@@ -148,7 +148,7 @@ fn headless_frames_of_each_mode_match_their_references() {
     ];
     for (name, settings, flight) in terrain_only.chain(with_objects) {
         let (frame, stats) =
-            render_once(&device, &queue, &mut scene, &flight, &settings, SIZE).unwrap();
+            render_once(&device, &queue, &mut scene, &flight, &settings, SIZE, false).unwrap();
         let reference = repo(&format!("data/golden/viewer/{name}.png"));
         let d = compare_with_reference(&frame.rgba, SIZE, &reference, 24, |d| {
             d.pixels_off * 100 <= (SIZE[0] * SIZE[1]) as usize && d.mean < 1.5
@@ -195,8 +195,10 @@ fn raycast_depth_agrees_with_the_full_resolution_mesh() {
         ..Default::default()
     };
     raycast.raycast.bands = fine_bands();
-    let (mesh_frame, _) = render_once(&device, &queue, &mut scene, &flight, &mesh, SIZE).unwrap();
-    let (ray_frame, _) = render_once(&device, &queue, &mut scene, &flight, &raycast, SIZE).unwrap();
+    let (mesh_frame, _) =
+        render_once(&device, &queue, &mut scene, &flight, &mesh, SIZE, false).unwrap();
+    let (ray_frame, _) =
+        render_once(&device, &queue, &mut scene, &flight, &raycast, SIZE, false).unwrap();
     let camera = flight.camera(&scene, SIZE);
     let cell = scene.frame.cell_size_m;
     let (mut errors, mut disagree) = (Vec::new(), 0usize);
@@ -297,7 +299,7 @@ fn composited_objects_are_hidden_exactly_where_the_terrain_covers_them() {
             ..settings.clone()
         };
         let render = |scene: &mut Scene, s: &Settings| {
-            render_once(&device, &queue, scene, &flight, s, SIZE)
+            render_once(&device, &queue, scene, &flight, s, SIZE, false)
                 .unwrap()
                 .0
         };

@@ -5,6 +5,7 @@
 
 use crate::flight::{Controls, Flight};
 use crate::gpu::{self, FrameStats, Mode, Settings};
+use crate::hud;
 use crate::scene::Scene;
 use eframe::egui;
 use eframe::egui_wgpu::{self, wgpu};
@@ -200,50 +201,16 @@ impl ViewerApp {
     /// The HUD's lines: frame rate, frame time, what was drawn, where the
     /// camera and the pointer are.
     pub fn hud_lines(&self) -> Vec<String> {
-        let mut lines = Vec::new();
         let frame_ms = self.frame_times.back().map_or(0.0, |t| t * 1e3);
-        lines.push(format!("{:.0} fps   {frame_ms:.1} ms", self.fps()));
-        let mode = match self.settings.mode {
-            Mode::Mesh => format!(
-                "mesh τ {:.1} px{}",
-                self.settings.tau_px,
-                if self.settings.morph {
-                    ", geomorphing"
-                } else {
-                    ""
-                }
-            ),
-            Mode::Raycast => "raycast (floating horizon)".to_string(),
-            Mode::ZBuffer(r) => format!("z-buffer baseline [{}] {r:?}", r.letter()),
-        };
-        lines.push(format!("{mode}   {} triangles", self.stats.triangles));
-        if let (Some(scene), Some(flight)) = (&self.scene, &self.flight) {
-            let pose = flight.pose(scene, self.stats.height.max(1));
-            let [e, n, z] = pose.eye;
-            lines.push(format!("speed {:.0} km/h", flight.speed_mps * 3.6));
-            lines.push(format!(
-                "camera E {e:.1}  N {n:.1}  h {z:.1} m  heading {:.0}°",
-                pose.heading_deg
-            ));
-            match flight.height_above_ground(scene) {
-                Some(h) => lines.push(format!("above ground {h:.1} m")),
-                None => lines.push("above ground: off the data".into()),
-            }
-        }
-        match self.ground_under_pointer {
-            Some([e, n, z]) => lines.push(format!("pointer E {e:.1}  N {n:.1}  ground {z:.1} m")),
-            None => lines.push("pointer: sky".into()),
-        }
-        let objects = match self.scene.as_ref().and_then(|s| s.objects.as_ref()) {
-            None => "objects: none loaded".to_string(),
-            Some(o) if self.settings.objects => format!(
-                "objects on: {} features, {} triangles",
-                o.features, self.stats.object_triangles
-            ),
-            Some(o) => format!("objects off ({} features)", o.features),
-        };
-        lines.push(format!("{objects}   h: help"));
-        lines
+        hud::lines(&hud::Readings {
+            fps: self.fps(),
+            frame_ms,
+            settings: &self.settings,
+            stats: &self.stats,
+            scene: self.scene.as_ref(),
+            flight: self.flight.as_ref(),
+            pointer: self.ground_under_pointer,
+        })
     }
 
     /// Apply the keys pressed this frame; returns the held flight controls.
@@ -562,50 +529,8 @@ impl ViewerApp {
 
     /// The HUD over the view: its lines and a frame-time plot.
     fn hud(&self, ui: &egui::Ui, rect: egui::Rect) {
-        let painter = ui.painter();
-        let lines = self.hud_lines();
-        let font = egui::FontId::monospace(13.0);
-        let height = 16.0 * lines.len() as f32 + 60.0;
-        let panel =
-            egui::Rect::from_min_size(rect.min + egui::vec2(8.0, 8.0), egui::vec2(430.0, height));
-        painter.rect_filled(panel, 4.0, egui::Color32::from_black_alpha(150));
-        for (k, line) in lines.iter().enumerate() {
-            painter.text(
-                panel.min + egui::vec2(8.0, 6.0 + 16.0 * k as f32),
-                egui::Align2::LEFT_TOP,
-                line,
-                font.clone(),
-                egui::Color32::WHITE,
-            );
-        }
-        // Frame time, newest on the right; the line marks 33 ms (30 fps).
-        let plot = egui::Rect::from_min_size(
-            egui::pos2(panel.min.x + 8.0, panel.max.y - 48.0),
-            egui::vec2(panel.width() - 16.0, 40.0),
-        );
-        let to_y = |seconds: f64| plot.max.y - (seconds / 0.1).min(1.0) as f32 * plot.height();
-        painter.line_segment(
-            [
-                egui::pos2(plot.min.x, to_y(1.0 / 30.0)),
-                egui::pos2(plot.max.x, to_y(1.0 / 30.0)),
-            ],
-            egui::Stroke::new(1.0, egui::Color32::from_rgb(200, 120, 60)),
-        );
-        let points: Vec<egui::Pos2> = self
-            .frame_times
-            .iter()
-            .enumerate()
-            .map(|(k, &t)| {
-                egui::pos2(
-                    plot.min.x + plot.width() * k as f32 / HISTORY as f32,
-                    to_y(t),
-                )
-            })
-            .collect();
-        painter.add(egui::Shape::line(
-            points,
-            egui::Stroke::new(1.0, egui::Color32::LIGHT_GREEN),
-        ));
+        let times: Vec<f64> = self.frame_times.iter().copied().collect();
+        hud::paint(ui.painter(), rect, &self.hud_lines(), &times, HISTORY);
     }
 
     fn help(&mut self, ctx: &egui::Context) {

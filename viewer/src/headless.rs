@@ -3,15 +3,20 @@
 //! buffer), at any size the GPU allows.
 
 use crate::flight::Flight;
-use crate::gpu::{FrameStats, Mode, Readback, Renderer, Settings};
+use crate::gpu::{
+    FrameStats, Mode, Readback, Renderer, Settings, Targets, COLOUR_FORMAT, DEPTH_FORMAT,
+};
+use crate::hud;
 use crate::scene::Scene;
 use anyhow::{bail, Context, Result};
-use eframe::egui_wgpu::wgpu;
+use eframe::egui;
+use eframe::egui_wgpu::{self, wgpu};
 use relevo_core::horizon::{Arithmetic, Band};
 use relevo_core::raster::png::encode_rgba;
 use relevo_core::scene::{self, CameraPose};
 use serde::Serialize;
 use std::path::PathBuf;
+use std::time::Instant;
 
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
@@ -63,6 +68,9 @@ pub struct RenderArgs {
     /// Draw the objects alone, without the terrain.
     #[arg(long, requires = "objects")]
     pub no_terrain: bool,
+    /// Paint the window's HUD into the image.
+    #[arg(long)]
+    pub hud: bool,
     /// Output PNG.
     #[arg(long, short)]
     pub out: PathBuf,
@@ -110,6 +118,54 @@ pub fn device() -> Result<(wgpu::Device, wgpu::Queue, String)> {
     Ok((device, queue, format!("{} ({:?})", info.name, info.backend)))
 }
 
+/// Paint the HUD's `lines` over the targets' colour with egui's own
+/// renderer, as the window does.
+fn paint_hud(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    targets: &Targets,
+    lines: &[String],
+    frame_s: f64,
+) -> Result<()> {
+    let [w, h] = targets.size;
+    let ctx = egui::Context::default();
+    let screen = egui::Rect::from_min_size(egui::Pos2::ZERO, egui::vec2(w as f32, h as f32));
+    let input = egui::RawInput {
+        screen_rect: Some(screen),
+        ..Default::default()
+    };
+    let output = ctx.run_ui(input, |ui| {
+        hud::paint(ui.painter(), screen, lines, &[frame_s], 1);
+    });
+    let primitives = ctx.tessellate(output.shapes, output.pixels_per_point);
+    let mut renderer = egui_wgpu::Renderer::new(
+        device,
+        COLOUR_FORMAT,
+        egui_wgpu::RendererOptions {
+            depth_stencil_format: Some(DEPTH_FORMAT),
+            ..Default::default()
+        },
+    );
+    for (id, deltas) in &output.textures_delta.set {
+        for delta in deltas {
+            renderer.update_texture(device, queue, *id, delta);
+        }
+    }
+    let screen = egui_wgpu::ScreenDescriptor {
+        size_in_pixels: [w, h],
+        pixels_per_point: output.pixels_per_point,
+    };
+    let mut encoder =
+        device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("hud") });
+    let uploads = renderer.update_buffers(device, queue, &mut encoder, &primitives, &screen);
+    {
+        let mut pass = targets.begin(&mut encoder, None, "hud").forget_lifetime();
+        renderer.render(&mut pass, &primitives, &screen);
+    }
+    queue.submit(uploads.into_iter().chain([encoder.finish()]));
+    wait_for_gpu(device)
+}
+
 /// Wait until the GPU has finished everything submitted.
 pub fn wait_for_gpu(device: &wgpu::Device) -> Result<()> {
     device
@@ -118,7 +174,8 @@ pub fn wait_for_gpu(device: &wgpu::Device) -> Result<()> {
     Ok(())
 }
 
-/// Render `scene` once for `flight` and read the targets back.
+/// Render `scene` once for `flight` and read the targets back; with
+/// `hud`, the window's HUD is painted over the frame.
 pub fn render_once(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
@@ -126,10 +183,32 @@ pub fn render_once(
     flight: &Flight,
     settings: &Settings,
     size: [u32; 2],
+    hud: bool,
 ) -> Result<(Readback, FrameStats)> {
     let camera = flight.camera(scene, size);
     let mut renderer = Renderer::new(device, queue, scene, size);
+    let start = Instant::now();
     let stats = renderer.render(device, queue, scene, &camera, settings)?;
+    wait_for_gpu(device)?;
+    if hud {
+        let frame_s = start.elapsed().as_secs_f64();
+        let readings = hud::Readings {
+            fps: 1.0 / frame_s,
+            frame_ms: frame_s * 1e3,
+            settings,
+            stats: &stats,
+            scene: Some(scene),
+            flight: Some(flight),
+            pointer: None,
+        };
+        paint_hud(
+            device,
+            queue,
+            &renderer.targets,
+            &hud::lines(&readings),
+            frame_s,
+        )?;
+    }
     let mut readback = renderer.targets.read(device, queue)?;
     // A terrain-only raycast's depth is the CPU buffer itself (not uploaded).
     if let Some(depth) = renderer.raycast_depth(scene, settings) {
@@ -197,7 +276,9 @@ pub fn run(a: RenderArgs) -> Result<()> {
         settings.raycast.bands = bands;
     }
     let (device, queue, adapter) = device()?;
-    let (readback, stats) = render_once(&device, &queue, &mut scene, &flight, &settings, a.size)?;
+    let (readback, stats) = render_once(
+        &device, &queue, &mut scene, &flight, &settings, a.size, a.hud,
+    )?;
     let png = encode_rgba(&readback.rgba, a.size[0] as usize, a.size[1] as usize)?;
     relevo_core::atomic::write_file(&a.out, &png)?;
     if let Some(path) = &a.depth {

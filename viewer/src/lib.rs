@@ -10,12 +10,14 @@
 //! - [`flight`]: the camera being flown and how input moves it.
 //! - [`gpu`]: offscreen targets, the mesh and raycast passes.
 //! - [`headless`]: `relevo-view render` and the GPU device without a window.
-//! - [`app`]: the window, HUD, side panel and keys.
+//! - [`hud`]: the HUD's readings, painted in the window and headless.
+//! - [`app`]: the window, side panel and keys.
 
 pub mod app;
 pub mod flight;
 pub mod gpu;
 pub mod headless;
+pub mod hud;
 pub mod scene;
 
 /// Mesa's software Vulkan driver (lavapipe): tests and CI draw with it so

@@ -85,6 +85,45 @@ fn a_real_window_flies_a_tour_and_shows_terrain_and_the_hud() {
 }
 
 #[test]
+fn headless_renders_can_carry_the_hud() {
+    let dir = tempfile::tempdir().unwrap();
+    let bundle = grenoble_bundle(dir.path());
+    let shot = dir.path().join("hud.png");
+    let out = viewer(
+        &[
+            "render".as_ref(),
+            bundle.as_os_str(),
+            "--mode".as_ref(),
+            "raycast".as_ref(),
+            "--hud".as_ref(),
+            "--size".as_ref(),
+            "640x360".as_ref(),
+            "--out".as_ref(),
+            shot.as_os_str(),
+        ],
+        false,
+        dir.path(),
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (rgba, w, _) = decode_png(&shot);
+    let pixel = |x: usize, y: usize| &rgba[(y * w + x) * 4..(y * w + x) * 4 + 3];
+    let hud: Vec<&[u8]> = (14..60)
+        .flat_map(|y| (14..300).map(move |x| (x, y)))
+        .map(|(x, y)| pixel(x, y))
+        .collect();
+    let dark = hud.iter().filter(|p| p.iter().all(|&c| c < 90)).count();
+    let bright = hud.iter().filter(|p| p.iter().all(|&c| c > 200)).count();
+    assert!(
+        dark > hud.len() / 2 && bright > 50,
+        "HUD: {dark} dark, {bright} bright pixels"
+    );
+}
+
+#[test]
 fn bad_bundles_are_refused_with_their_name() {
     let dir = tempfile::tempdir().unwrap();
     let out_png = dir.path().join("x.png");
@@ -116,6 +155,48 @@ fn bad_bundles_are_refused_with_their_name() {
         );
         assert!(!out_png.exists());
     }
+    // Broken placement files and models: named, exit 1, no image.
+    let placements = dir.path().join("placements");
+    std::fs::create_dir_all(&placements).unwrap();
+    let good = grenoble_bundle(&placements);
+    let broken_json = placements.join("broken.geojson");
+    std::fs::write(
+        &broken_json,
+        "{\"type\": \"FeatureCollection\", \"features\": [",
+    )
+    .unwrap();
+    let missing_obj = placements.join("model.geojson");
+    std::fs::write(
+        &missing_obj,
+        r#"{"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {"model": "tree.obj"},
+            "geometry": {"type": "Point", "coordinates": [719000, 5030000]}}]}"#,
+    )
+    .unwrap();
+    for (placement, needle) in [
+        (&broken_json, "broken.geojson: not JSON"),
+        (&missing_obj, "tree.obj"),
+    ] {
+        let out = viewer(
+            &[
+                "render".as_ref(),
+                good.as_os_str(),
+                "--objects".as_ref(),
+                placement.as_os_str(),
+                "--out".as_ref(),
+                out_png.as_os_str(),
+            ],
+            false,
+            dir.path(),
+        );
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{stderr}");
+        assert!(
+            stderr.contains(needle) && !stderr.contains("panicked"),
+            "{stderr}"
+        );
+        assert!(!out_png.exists());
+    }
+
     // Bad arguments, refused before any work.
     let good = dir.path().join("good");
     std::fs::create_dir_all(&good).unwrap();

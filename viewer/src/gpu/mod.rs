@@ -9,7 +9,7 @@ mod raycast;
 mod targets;
 mod zbuffer;
 
-pub use targets::{Readback, Targets};
+pub use targets::{Readback, Targets, COLOUR_FORMAT, DEPTH_FORMAT};
 
 use crate::scene::Scene;
 use eframe::egui_wgpu::wgpu;

@@ -1,0 +1,116 @@
+//! The HUD (after SJD-Vis3D and Enviro): frame rate and time with a
+//! frame-time plot, what was drawn, speed, camera and ground positions in
+//! the bundle's CRS. The window paints it over the view each frame;
+//! `relevo-view render --hud` paints the same lines into the image.
+
+use crate::flight::Flight;
+use crate::gpu::{FrameStats, Mode, Settings};
+use crate::scene::Scene;
+use eframe::egui;
+
+/// What the HUD reports.
+pub struct Readings<'a> {
+    pub fps: f64,
+    pub frame_ms: f64,
+    pub settings: &'a Settings,
+    pub stats: &'a FrameStats,
+    pub scene: Option<&'a Scene>,
+    pub flight: Option<&'a Flight>,
+    /// World (east, north, height) of the ground under the pointer.
+    pub pointer: Option<[f64; 3]>,
+}
+
+/// The HUD's lines.
+pub fn lines(r: &Readings) -> Vec<String> {
+    let mut lines = vec![format!("{:.0} fps   {:.1} ms", r.fps, r.frame_ms)];
+    let s = r.settings;
+    let mode = match s.mode {
+        Mode::Mesh => format!(
+            "mesh τ {:.1} px{}",
+            s.tau_px,
+            if s.morph { ", geomorphing" } else { "" }
+        ),
+        Mode::Raycast => "raycast (floating horizon)".to_string(),
+        Mode::ZBuffer(rep) => format!("z-buffer baseline [{}] {rep:?}", rep.letter()),
+    };
+    lines.push(format!("{mode}   {} triangles", r.stats.triangles));
+    if let (Some(scene), Some(flight)) = (r.scene, r.flight) {
+        let pose = flight.pose(scene, r.stats.height.max(1));
+        let [e, n, z] = pose.eye;
+        lines.push(format!("speed {:.0} km/h", flight.speed_mps * 3.6));
+        lines.push(format!(
+            "camera E {e:.1}  N {n:.1}  h {z:.1} m  heading {:.0}°",
+            pose.heading_deg
+        ));
+        match flight.height_above_ground(scene) {
+            Some(h) => lines.push(format!("above ground {h:.1} m")),
+            None => lines.push("above ground: off the data".into()),
+        }
+    }
+    match r.pointer {
+        Some([e, n, z]) => lines.push(format!("pointer E {e:.1}  N {n:.1}  ground {z:.1} m")),
+        None => lines.push("pointer: sky".into()),
+    }
+    let objects = match r.scene.and_then(|scene| scene.objects.as_ref()) {
+        None => "objects: none loaded".to_string(),
+        Some(o) if s.objects => format!(
+            "objects on: {} features, {} triangles",
+            o.features, r.stats.object_triangles
+        ),
+        Some(o) => format!("objects off ({} features)", o.features),
+    };
+    lines.push(format!("{objects}   h: help"));
+    lines
+}
+
+/// Paint `lines` and a plot of `frame_times` (seconds, newest last, at
+/// most `history` of them) in a dark panel at the top left of `rect`.
+pub fn paint(
+    painter: &egui::Painter,
+    rect: egui::Rect,
+    lines: &[String],
+    frame_times: &[f64],
+    history: usize,
+) {
+    let font = egui::FontId::monospace(13.0);
+    let height = 16.0 * lines.len() as f32 + 60.0;
+    let panel =
+        egui::Rect::from_min_size(rect.min + egui::vec2(8.0, 8.0), egui::vec2(430.0, height));
+    painter.rect_filled(panel, 4.0, egui::Color32::from_black_alpha(150));
+    for (k, line) in lines.iter().enumerate() {
+        painter.text(
+            panel.min + egui::vec2(8.0, 6.0 + 16.0 * k as f32),
+            egui::Align2::LEFT_TOP,
+            line,
+            font.clone(),
+            egui::Color32::WHITE,
+        );
+    }
+    // Frame time, newest on the right; the line marks 33 ms (30 fps).
+    let plot = egui::Rect::from_min_size(
+        egui::pos2(panel.min.x + 8.0, panel.max.y - 48.0),
+        egui::vec2(panel.width() - 16.0, 40.0),
+    );
+    let to_y = |seconds: f64| plot.max.y - (seconds / 0.1).min(1.0) as f32 * plot.height();
+    painter.line_segment(
+        [
+            egui::pos2(plot.min.x, to_y(1.0 / 30.0)),
+            egui::pos2(plot.max.x, to_y(1.0 / 30.0)),
+        ],
+        egui::Stroke::new(1.0, egui::Color32::from_rgb(200, 120, 60)),
+    );
+    let points: Vec<egui::Pos2> = frame_times
+        .iter()
+        .enumerate()
+        .map(|(k, &t)| {
+            egui::pos2(
+                plot.min.x + plot.width() * k as f32 / history as f32,
+                to_y(t),
+            )
+        })
+        .collect();
+    painter.add(egui::Shape::line(
+        points,
+        egui::Stroke::new(1.0, egui::Color32::LIGHT_GREEN),
+    ));
+}
