@@ -313,6 +313,7 @@ impl ViewerApp {
         );
         ui.checkbox(&mut s.morph, "geomorphing (g)");
         ui.checkbox(&mut s.cull, "frustum culling");
+        ui.checkbox(&mut s.true_pitch, "true pitch (mesh, z-buffer)");
         ui.checkbox(&mut s.wireframe, "wireframe (w)");
         ui.checkbox(&mut s.texture, "drape texture (t)");
         ui.label("Raycast");
@@ -451,7 +452,7 @@ impl ViewerApp {
             controls.turn += drag.x as f64 / 4.0 / dt.max(1e-3) / 60.0;
             controls.look += drag.y as f64 / rect.height() as f64 / dt.max(1e-3) / 0.5;
         }
-        let camera = flight.camera(scene, size);
+        let camera = flight.camera_for(scene, size, &self.settings);
         let pointer = response
             .hover_pos()
             .map(|p| ((p.x - rect.min.x) * ppp, (p.y - rect.min.y) * ppp));
@@ -488,7 +489,7 @@ impl ViewerApp {
         }
         flight.fly(scene, &controls, dt);
 
-        let camera = flight.camera(scene, size);
+        let camera = flight.camera_for(scene, size, &self.settings);
         let (device, queue) = (&state.device, &state.queue);
         let renderer = self
             .renderer

@@ -3,6 +3,7 @@
 //! PgUp/PgDn — climb and sink along the terrain normal). The camera never
 //! goes below the surface; terrain following keeps the height above ground.
 
+use crate::gpu::{Mode, Settings};
 use crate::scene::Scene;
 use glam::DVec3;
 use relevo_core::camera::Camera;
@@ -109,6 +110,21 @@ impl Flight {
             near_m: cell,
             far_m: self.far_cells * cell,
         }
+    }
+
+    /// The camera `settings` draw with: with true pitch (mesh and Z-buffer
+    /// modes) the view tilts down by the angle the projection-plane shift
+    /// would show at the screen's centre — atan((incl − h/2) / d), d the
+    /// plane distance in pixels — so switching modes keeps what is in the
+    /// middle of the screen; the raycast always shifts the plane instead.
+    pub fn camera_for(&self, scene: &Scene, size: [u32; 2], settings: &Settings) -> Camera {
+        let mut camera = self.camera(scene, size);
+        if settings.true_pitch && settings.mode != Mode::Raycast {
+            let shift_px = camera.incl_px - size[1] as f64 / 2.0;
+            camera.pitch_deg = -(shift_px / camera.plane_distance_px()).atan().to_degrees();
+            camera.incl_px = size[1] as f64 / 2.0;
+        }
+        camera
     }
 
     /// Height of the eye above the ground under it, when there is ground.

@@ -47,6 +47,10 @@ pub struct RenderArgs {
     /// Mesh mode: no geomorphing.
     #[arg(long)]
     pub no_morph: bool,
+    /// Mesh and Z-buffer modes: tilt the camera by the INCL's angle instead
+    /// of shifting the projection plane.
+    #[arg(long)]
+    pub true_pitch: bool,
     /// Mesh mode: wireframe over the surface.
     #[arg(long)]
     pub wireframe: bool,
@@ -185,7 +189,7 @@ pub fn render_once(
     size: [u32; 2],
     hud: bool,
 ) -> Result<(Readback, FrameStats)> {
-    let camera = flight.camera(scene, size);
+    let camera = flight.camera_for(scene, size, settings);
     let mut renderer = Renderer::new(device, queue, scene, size);
     let start = Instant::now();
     let stats = renderer.render(device, queue, scene, &camera, settings)?;
@@ -266,6 +270,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         wireframe: a.wireframe,
         texture: !a.no_texture,
         terrain: !a.no_terrain,
+        true_pitch: a.true_pitch,
         ..Default::default()
     };
     settings.raycast.prefilter = a.prefilter;

@@ -215,7 +215,7 @@ fn frame_time(
                 heading_deg: heading,
                 ..*home
             };
-            let camera = flight.camera(scene, size);
+            let camera = flight.camera_for(scene, size, settings);
             let start = Instant::now();
             stats = renderer.render(device, queue, scene, &camera, settings)?;
             wait_for_gpu(device)?;

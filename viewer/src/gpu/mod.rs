@@ -99,6 +99,9 @@ pub struct Settings {
     pub objects: bool,
     /// Draw the terrain (off: objects alone, to check composition).
     pub terrain: bool,
+    /// Mesh and Z-buffer modes tilt the camera instead of shifting the
+    /// projection plane (the raycast always shifts it).
+    pub true_pitch: bool,
 }
 
 impl Default for Settings {
@@ -113,6 +116,7 @@ impl Default for Settings {
             raycast: RenderOptions::default(),
             objects: true,
             terrain: true,
+            true_pitch: false,
         }
     }
 }
