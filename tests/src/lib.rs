@@ -36,14 +36,9 @@ pub fn prep_dem(dem: &Path, dir: &Path) -> PathBuf {
 
 /// Decode an RGBA8 PNG.
 pub fn decode_png(path: &Path) -> (Vec<u8>, [u32; 2]) {
-    let file = std::fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let mut reader = png::Decoder::new(std::io::BufReader::new(file))
-        .read_info()
-        .unwrap();
-    let mut buf = vec![0; reader.output_buffer_size()];
-    let info = reader.next_frame(&mut buf).unwrap();
-    buf.truncate(info.buffer_size());
-    (buf, [info.width, info.height])
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let (rgba, w, h) = relevo_core::raster::png::decode_rgba(&bytes).unwrap();
+    (rgba, [w as u32, h as u32])
 }
 
 /// How far an image is from its reference.

@@ -53,18 +53,7 @@ fn headless_frames_of_each_mode_match_their_references() {
     let mut scene = olinda(d.path());
     let (device, queue) = lavapipe();
     let flight = Flight::home(&scene);
-    let bands = vec![
-        Band {
-            until_m: 3000.0,
-            slices_per_cell: 4.0,
-            subvoxel: true,
-        },
-        Band {
-            until_m: f64::INFINITY,
-            slices_per_cell: 1.0,
-            subvoxel: false,
-        },
-    ];
+
     let cases = [
         (
             "mesh",
@@ -96,7 +85,7 @@ fn headless_frames_of_each_mode_match_their_references() {
                 mode: Mode::Raycast,
                 ..Default::default()
             };
-            s.raycast.bands = bands;
+            s.raycast.bands = relevo_view::gpu::detailed_bands();
             s
         }),
     ];

@@ -9,7 +9,7 @@ use crate::hud;
 use crate::scene::Scene;
 use eframe::egui;
 use eframe::egui_wgpu::{self, wgpu};
-use relevo_core::horizon::{self, Band};
+use relevo_core::horizon;
 use relevo_core::scene::CameraPose;
 use relevo_core::zbuffer::Representation;
 use std::collections::VecDeque;
@@ -323,18 +323,7 @@ impl ViewerApp {
             .changed()
         {
             s.raycast.bands = if bands {
-                vec![
-                    Band {
-                        until_m: 3000.0,
-                        slices_per_cell: 4.0,
-                        subvoxel: true,
-                    },
-                    Band {
-                        until_m: f64::INFINITY,
-                        slices_per_cell: 1.0,
-                        subvoxel: false,
-                    },
-                ]
+                gpu::detailed_bands()
             } else {
                 horizon::RenderOptions::default().bands
             };

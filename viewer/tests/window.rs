@@ -28,14 +28,7 @@ fn viewer(args: &[&std::ffi::OsStr], xvfb: bool, runtime: &Path) -> Output {
 }
 
 fn decode_png(path: &Path) -> (Vec<u8>, usize, usize) {
-    let file = std::fs::File::open(path).unwrap();
-    let mut reader = png::Decoder::new(std::io::BufReader::new(file))
-        .read_info()
-        .unwrap();
-    let mut buf = vec![0; reader.output_buffer_size()];
-    let info = reader.next_frame(&mut buf).unwrap();
-    buf.truncate(info.buffer_size());
-    (buf, info.width as usize, info.height as usize)
+    relevo_core::raster::png::decode_rgba(&std::fs::read(path).unwrap()).unwrap()
 }
 
 #[test]

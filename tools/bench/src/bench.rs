@@ -146,7 +146,7 @@ pub fn ingest(repo: &Path, data: &Path, runs: usize, json_lines: bool) -> Result
 }
 
 /// A fresh scratch folder under the system temp dir.
-fn tempfile_dir() -> Result<PathBuf> {
+pub fn tempfile_dir() -> Result<PathBuf> {
     let dir = std::env::temp_dir().join(format!("relevo-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir).with_context(|| dir.display().to_string())?;
     Ok(dir)

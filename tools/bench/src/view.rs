@@ -12,7 +12,7 @@ use relevo::prep::region::Region;
 use relevo_core::bundle::{write_terrain_bundle, Crs};
 use relevo_core::geo::GeoTransform;
 use relevo_core::grid::{fractal_heights, HeightGrid};
-use relevo_core::horizon::{Arithmetic, Band};
+use relevo_core::horizon::Arithmetic;
 use relevo_core::zbuffer::{self, Representation};
 use relevo_view::flight::Flight;
 use relevo_view::gpu::{FrameStats, Mode, Renderer, Settings};
@@ -32,8 +32,7 @@ pub fn view(
     max_side: usize,
     json_lines: bool,
 ) -> Result<()> {
-    let scratch = std::env::temp_dir().join(format!("relevo-bench-view-{}", std::process::id()));
-    std::fs::create_dir_all(&scratch)?;
+    let scratch = crate::bench::tempfile_dir()?;
     let (device, queue, adapter) = device()?;
     emit(
         json_lines,
@@ -120,18 +119,7 @@ pub fn view(
                 mode: Mode::Raycast,
                 ..Default::default()
             };
-            bands.raycast.bands = vec![
-                Band {
-                    until_m: 3000.0,
-                    slices_per_cell: 4.0,
-                    subvoxel: true,
-                },
-                Band {
-                    until_m: f64::INFINITY,
-                    slices_per_cell: 1.0,
-                    subvoxel: false,
-                },
-            ];
+            bands.raycast.bands = relevo_view::gpu::detailed_bands();
             configs.push(("raycast bands+sub".into(), bands));
             if side * side <= zbuffer::MAX_VERTICES {
                 for r in Representation::ALL {

@@ -31,12 +31,9 @@ fn bundle_of(dem: &str, dir: &Path) -> PathBuf {
 }
 
 fn decode_png(path: &Path) -> Vec<u8> {
-    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
-    let mut reader = decoder.read_info().unwrap();
-    let mut buf = vec![0; reader.output_buffer_size()];
-    let info = reader.next_frame(&mut buf).unwrap();
-    buf.truncate(info.buffer_size());
-    buf
+    relevo_core::raster::png::decode_rgba(&std::fs::read(path).unwrap())
+        .unwrap()
+        .0
 }
 
 /// The command writes the PNG and depth the library renders for the same

@@ -58,18 +58,13 @@ pub fn dem(name: &str) -> Dem {
 
 /// `SOAP_061.png` (NEON RGB, 400², 0.1 m) as an 8-bit three-band image.
 pub fn soap_061() -> Image {
-    let file = std::fs::File::open(path("SOAP_061.png")).unwrap();
-    let mut reader = png::Decoder::new(std::io::BufReader::new(file))
-        .read_info()
-        .unwrap();
-    let mut buf = vec![0; reader.output_buffer_size()];
-    let info = reader.next_frame(&mut buf).unwrap();
-    let channels = info.color_type.samples();
-    let rgb: Vec<u8> = buf[..info.buffer_size()]
-        .chunks_exact(channels)
+    let bytes = std::fs::read(path("SOAP_061.png")).unwrap();
+    let (rgba, w, h) = crate::raster::png::decode_rgba(&bytes).unwrap();
+    let rgb: Vec<u8> = rgba
+        .chunks_exact(4)
         .flat_map(|p| [p[0], p[1], p[2]])
         .collect();
-    Image::new(info.width as usize, info.height as usize, 3, rgb).unwrap()
+    Image::new(w, h, 3, rgb).unwrap()
 }
 
 /// A deterministic pseudo-random sequence in [0, 1).

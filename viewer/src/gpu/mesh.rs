@@ -3,7 +3,7 @@
 //! padding or voids (mask 0) are not drawn. The vertex buffer grows to the
 //! largest frame seen and is reused; nothing else is allocated per frame.
 
-use super::targets::{Targets, COLOUR_FORMAT, DEPTH_FORMAT};
+use super::targets::{Targets, COLOUR_FORMAT};
 use super::{eye_relative_view_projection, FrameStats, Settings, SUN};
 use crate::scene::Scene;
 use bytemuck::{Pod, Zeroable};
@@ -76,16 +76,7 @@ impl MeshPass {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("mesh bindings"),
             entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
+                super::uniform_entry(),
                 wgpu::BindGroupLayoutEntry {
                     binding: 1,
                     visibility: wgpu::ShaderStages::FRAGMENT,
@@ -126,54 +117,28 @@ impl MeshPass {
             label: Some("mesh.wgsl"),
             source: wgpu::ShaderSource::Wgsl(include_str!("mesh.wgsl").into()),
         });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("mesh"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
         let attributes = wgpu::vertex_attr_array![
             0 => Float32x3, 1 => Float32x2, 2 => Float32x3, 3 => Float32x3, 4 => Float32
         ];
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("mesh"),
-            layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &shader,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: size_of::<Vertex>() as u64,
-                    step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: &attributes,
-                })],
-            },
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: Default::default(),
-                bias: Default::default(),
+        let pipeline = super::pipeline(
+            device,
+            "mesh",
+            &shader,
+            &layout,
+            Some(wgpu::VertexBufferLayout {
+                array_stride: size_of::<Vertex>() as u64,
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes: &attributes,
             }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &shader,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(COLOUR_FORMAT.into())],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+            wgpu::PrimitiveTopology::TriangleList,
+            "fs_main",
+            (true, wgpu::CompareFunction::Less),
+        );
         MeshPass {
             pipeline,
             bind_group,
             uniforms,
-            vertex_buffer: vertex_buffer(device, 1 << 16),
+            vertex_buffer: super::vertex_buffer(device, "mesh vertices", 1 << 16),
             vertices: Vec::new(),
             vertex_count: 0,
             has_drape,
@@ -241,7 +206,8 @@ impl MeshPass {
         }
         let bytes: &[u8] = bytemuck::cast_slice(&self.vertices);
         if bytes.len() as u64 > self.vertex_buffer.size() {
-            self.vertex_buffer = vertex_buffer(device, (bytes.len() as u64).next_power_of_two());
+            let grown = (bytes.len() as u64).next_power_of_two();
+            self.vertex_buffer = super::vertex_buffer(device, "mesh vertices", grown);
         }
         queue.write_buffer(&self.vertex_buffer, 0, bytes);
         self.vertex_count = self.vertices.len() as u32;
@@ -270,15 +236,6 @@ impl MeshPass {
         pass.set_vertex_buffer(0, self.vertex_buffer.slice(..));
         pass.draw(0..self.vertex_count, 0..1);
     }
-}
-
-fn vertex_buffer(device: &wgpu::Device, bytes: u64) -> wgpu::Buffer {
-    device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("mesh vertices"),
-        size: bytes,
-        usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    })
 }
 
 /// An RGBA8 texture with its full mip chain, each level the 2×2 mean of

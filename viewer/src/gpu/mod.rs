@@ -15,7 +15,7 @@ use crate::scene::Scene;
 use eframe::egui_wgpu::wgpu;
 
 use relevo_core::camera::Camera;
-use relevo_core::horizon::RenderOptions;
+use relevo_core::horizon::{Band, RenderOptions};
 use relevo_core::zbuffer::Representation;
 use serde::Serialize;
 use std::time::Instant;
@@ -78,6 +78,124 @@ impl Serialize for Mode {
     fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
         serializer.collect_str(self)
     }
+}
+
+/// The raycast's detailed bands (the side panel's and the benchmarks'):
+/// four slices per cell with sub-voxels to 3 km, one slice per cell beyond.
+pub fn detailed_bands() -> Vec<Band> {
+    vec![
+        Band {
+            until_m: 3000.0,
+            slices_per_cell: 4.0,
+            subvoxel: true,
+        },
+        Band {
+            until_m: f64::INFINITY,
+            slices_per_cell: 1.0,
+            subvoxel: false,
+        },
+    ]
+}
+
+/// A render pipeline over the shared targets: `shader`'s `vs_main` and
+/// `fs_main` (or `fragment`), depth-tested with `depth_compare`.
+#[allow(clippy::too_many_arguments)]
+fn pipeline(
+    device: &Device,
+    label: &str,
+    shader: &wgpu::ShaderModule,
+    layout: &wgpu::BindGroupLayout,
+    vertices: Option<wgpu::VertexBufferLayout<'_>>,
+    topology: wgpu::PrimitiveTopology,
+    fragment: &str,
+    depth: (bool, wgpu::CompareFunction),
+) -> wgpu::RenderPipeline {
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &[Some(layout)],
+        immediate_size: 0,
+    });
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(label),
+        layout: Some(&pipeline_layout),
+        vertex: wgpu::VertexState {
+            module: shader,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers: &[vertices],
+        },
+        primitive: wgpu::PrimitiveState {
+            topology,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(depth.0),
+            depth_compare: Some(depth.1),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: shader,
+            entry_point: Some(fragment),
+            compilation_options: Default::default(),
+            targets: &[Some(COLOUR_FORMAT.into())],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
+/// A uniform buffer of `size` bytes, its one-binding layout and bind group.
+fn uniforms(
+    device: &Device,
+    label: &str,
+    size: u64,
+) -> (wgpu::Buffer, wgpu::BindGroupLayout, wgpu::BindGroup) {
+    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size,
+        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some(label),
+        entries: &[uniform_entry()],
+    });
+    let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout: &layout,
+        entries: &[wgpu::BindGroupEntry {
+            binding: 0,
+            resource: buffer.as_entire_binding(),
+        }],
+    });
+    (buffer, layout, bind_group)
+}
+
+/// Binding 0: a uniform buffer seen by both stages.
+fn uniform_entry() -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding: 0,
+        visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// A vertex buffer of at least `bytes` (grown by the caller, never per frame).
+fn vertex_buffer(device: &Device, label: &str, bytes: u64) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: bytes.max(4),
+        usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
 }
 
 /// Everything a frame is drawn with besides the camera.

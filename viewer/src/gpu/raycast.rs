@@ -4,7 +4,7 @@
 //! into the shared targets with `frag_depth`. A terrain-only frame uploads
 //! colour alone (Szenberg 1997, table 8.1).
 
-use super::targets::{Targets, COLOUR_FORMAT, DEPTH_FORMAT};
+use super::targets::{Targets, COLOUR_FORMAT};
 use super::{FrameStats, Settings};
 use crate::scene::Scene;
 use eframe::egui_wgpu::wgpu;
@@ -47,39 +47,17 @@ impl RaycastPass {
             label: Some("raycast.wgsl"),
             source: wgpu::ShaderSource::Wgsl(include_str!("raycast.wgsl").into()),
         });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("raycast"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
         let pipeline = |fragment: &str, write_depth: bool| {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(fragment),
-                layout: Some(&pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &shader,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[],
-                },
-                primitive: Default::default(),
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
-                    depth_write_enabled: Some(write_depth),
-                    depth_compare: Some(wgpu::CompareFunction::Always),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &shader,
-                    entry_point: Some(fragment),
-                    compilation_options: Default::default(),
-                    targets: &[Some(COLOUR_FORMAT.into())],
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
+            super::pipeline(
+                device,
+                fragment,
+                &shader,
+                &layout,
+                None,
+                wgpu::PrimitiveTopology::TriangleList,
+                fragment,
+                (write_depth, wgpu::CompareFunction::Always),
+            )
         };
         RaycastPass {
             with_depth: pipeline("fs_colour_and_depth", true),

@@ -2,7 +2,7 @@
 //! whole grid (Szenberg 1997, ch. 3, table 3.1), uploaded once per
 //! representation and drawn by the rasterizer with its depth test.
 
-use super::targets::{Targets, COLOUR_FORMAT, DEPTH_FORMAT};
+use super::targets::Targets;
 use super::FrameStats;
 use crate::scene::Scene;
 use anyhow::{Context, Result};
@@ -39,78 +39,27 @@ pub struct ZBufferPass {
 
 impl ZBufferPass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("z-buffer uniforms"),
-            size: 64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("z-buffer bindings"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            }],
-        });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("z-buffer bindings"),
-            layout: &layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: uniforms.as_entire_binding(),
-            }],
-        });
+        let (uniforms, layout, bind_group) = super::uniforms(device, "z-buffer uniforms", 64);
         let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("zbuffer.wgsl"),
             source: wgpu::ShaderSource::Wgsl(include_str!("zbuffer.wgsl").into()),
         });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("z-buffer"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
         let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Unorm8x4];
         let pipeline = |topology| {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("z-buffer"),
-                layout: Some(&pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &shader,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[Some(wgpu::VertexBufferLayout {
-                        array_stride: size_of::<Vertex>() as u64,
-                        step_mode: wgpu::VertexStepMode::Vertex,
-                        attributes: &attributes,
-                    })],
-                },
-                primitive: wgpu::PrimitiveState {
-                    topology,
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Less),
-                    stencil: Default::default(),
-                    bias: Default::default(),
+            super::pipeline(
+                device,
+                "z-buffer",
+                &shader,
+                &layout,
+                Some(wgpu::VertexBufferLayout {
+                    array_stride: size_of::<Vertex>() as u64,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &attributes,
                 }),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &shader,
-                    entry_point: Some("fs_main"),
-                    compilation_options: Default::default(),
-                    targets: &[Some(COLOUR_FORMAT.into())],
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
+                topology,
+                "fs_main",
+                (true, wgpu::CompareFunction::Less),
+            )
         };
         ZBufferPass {
             points: pipeline(wgpu::PrimitiveTopology::PointList),
@@ -162,12 +111,8 @@ impl ZBufferPass {
                 .zip(&mesh.colours)
                 .map(|(&position, &colour)| Vertex { position, colour })
                 .collect();
-            let vertex_buffer = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("z-buffer vertices"),
-                size: (vertices.len().max(1) * size_of::<Vertex>()) as u64,
-                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
+            let bytes = (vertices.len() * size_of::<Vertex>()) as u64;
+            let vertex_buffer = super::vertex_buffer(device, "z-buffer vertices", bytes);
             queue.write_buffer(&vertex_buffer, 0, bytemuck::cast_slice(&vertices));
             self.uploaded = Some(Uploaded {
                 representation,

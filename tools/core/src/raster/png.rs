@@ -20,6 +20,32 @@ pub fn encode_rgba(rgba: &[u8], width: usize, height: usize) -> Result<Vec<u8>> 
     Ok(out)
 }
 
+/// A PNG decoded to RGBA8 (grey, grey-alpha and RGB are expanded; 16-bit
+/// samples keep their high byte): pixels, width, height.
+pub fn decode_rgba(bytes: &[u8]) -> Result<(Vec<u8>, usize, usize)> {
+    let bad = |e: png::DecodingError| Error::Input(format!("PNG decoding: {e}"));
+    let mut decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+    decoder.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
+    let mut reader = decoder.read_info().map_err(bad)?;
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buf).map_err(bad)?;
+    buf.truncate(info.buffer_size());
+    let (w, h) = (info.width as usize, info.height as usize);
+    let rgba = match info.color_type.samples() {
+        4 => buf,
+        3 => buf
+            .chunks_exact(3)
+            .flat_map(|p| [p[0], p[1], p[2], 255])
+            .collect(),
+        2 => buf
+            .chunks_exact(2)
+            .flat_map(|p| [p[0], p[0], p[0], p[1]])
+            .collect(),
+        _ => buf.iter().flat_map(|&g| [g, g, g, 255]).collect(),
+    };
+    Ok((rgba, w, h))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -28,12 +54,7 @@ mod tests {
     fn encoded_images_decode_to_the_same_pixels() {
         let rgba: Vec<u8> = (0..3 * 2 * 4).map(|v| (v * 9) as u8).collect();
         let bytes = encode_rgba(&rgba, 3, 2).unwrap();
-        let mut reader = png::Decoder::new(std::io::Cursor::new(bytes))
-            .read_info()
-            .unwrap();
-        let mut buf = vec![0; reader.output_buffer_size()];
-        let info = reader.next_frame(&mut buf).unwrap();
-        assert_eq!((info.width, info.height), (3, 2));
-        assert_eq!(&buf[..info.buffer_size()], &rgba[..]);
+        assert_eq!(decode_rgba(&bytes).unwrap(), (rgba, 3, 2));
+        assert!(decode_rgba(b"not a png").is_err());
     }
 }

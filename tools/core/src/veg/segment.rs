@@ -804,27 +804,9 @@ mod tests {
         assert_eq!(a.regions, b.regions);
     }
 
-    /// An RGB PNG of the shared real data.
-    fn shared_png(rel: &str) -> Image {
-        let root = std::env::var_os("RELEVO_SHARED_DATA")
-            .map(std::path::PathBuf::from)
-            .unwrap_or_else(|| {
-                std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data")
-            });
-        let file = std::fs::File::open(root.join(rel)).expect("shared data (RELEVO_SHARED_DATA)");
-        let mut reader = png::Decoder::new(std::io::BufReader::new(file))
-            .read_info()
-            .unwrap();
-        let mut pixels = vec![0; reader.output_buffer_size()];
-        let info = reader.next_frame(&mut pixels).unwrap();
-        assert_eq!(info.color_type, png::ColorType::Rgb);
-        pixels.truncate(info.buffer_size());
-        Image::new(info.width as usize, info.height as usize, 3, pixels).unwrap()
-    }
-
     #[test]
     fn real_aerial_image_is_partitioned_into_connected_regions() {
-        let image = shared_png("trees/SOAP_061.png");
+        let image = crate::testdata::soap_061();
         for min_block_px in [1, 2, 8] {
             let params = SegmentParams {
                 min_block_px,
