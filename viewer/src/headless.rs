@@ -281,6 +281,14 @@ pub fn run(a: RenderArgs) -> Result<()> {
         settings.raycast.bands = bands;
     }
     let (device, queue, adapter) = device()?;
+    let largest = device.limits().max_texture_dimension_2d;
+    if a.size.iter().any(|&side| side > largest) {
+        bail!(
+            "--size {}x{}: this GPU ({adapter}) draws at most {largest} pixels a side",
+            a.size[0],
+            a.size[1]
+        );
+    }
     let (readback, stats) = render_once(
         &device, &queue, &mut scene, &flight, &settings, a.size, a.hud,
     )?;
