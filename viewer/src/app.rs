@@ -350,8 +350,9 @@ impl ViewerApp {
         ui.checkbox(&mut self.settings.objects, "objects (F1)");
         ui.checkbox(&mut self.settings.terrain, "terrain");
         ui.separator();
-        ui.label("Camera X,Y,Z,HEADING[,INCL]");
-        ui.text_edit_singleline(&mut self.camera_text);
+        let label = ui.label("Camera X,Y,Z,HEADING[,INCL]");
+        ui.text_edit_singleline(&mut self.camera_text)
+            .labelled_by(label.id);
         ui.horizontal(|ui| {
             if ui.button("Go").clicked() {
                 self.go_to_typed_camera();

@@ -106,3 +106,42 @@ fn keys_switch_modes_and_the_hud_shows_the_numbers() {
         "HUD panel at (20, 30): {hud_pixel:?}"
     );
 }
+
+#[test]
+fn problems_are_shown_in_the_window() {
+    if std::env::var_os("VK_ICD_FILENAMES").is_none() {
+        std::env::set_var("VK_ICD_FILENAMES", relevo_view::LAVAPIPE_ICD);
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("nowhere.relevo");
+    let mut harness = Harness::builder()
+        .with_size([800.0, 500.0])
+        .wgpu()
+        .build_eframe(|_| ViewerApp::new(Some(&missing)));
+    harness.run_steps(2);
+    let error = harness.state().error().unwrap().to_string();
+    assert!(error.contains("nowhere.relevo"), "{error}");
+    harness.get_by_label(&error);
+    // A broken placement on a good bundle: the message, and the view goes on.
+    let bundle = common::grenoble_bundle(dir.path());
+    let broken = dir.path().join("broken.geojson");
+    std::fs::write(&broken, "{").unwrap();
+    let mut harness = Harness::builder()
+        .with_size([800.0, 500.0])
+        .wgpu()
+        .build_eframe(|_| {
+            let mut app = ViewerApp::new(Some(&bundle));
+            app.load_objects(&broken);
+            app
+        });
+    harness.run_steps(2);
+    let error = harness.state().error().unwrap();
+    assert!(
+        error.contains("broken.geojson") && error.contains("not JSON"),
+        "{error}"
+    );
+    assert!(
+        harness.state().stats.triangles > 0,
+        "the terrain is still drawn"
+    );
+}
