@@ -55,6 +55,58 @@ impl ObjectMesh {
         self.colours.extend([colour; 3]);
     }
 
+    /// A cable through `line` (terrain frame, metres): a vertical ribbon
+    /// `2·half` metres wide, seen from both sides.
+    fn add_cable(&mut self, line: &[[f64; 3]], half: f64, colour: [u8; 4]) {
+        let lower = |p: [f64; 3]| [p[0], p[1], p[2] - half];
+        let upper = |p: [f64; 3]| [p[0], p[1], p[2] + half];
+        for w in line.windows(2) {
+            let (a, b) = (w[0], w[1]);
+            self.quad(lower(a), lower(b), upper(b), upper(a), colour);
+            self.quad(lower(b), lower(a), upper(a), upper(b), colour);
+        }
+    }
+
+    /// A building: the `footprint` ring (terrain frame, without the closing
+    /// position) extruded from `base` to `top` metres, walls facing out,
+    /// the roof triangulated by ear clipping and facing up.
+    fn add_building(&mut self, mut footprint: Vec<[f64; 2]>, base: f64, top: f64, colour: [u8; 4]) {
+        let area2: f64 = (0..footprint.len())
+            .map(|i| {
+                let (a, b) = (footprint[i], footprint[(i + 1) % footprint.len()]);
+                a[0] * b[1] - b[0] * a[1]
+            })
+            .sum();
+        // Counter-clockwise seen from above, so walls face outwards.
+        if area2 < 0.0 {
+            footprint.reverse();
+        }
+        for i in 0..footprint.len() {
+            let (a, b) = (footprint[i], footprint[(i + 1) % footprint.len()]);
+            self.quad(
+                [a[0], a[1], base],
+                [b[0], b[1], base],
+                [b[0], b[1], top],
+                [a[0], a[1], top],
+                colour,
+            );
+        }
+        let mut roof: Vec<u32> = Vec::new();
+        earcut::Earcut::new().earcut(footprint.iter().copied(), &[], &mut roof);
+        for t in roof.chunks_exact(3) {
+            let [a, b, c] = [t[0], t[1], t[2]].map(|i| {
+                let p = footprint[i as usize];
+                [p[0], p[1], top]
+            });
+            // The roof faces up whatever order ear clipping returns.
+            if (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]) > 0.0 {
+                self.triangle(a, b, c, colour);
+            } else {
+                self.triangle(a, c, b, colour);
+            }
+        }
+    }
+
     /// A quad `abcd` as two triangles.
     fn quad(&mut self, a: [f64; 3], b: [f64; 3], c: [f64; 3], d: [f64; 3], colour: [u8; 4]) {
         self.triangle(a, b, c, colour);
@@ -151,14 +203,7 @@ pub fn parse_placement(
                     let h = h.ok_or_else(|| fail("a cable position needs a height [x, y, h]"))?;
                     line.push([x, y, z + h]);
                 }
-                for w in line.windows(2) {
-                    let (a, b) = (w[0], w[1]);
-                    let lower = |p: [f64; 3]| [p[0], p[1], p[2] - half];
-                    let upper = |p: [f64; 3]| [p[0], p[1], p[2] + half];
-                    let c = colour(CABLE);
-                    mesh.quad(lower(a), lower(b), upper(b), upper(a), c);
-                    mesh.quad(lower(b), lower(a), upper(a), upper(b), c);
-                }
+                mesh.add_cable(&line, half, colour(CABLE));
             }
             "Polygon" => {
                 let ring = coordinates
@@ -177,43 +222,7 @@ pub fn parse_placement(
                     base = base.min(z);
                     footprint.push([x, y]);
                 }
-                // Counter-clockwise seen from above, so walls face outwards.
-                let area2: f64 = (0..footprint.len())
-                    .map(|i| {
-                        let (a, b) = (footprint[i], footprint[(i + 1) % footprint.len()]);
-                        a[0] * b[1] - b[0] * a[1]
-                    })
-                    .sum();
-                if area2 < 0.0 {
-                    footprint.reverse();
-                }
-                let top = base + height;
-                let c = colour(BUILDING);
-                for i in 0..footprint.len() {
-                    let (a, b) = (footprint[i], footprint[(i + 1) % footprint.len()]);
-                    mesh.quad(
-                        [a[0], a[1], base],
-                        [b[0], b[1], base],
-                        [b[0], b[1], top],
-                        [a[0], a[1], top],
-                        c,
-                    );
-                }
-                let mut roof: Vec<u32> = Vec::new();
-                earcut::Earcut::new().earcut(footprint.iter().copied(), &[], &mut roof);
-                for t in roof.chunks_exact(3) {
-                    let [a, b, cc] = [t[0], t[1], t[2]].map(|i| {
-                        let p = footprint[i as usize];
-                        [p[0], p[1], top]
-                    });
-                    // Roof faces up whatever order ear clipping returns.
-                    let up = (b[0] - a[0]) * (cc[1] - a[1]) - (b[1] - a[1]) * (cc[0] - a[0]) > 0.0;
-                    if up {
-                        mesh.triangle(a, b, cc, c);
-                    } else {
-                        mesh.triangle(a, cc, b, c);
-                    }
-                }
+                mesh.add_building(footprint, base, base + height, colour(BUILDING));
             }
             "Point" => {
                 let (x, y, z, _) = place(coordinates)?;
