@@ -52,21 +52,24 @@ const TURN_DEG_PER_S: f64 = 60.0;
 /// Horizon travel at full input, screen heights per second.
 const LOOK_PER_S: f64 = 0.5;
 
+/// A speed that crosses the scene in about a minute (10 m/s to 2 km/s).
+fn cruising_speed(scene: &Scene) -> f64 {
+    (scene.extent_m() / 60.0).clamp(10.0, 2000.0)
+}
+
 impl Flight {
     /// The home view of the scene (see [`View::home`]).
     pub fn home(scene: &Scene) -> Flight {
         let view = View::home(&scene.bundle.manifest.grid, [1280, 720]);
-        let mut flight = Flight::from_pose(scene, &view.pose(), 720).unwrap_or(Flight {
+        Flight::from_pose(scene, &view.pose(), 720).unwrap_or(Flight {
             position: DVec3::new(scene.extent_m() / 2.0, 0.0, 1000.0),
             heading_deg: 0.0,
             horizon_frac: 0.75,
             fov_x_deg: 60.0,
             far_cells: 1024.0,
-            speed_mps: 100.0,
+            speed_mps: cruising_speed(scene),
             follow_terrain: false,
-        });
-        flight.speed_mps = (scene.extent_m() / 60.0).clamp(10.0, 2000.0);
-        flight
+        })
     }
 
     /// A flight at a camera string's pose for an image `height_px` tall.
@@ -78,7 +81,7 @@ impl Flight {
             horizon_frac: pose.incl_px.map_or(0.5, |incl| incl / height_px as f64),
             fov_x_deg: 60.0,
             far_cells: 1024.0,
-            speed_mps: (scene.extent_m() / 60.0).clamp(10.0, 2000.0),
+            speed_mps: cruising_speed(scene),
             follow_terrain: false,
         })
     }
@@ -170,7 +173,7 @@ impl Flight {
             return DVec3::Z;
         }
         let n = vertex_normal(
-            &scene.heights,
+            scene.terrain.heights(),
             f.side,
             f.cell_size_m,
             c.round() as usize,

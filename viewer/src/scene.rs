@@ -26,11 +26,10 @@ pub struct Scene {
     pub path: PathBuf,
     pub bundle: Bundle,
     pub frame: TerrainFrame,
-    pub heights: Array<f32>,
-    pub mask: Array<u8>,
     pub lp: LpArray,
     pub drape: Option<DrapeImage>,
-    /// The raycaster's view of the terrain (colour pyramid built once).
+    /// The heights and mask, read once, with the raycaster's colour
+    /// pyramid: every renderer reads the grid from here.
     pub terrain: Terrain<'static>,
     /// Reusable refinement and raycast buffers: nothing allocated per frame
     /// once warm.
@@ -45,16 +44,14 @@ impl Scene {
     pub fn open(path: &Path) -> Result<Scene> {
         let bundle = Bundle::open(path)?;
         let frame = bundle.frame();
-        let heights = bundle.heights()?;
-        let mask = bundle.mask()?;
         let lp = bundle.lp()?;
         let drape = bundle.drape()?;
         let color = drape.as_ref().and_then(|d| d.color_source(&frame));
         let terrain = Terrain::new(
             frame.side,
             frame.cell_size_m,
-            heights.to_vec(),
-            mask.to_vec(),
+            bundle.heights()?.to_vec(),
+            bundle.mask()?.to_vec(),
             color,
         );
         let drape = match drape {
@@ -89,8 +86,6 @@ impl Scene {
             path: path.to_path_buf(),
             bundle,
             frame,
-            heights,
-            mask,
             lp,
             drape,
             terrain,

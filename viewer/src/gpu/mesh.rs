@@ -163,7 +163,9 @@ impl MeshPass {
             settings.cull,
         );
         let hierarchy = scene.lp.hierarchy();
-        let strip = scene.refiner.refine(&hierarchy, &scene.heights, &params);
+        let strip = scene
+            .refiner
+            .refine(&hierarchy, scene.terrain.heights(), &params);
         stats.refine_ms = start.elapsed().as_secs_f64() * 1e3;
 
         let start = Instant::now();
@@ -180,11 +182,12 @@ impl MeshPass {
             }
             None => [0.0, 0.0],
         };
+        let (heights, mask) = (scene.terrain.heights(), scene.terrain.mask());
         let barycentric = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
         self.vertices.clear();
         for entries in strip.triangle_entries() {
             let index = entries.map(|e| strip.indices[e] as usize);
-            if index.iter().any(|&i| scene.mask[i] == 0) {
+            if index.iter().any(|&i| mask[i] == 0) {
                 continue;
             }
             for (k, (&e, &i)) in entries.iter().zip(&index).enumerate() {
@@ -192,9 +195,9 @@ impl MeshPass {
                 let z = strip
                     .morphed_z
                     .get(e)
-                    .map_or(scene.heights[i] as f64, |&z| z as f64);
+                    .map_or(heights[i] as f64, |&z| z as f64);
                 let p = DVec3::from_array(terrain_position(c, r, side, cell, z));
-                let n = vertex_normal(&scene.heights, side, cell, c, r);
+                let n = vertex_normal(heights, side, cell, c, r);
                 self.vertices.push(Vertex {
                     position: (p - eye).as_vec3().to_array(),
                     uv: uv_of(p.x, p.y),

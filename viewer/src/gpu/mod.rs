@@ -271,6 +271,10 @@ pub struct Renderer {
     zbuffer: zbuffer::ZBufferPass,
     /// Built on the first frame that draws objects.
     objects: Option<objects::ObjectPass>,
+    /// What the targets hold: the camera, settings and objects (vertex
+    /// count) of the last frame and its figures. A frame asking for the
+    /// same is already drawn.
+    drawn: Option<(Camera, Settings, Option<usize>, FrameStats)>,
 }
 
 /// The sky: the raycaster's colour for pixels without terrain.
@@ -288,13 +292,16 @@ impl Renderer {
             raycast: raycast::RaycastPass::new(device),
             zbuffer: zbuffer::ZBufferPass::new(device),
             objects: None,
+            drawn: None,
         }
     }
 
     /// Draw `scene` seen by `camera` into the targets (resized to the
     /// camera's viewport when needed): the terrain, then its objects
-    /// depth-tested against it. Fails only when a Z-buffer baseline is asked
-    /// of a grid too large for it.
+    /// depth-tested against it. When nothing changed since the last frame
+    /// the targets already hold it, and its figures are returned without
+    /// any work. Fails only when a Z-buffer baseline is asked of a grid too
+    /// large for it.
     pub fn render(
         &mut self,
         device: &Device,
@@ -303,6 +310,12 @@ impl Renderer {
         camera: &Camera,
         settings: &Settings,
     ) -> anyhow::Result<FrameStats> {
+        let objects_key = scene.objects.as_ref().map(|o| o.positions.len());
+        if let Some((c, s, o, stats)) = &self.drawn {
+            if c == camera && s == settings && *o == objects_key {
+                return Ok(*stats);
+            }
+        }
         let size = [camera.width, camera.height];
         if self.targets.size != size {
             self.targets = Targets::new(device, size);
@@ -350,13 +363,14 @@ impl Renderer {
             let pass = self
                 .objects
                 .get_or_insert_with(|| objects::ObjectPass::new(device, objects));
-            pass.prepare(queue, objects, camera);
+            pass.prepare(device, queue, objects, camera);
             pass.draw(&mut encoder, &self.targets);
             stats.object_triangles = objects.triangles();
         }
         let start = Instant::now();
         queue.submit([encoder.finish()]);
         stats.submit_ms = start.elapsed().as_secs_f64() * 1e3;
+        self.drawn = Some((*camera, settings.clone(), objects_key, stats));
         Ok(stats)
     }
 

@@ -37,6 +37,7 @@ pub struct ObjectPass {
 
 impl ObjectPass {
     pub fn new(device: &wgpu::Device, objects: &ObjectMesh) -> Self {
+        // Sized for `objects`; `prepare` grows it for a larger placement.
         let (uniforms, layout, bind_group) =
             super::uniforms(device, "object uniforms", size_of::<Uniforms>() as u64);
         let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -69,8 +70,15 @@ impl ObjectPass {
         }
     }
 
-    /// Upload the objects relative to the eye and the camera's projection.
-    pub fn prepare(&mut self, queue: &wgpu::Queue, objects: &ObjectMesh, camera: &Camera) {
+    /// Upload the objects relative to the eye and the camera's projection
+    /// (the buffer grows when another placement brings more triangles).
+    pub fn prepare(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        objects: &ObjectMesh,
+        camera: &Camera,
+    ) {
         let eye = camera.position;
         self.vertices.clear();
         self.vertices.extend(
@@ -85,7 +93,13 @@ impl ObjectPass {
                     colour,
                 }),
         );
-        queue.write_buffer(&self.vertex_buffer, 0, bytemuck::cast_slice(&self.vertices));
+        let bytes: &[u8] = bytemuck::cast_slice(&self.vertices);
+        if bytes.len() as u64 > self.vertex_buffer.size() {
+            self.vertex_buffer =
+                super::vertex_buffer(device, "object vertices", bytes.len() as u64);
+        }
+        queue.write_buffer(&self.vertex_buffer, 0, bytes);
+        self.count = self.vertices.len() as u32;
         let uniforms = Uniforms {
             view_proj: eye_relative_view_projection(camera),
             sun: SUN,

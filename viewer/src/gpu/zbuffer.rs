@@ -93,8 +93,8 @@ impl ZBufferPass {
             };
             let mesh = zbuffer::build(
                 representation,
-                &scene.heights,
-                &scene.mask,
+                scene.terrain.heights(),
+                scene.terrain.mask(),
                 f.side,
                 f.cell_size_m,
                 &colour,

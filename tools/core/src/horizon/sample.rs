@@ -150,6 +150,16 @@ impl<'a> Terrain<'a> {
         terrain
     }
 
+    /// Heights in metres, row-major, `side`×`side`.
+    pub fn heights(&self) -> &[f32] {
+        &self.heights
+    }
+
+    /// The data mask (1 data, 0 padding or void), row-major.
+    pub fn mask(&self) -> &[u8] {
+        &self.mask
+    }
+
     /// Recompute the per-vertex colours used when there is no imagery.
     fn update_vertex_colors(&mut self) {
         if self.color.is_some() {
