@@ -19,6 +19,8 @@
 //!   raycast of a bundle.
 //! - [`veg`]: vegetation from imagery: split-and-merge, Haar signatures,
 //!   classification from samples, objects, the vegetation database.
+//! - [`cluster`]: vegetation clusters — impostors from models, the
+//!   quadtree with baked views, atlases, the cut chosen from a camera.
 //! - [`zbuffer`]: the grid as geometry in the seven Z-buffer
 //!   representations the floating horizon is compared with.
 //! - [`bundle`]: the `NAME.relevo/` directory: manifest, artifacts, validation.
@@ -26,6 +28,7 @@
 pub mod atomic;
 pub mod bundle;
 pub mod camera;
+pub mod cluster;
 pub mod geo;
 pub mod grid;
 pub mod horizon;

@@ -36,6 +36,31 @@ pub const VEGETATION: ArtifactName = ArtifactName {
     file: "vegetation.csv",
 };
 
+/// Folder of the vegetation clusters (see `cluster::store`), and the prefix
+/// of their manifest keys (atlas pages are `clusters_atlas_NNN`).
+pub const CLUSTERS_DIR: &str = "clusters";
+pub const CLUSTERS_PREFIX: &str = "clusters";
+/// The cluster index: options, classes, pages, bake report (JSON).
+pub const CLUSTER_INDEX: ArtifactName = ArtifactName {
+    key: "clusters_index",
+    file: "clusters/index.json",
+};
+/// Quadtree nodes, 68-byte records.
+pub const CLUSTER_NODES: ArtifactName = ArtifactName {
+    key: "clusters_nodes",
+    file: "clusters/nodes.bin",
+};
+/// Objects in tree order, 28-byte records.
+pub const CLUSTER_OBJECTS: ArtifactName = ArtifactName {
+    key: "clusters_objects",
+    file: "clusters/objects.bin",
+};
+/// Atlas frames of the baked nodes, 20-byte records.
+pub const CLUSTER_FRAMES: ArtifactName = ArtifactName {
+    key: "clusters_frames",
+    file: "clusters/frames.bin",
+};
+
 /// Folder of the interoperability exports.
 pub const EXPORTS_DIR: &str = "exports";
 /// Heights as a GeoTIFF (no-data outside the mask).

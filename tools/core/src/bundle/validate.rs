@@ -132,6 +132,7 @@ pub fn validate(bundle: &Bundle) -> Vec<String> {
     if m.artifacts.contains_key(names::VEGETATION.key) {
         problems.extend(vegetation_problems(bundle));
     }
+    problems.extend(crate::cluster::store::validate(bundle));
     problems
 }
 

@@ -1,0 +1,751 @@
+//! Baking: the class impostors rendered from their models, the quadtree's
+//! cluster views composed from them, everything packed into atlas pages
+//! under a memory budget (vegetation thesis, §4.2.4.3 and its future work:
+//! cluster textures, billboards sized to their quad, n levels; the seed ran
+//! out of texture memory and reused textures near the leaves — here the
+//! budget is stated and the bake says what it dropped).
+//!
+//! A cluster's view is composed, not re-rendered: each member's class view
+//! (from the mip level nearest above the size it takes) is drawn with
+//! tiny-skia at the member's true position and height, in painter's order —
+//! farthest first for a side view, lowest top first for the top view. This
+//! costs a few texture copies per member instead of re-rasterising every
+//! member's triangles into every cluster above it; the difference to a true
+//! render of the members' models is measured in the tests and documented
+//! (docs/algorithms.md#clusters).
+
+use super::cut::{CutOptions, Frame};
+use super::image::PremulImage;
+use super::model::Model;
+use super::quadtree::{ClusterObject, Node, Quadtree, NONE};
+use super::views::{render_view, ImpostorView, Placed};
+use super::{ClassImpostor, Clusters};
+use crate::{Error, Result};
+use rayon::prelude::*;
+
+/// Frames start on multiples of this many texels, sizes are multiples of
+/// it and frames lie at least this far apart: with [`MIP_LEVELS`] levels,
+/// no texel of any level mixes two frames, and bilinear sampling at a
+/// frame's edge reads transparent texels.
+pub const ALIGN: usize = 8;
+/// Mip levels kept per atlas page: 1, ½, ¼ and ⅛ (256 → 32 px frames).
+pub const MIP_LEVELS: usize = 4;
+
+/// Bytes of a page of `w`×`h` texels with its mip chain, RGBA8.
+pub fn page_bytes(w: usize, h: usize) -> u64 {
+    (0..MIP_LEVELS)
+        .map(|m| (w.div_ceil(1 << m) * h.div_ceil(1 << m) * 4) as u64)
+        .sum()
+}
+
+/// What a bake is asked to do.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BakeOptions {
+    /// The cut the textures are sized for.
+    pub cut: CutOptions,
+    /// Most bytes of atlas texture (all pages with their mip levels).
+    pub budget_bytes: u64,
+    /// Screen the texel density is chosen for: width in pixels and
+    /// horizontal field of view.
+    pub reference_width_px: u32,
+    pub reference_fov_deg: f64,
+    /// Longer side of a class view, texels.
+    pub class_frame_px: u32,
+    /// Longer side of a cluster view at most, texels.
+    pub max_frame_px: u32,
+    /// Side of an atlas page, texels.
+    pub page_px: u32,
+    /// Deepest quadtree level.
+    pub max_depth: u32,
+}
+
+impl Default for BakeOptions {
+    fn default() -> Self {
+        BakeOptions {
+            cut: CutOptions::default(),
+            budget_bytes: 256 << 20,
+            reference_width_px: 1920,
+            reference_fov_deg: 60.0,
+            class_frame_px: 256,
+            max_frame_px: 256,
+            page_px: 2048,
+            max_depth: 16,
+        }
+    }
+}
+
+/// A vegetation class to bake: its name, model and where the model came
+/// from (a file, or `procedural:KIND`).
+#[derive(Debug, Clone)]
+pub struct ClassSource {
+    pub name: String,
+    pub source: String,
+    pub model: Model,
+}
+
+/// Counts and bytes of one quadtree depth.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LevelReport {
+    pub depth: u32,
+    pub nodes: usize,
+    /// Nodes a cut may draw as clusters (2 to the largest band size members).
+    pub clusters: usize,
+    /// Clusters whose views were baked (0 when the level was dropped).
+    pub baked: usize,
+    /// Texture bytes of the baked views with their mip levels, estimated
+    /// from their frames and gutters.
+    pub atlas_bytes: u64,
+    pub dropped: bool,
+}
+
+/// What a bake did.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BakeReport {
+    pub objects: usize,
+    pub levels: Vec<LevelReport>,
+    /// Class impostor texture bytes (estimated like the levels').
+    pub class_bytes: u64,
+    /// Bytes of the atlas pages as written, with mip levels.
+    pub atlas_bytes: u64,
+    pub budget_bytes: u64,
+}
+
+impl BakeReport {
+    pub fn dropped_depths(&self) -> Vec<u32> {
+        self.levels
+            .iter()
+            .filter(|l| l.dropped)
+            .map(|l| l.depth)
+            .collect()
+    }
+}
+
+/// The five views' sizes in texels, each a multiple of [`ALIGN`], for a
+/// box of `size` metres at `texels_per_m`, the longer side at most `max_px`.
+fn frame_sizes(size: [f32; 3], texels_per_m: f64, max_px: u32) -> [[usize; 2]; 5] {
+    let longest = size.iter().fold(0f32, |m, &v| m.max(v)) as f64;
+    let density = texels_per_m.min(max_px as f64 / longest.max(1e-6));
+    ImpostorView::ALL.map(|v| {
+        v.extent(size).map(|e| {
+            ((e as f64 * density).ceil() as usize)
+                .max(1)
+                .next_multiple_of(ALIGN)
+        })
+    })
+}
+
+/// Texture bytes a frame of `w`×`h` takes in a page, with its gutter.
+fn frame_bytes([w, h]: [usize; 2]) -> u64 {
+    page_bytes(w + ALIGN, h + ALIGN)
+}
+
+/// Bake the class impostors and the quadtree over `objects` (terrain
+/// frame, classes indexing `classes`) inside the square at `origin` with
+/// side `side_m`. `progress` is told how many clusters were composed.
+pub fn bake(
+    classes: Vec<ClassSource>,
+    objects: Vec<ClusterObject>,
+    origin: [f32; 2],
+    side_m: f32,
+    options: &BakeOptions,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<Clusters> {
+    options.cut.check().map_err(Error::Input)?;
+    if objects.is_empty() {
+        return Err(Error::Input(
+            "the vegetation database is empty: there is nothing to cluster".into(),
+        ));
+    }
+    if let Some(o) = objects.iter().find(|o| o.class as usize >= classes.len()) {
+        return Err(Error::Input(format!(
+            "object row {} has no class model",
+            o.row
+        )));
+    }
+    // Class impostors: the model over its own box, the longer side at
+    // `class_frame_px`.
+    let class_views: Vec<[PremulImage; 5]> = classes
+        .par_iter()
+        .map(|c| {
+            let (d, h) = c.model.size();
+            let size = [d, d, h];
+            let density = options.class_frame_px as f64 / d.max(h) as f64;
+            let sizes = frame_sizes(size, density, options.class_frame_px);
+            let scene = [Placed {
+                model: &c.model,
+                foot: [0.0; 3],
+                diameter: d,
+                height: h,
+            }];
+            let (min, max) = ([-d / 2.0, -d / 2.0, 0.0], [d / 2.0, d / 2.0, h]);
+            ImpostorView::ALL.map(|v| {
+                let [w, h] = sizes[v as usize];
+                render_view(&scene, v, min, max, w, h)
+            })
+        })
+        .collect();
+    let class_bytes: u64 = class_views
+        .iter()
+        .flatten()
+        .map(|i| frame_bytes([i.width, i.height]))
+        .sum();
+    if class_bytes > options.budget_bytes {
+        return Err(Error::Input(format!(
+            "an atlas budget of {} bytes is below the {class_bytes} bytes the {} class impostors need",
+            options.budget_bytes,
+            classes.len()
+        )));
+    }
+
+    let object_count = objects.len();
+    let mut tree = Quadtree::build(objects, origin, side_m, options.max_depth);
+
+    // Texel density per cluster from the nearest distance its size is
+    // allowed at, on the reference screen (pixels per metre at 1 m).
+    let pixels_per_m_at_1m = options.reference_width_px as f64
+        / (2.0 * (options.reference_fov_deg.to_radians() / 2.0).tan());
+    let largest = options.cut.largest_cluster();
+    let plans: Vec<Option<[[usize; 2]; 5]>> = tree
+        .nodes
+        .iter()
+        .map(|n| {
+            if n.count < 2 || n.count > largest {
+                return None;
+            }
+            let near = options.cut.nearest_distance_for(n.count)?;
+            let density = pixels_per_m_at_1m / near.max(1e-9) / options.cut.magnification.max(1.0);
+            Some(frame_sizes(size_of_node(n), density, options.max_frame_px))
+        })
+        .collect();
+
+    // Levels per depth, then the budget: keep the shallowest levels (the
+    // large clusters that spare the most draws far away) while they fit,
+    // drop the rest.
+    let depths = tree.nodes_per_depth().len();
+    let mut levels: Vec<LevelReport> = (0..depths)
+        .map(|d| LevelReport {
+            depth: d as u32,
+            nodes: 0,
+            clusters: 0,
+            baked: 0,
+            atlas_bytes: 0,
+            dropped: false,
+        })
+        .collect();
+    for (node, plan) in tree.nodes.iter().zip(&plans) {
+        let level = &mut levels[node.depth as usize];
+        level.nodes += 1;
+        if let Some(sizes) = plan {
+            level.clusters += 1;
+            level.atlas_bytes += sizes.iter().map(|&s| frame_bytes(s)).sum::<u64>();
+        }
+    }
+    let mut keep_depths = depths;
+    let mut total = class_bytes;
+    for level in &levels {
+        if total + level.atlas_bytes > options.budget_bytes {
+            keep_depths = level.depth as usize;
+            break;
+        }
+        total += level.atlas_bytes;
+    }
+
+    // Pack; if the pages come out over the budget (shelf waste), drop one
+    // more level and pack again.
+    let (layout, pages_size, baked_nodes) = loop {
+        let baked_nodes: Vec<usize> = (0..tree.nodes.len())
+            .filter(|&i| plans[i].is_some() && (tree.nodes[i].depth as usize) < keep_depths)
+            .collect();
+        let mut sizes: Vec<[usize; 2]> = class_views
+            .iter()
+            .flatten()
+            .map(|i| [i.width, i.height])
+            .collect();
+        for &i in &baked_nodes {
+            sizes.extend(plans[i].iter().flatten());
+        }
+        let (layout, pages_size) = pack(&sizes, options.page_px as usize)?;
+        let bytes: u64 = pages_size.iter().map(|&[w, h]| page_bytes(w, h)).sum();
+        if bytes <= options.budget_bytes || keep_depths == 0 {
+            break (layout, pages_size, baked_nodes);
+        }
+        keep_depths -= 1;
+    };
+    for level in &mut levels {
+        level.dropped = level.clusters > 0 && level.depth as usize >= keep_depths;
+    }
+    for &i in &baked_nodes {
+        levels[tree.nodes[i].depth as usize].baked += 1;
+    }
+    if levels.iter().any(|l| l.dropped) {
+        tracing::warn!(
+            dropped = ?levels.iter().filter(|l| l.dropped).map(|l| l.depth).collect::<Vec<_>>(),
+            budget = options.budget_bytes,
+            "cluster levels over the atlas budget were not baked; their objects are drawn from deeper clusters or one by one"
+        );
+    }
+
+    // Compose the clusters' views (in parallel; each depends only on its
+    // members, so the result does not depend on the thread count).
+    let class_mips: Vec<[Vec<tiny_skia::Pixmap>; 5]> = class_views
+        .iter()
+        .map(|views| {
+            let mut out: [Vec<tiny_skia::Pixmap>; 5] = Default::default();
+            for (slot, image) in out.iter_mut().zip(views) {
+                *slot = image
+                    .mip_chain(MIP_LEVELS)
+                    .iter()
+                    .filter_map(to_pixmap)
+                    .collect();
+            }
+            out
+        })
+        .collect();
+    let composed: Vec<[PremulImage; 5]> = baked_nodes
+        .par_iter()
+        .map(|&i| {
+            let node = &tree.nodes[i];
+            let members = &tree.objects[node.members()];
+            let sizes = plans[i].unwrap_or_default();
+            let views = ImpostorView::ALL
+                .map(|v| compose_view(node, members, v, sizes[v as usize], &class_mips));
+            progress(1);
+            views
+        })
+        .collect();
+
+    // Paste everything into the pages.
+    let mut pages: Vec<PremulImage> = pages_size
+        .iter()
+        .map(|&[w, h]| PremulImage::transparent(w, h))
+        .collect();
+    let images = class_views
+        .iter()
+        .flatten()
+        .chain(composed.iter().flatten());
+    for (image, frame) in images.zip(&layout) {
+        pages[frame.page as usize].paste(image, frame.x as usize, frame.y as usize);
+    }
+    let mut class_frames = layout.chunks_exact(5);
+    let classes = classes
+        .iter()
+        .zip(&mut class_frames)
+        .map(|(c, frames)| ClassImpostor {
+            name: c.name.clone(),
+            model: c.source.clone(),
+            aspect: c.model.aspect(),
+            frames: [frames[0], frames[1], frames[2], frames[3], frames[4]],
+        })
+        .collect();
+    let frames: Vec<Frame> = layout[5 * class_views.len()..].to_vec();
+    for (k, &i) in baked_nodes.iter().enumerate() {
+        tree.nodes[i].frames = (5 * k) as u32;
+    }
+    let atlas_bytes = pages_size.iter().map(|&[w, h]| page_bytes(w, h)).sum();
+    Ok(Clusters {
+        classes,
+        tree,
+        frames,
+        pages,
+        report: BakeReport {
+            objects: object_count,
+            levels,
+            class_bytes,
+            atlas_bytes,
+            budget_bytes: options.budget_bytes,
+        },
+    })
+}
+
+/// Extents (x, y, z) of the box a node's members fill, metres.
+pub fn size_of_node(n: &Node) -> [f32; 3] {
+    [0, 1, 2].map(|k| (n.max[k] - n.min[k]).max(1e-3))
+}
+
+/// A premultiplied image as a tiny-skia pixmap (same layout).
+fn to_pixmap(image: &PremulImage) -> Option<tiny_skia::Pixmap> {
+    let size = tiny_skia::IntSize::from_wh(image.width as u32, image.height as u32)?;
+    tiny_skia::Pixmap::from_vec(image.bytes().to_vec(), size)
+}
+
+/// View `view` of `node`: each member's class view at its place, in
+/// painter's order, into `w`×`h` texels over the node's box.
+fn compose_view(
+    node: &Node,
+    members: &[ClusterObject],
+    view: ImpostorView,
+    [w, h]: [usize; 2],
+    class_mips: &[[Vec<tiny_skia::Pixmap>; 5]],
+) -> PremulImage {
+    let Some(mut canvas) = tiny_skia::Pixmap::new(w as u32, h as u32) else {
+        return PremulImage::transparent(w, h);
+    };
+    let size = size_of_node(node);
+    let centre = [0, 1, 2].map(|k| (node.min[k] + node.max[k]) / 2.0);
+    let [span_w, span_h] = view.extent(size);
+    let (sx, sy) = (w as f32 / span_w, h as f32 / span_h);
+    // (depth key, member): farthest (smallest depth) first; ties by row.
+    let mut order: Vec<(f32, u32, &ClusterObject)> = members
+        .iter()
+        .map(|o| {
+            let key = match view {
+                ImpostorView::Top => o.foot[2] + o.height,
+                _ => view.project([o.foot[0] - centre[0], o.foot[1] - centre[1], 0.0])[2],
+            };
+            (key, o.row, o)
+        })
+        .collect();
+    order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let paint = tiny_skia::PixmapPaint {
+        quality: tiny_skia::FilterQuality::Bilinear,
+        ..Default::default()
+    };
+    for (_, _, o) in order {
+        let [r, u, _] = view.project([
+            o.foot[0] - centre[0],
+            o.foot[1] - centre[1],
+            o.foot[2] - centre[2],
+        ]);
+        // The member's rectangle in the node's image (x right, y down).
+        let (left, top, width, height) = match view {
+            ImpostorView::Top => (
+                r - o.diameter / 2.0,
+                u + o.diameter / 2.0,
+                o.diameter,
+                o.diameter,
+            ),
+            _ => (r - o.diameter / 2.0, u + o.height, o.diameter, o.height),
+        };
+        let x0 = (left + span_w / 2.0) * sx;
+        let y0 = (span_h / 2.0 - top) * sy;
+        let (pw, ph) = (width * sx, height * sy);
+        let mips = &class_mips[o.class as usize][view as usize];
+        // The smallest level still at least as wide as the drawn size.
+        let Some(source) = mips
+            .iter()
+            .rev()
+            .find(|p| p.width() as f32 >= pw)
+            .or_else(|| mips.first())
+        else {
+            continue;
+        };
+        let transform = tiny_skia::Transform::from_row(
+            pw / source.width() as f32,
+            0.0,
+            0.0,
+            ph / source.height() as f32,
+            x0,
+            y0,
+        );
+        canvas.draw_pixmap(0, 0, source.as_ref(), &paint, transform, None);
+    }
+    let texels = canvas
+        .data()
+        .chunks_exact(4)
+        .map(|p| [p[0], p[1], p[2], p[3]])
+        .collect();
+    PremulImage {
+        width: w,
+        height: h,
+        texels,
+    }
+}
+
+/// Shelf packing of frames of `sizes` into pages of side `page_px`: frames
+/// sorted by height (then width, then input order), placed left to right on
+/// shelves; each frame starts [`ALIGN`] texels from the page's top-left
+/// and from its neighbours. The last page is cut to the rows it uses.
+/// Returns each frame's place (input order) and each page's size.
+pub fn pack(sizes: &[[usize; 2]], page_px: usize) -> Result<(Vec<Frame>, Vec<[usize; 2]>)> {
+    let mut order: Vec<usize> = (0..sizes.len()).collect();
+    order.sort_by(|&a, &b| {
+        sizes[b][1]
+            .cmp(&sizes[a][1])
+            .then(sizes[b][0].cmp(&sizes[a][0]))
+            .then(a.cmp(&b))
+    });
+    let mut frames = vec![Frame::default(); sizes.len()];
+    let mut pages: Vec<[usize; 2]> = Vec::new();
+    let (mut x, mut y, mut shelf) = (ALIGN, ALIGN, 0usize);
+    for i in order {
+        let [w, h] = sizes[i];
+        if w + 2 * ALIGN > page_px || h + 2 * ALIGN > page_px {
+            return Err(Error::Input(format!(
+                "a {w}×{h} frame does not fit an atlas page of {page_px} texels"
+            )));
+        }
+        if pages.is_empty() {
+            pages.push([page_px, 0]);
+        }
+        if x + w + ALIGN > page_px {
+            // Next shelf.
+            x = ALIGN;
+            y += shelf + ALIGN;
+            shelf = 0;
+        }
+        if y + h + ALIGN > page_px {
+            pages.push([page_px, 0]);
+            x = ALIGN;
+            y = ALIGN;
+            shelf = 0;
+        }
+        let page = pages.len() - 1;
+        frames[i] = Frame {
+            page: page as u32,
+            x: x as u32,
+            y: y as u32,
+            width: w as u32,
+            height: h as u32,
+        };
+        pages[page][1] = pages[page][1].max(y + h + ALIGN);
+        shelf = shelf.max(h);
+        x += w + ALIGN;
+    }
+    Ok((frames, pages))
+}
+
+/// A node's view rendered from its members' models instead of composed:
+/// the reference the composition is measured against.
+pub fn render_node_view(
+    node: &Node,
+    members: &[ClusterObject],
+    view: ImpostorView,
+    [w, h]: [usize; 2],
+    models: &[Model],
+) -> PremulImage {
+    let scene: Vec<Placed> = members
+        .iter()
+        .map(|o| Placed {
+            model: &models[o.class as usize],
+            foot: o.foot,
+            diameter: o.diameter,
+            height: o.height,
+        })
+        .collect();
+    let size = size_of_node(node);
+    let centre = [0, 1, 2].map(|k| (node.min[k] + node.max[k]) / 2.0);
+    let min = [0, 1, 2].map(|k| centre[k] - size[k] / 2.0);
+    let max = [0, 1, 2].map(|k| centre[k] + size[k] / 2.0);
+    render_view(&scene, view, min, max, w, h)
+}
+
+/// Nodes whose frames were baked.
+pub fn baked(tree: &Quadtree) -> impl Iterator<Item = &Node> {
+    tree.nodes.iter().filter(|n| n.frames != NONE)
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use crate::cluster::model::TreeKind;
+
+    /// Objects scattered over a 2 km square in clumps, on a gentle slope,
+    /// of two classes.
+    pub(crate) fn scattered(count: usize) -> Vec<ClusterObject> {
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        (0..count)
+            .map(|i| {
+                let (cx, cy) = (
+                    ((i / 40) % 7) as f32 * 280.0 + 60.0,
+                    ((i / 280) % 7) as f32 * 280.0 + 60.0,
+                );
+                let (x, y) = (cx + next() * 160.0, cy + next() * 160.0);
+                let diameter = 6.0 + next() * 8.0;
+                let class = (i % 3 == 0) as u32;
+                ClusterObject {
+                    foot: [x, y, 100.0 + 0.05 * x],
+                    diameter,
+                    height: diameter * if class == 0 { 1.3 } else { 2.4 },
+                    class,
+                    row: i as u32,
+                }
+            })
+            .collect()
+    }
+
+    pub(crate) fn sources() -> Vec<ClassSource> {
+        [TreeKind::Broadleaf, TreeKind::Conifer]
+            .iter()
+            .map(|k| ClassSource {
+                name: k.name().into(),
+                source: format!("procedural:{}", k.name()),
+                model: k.model(1),
+            })
+            .collect()
+    }
+
+    pub(crate) fn small_options() -> BakeOptions {
+        BakeOptions {
+            class_frame_px: 64,
+            max_frame_px: 64,
+            page_px: 1024,
+            ..BakeOptions::default()
+        }
+    }
+
+    pub(crate) fn baked_clusters(count: usize) -> Clusters {
+        bake(
+            sources(),
+            scattered(count),
+            [0.0; 2],
+            2048.0,
+            &small_options(),
+            &|_| {},
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn bakes_are_identical_across_runs_and_thread_counts() {
+        let on = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| baked_clusters(600))
+        };
+        let one = on(1);
+        assert_eq!(one, on(4));
+        assert_eq!(one, on(1));
+        assert!(one.frames.len() > 100, "{} frames", one.frames.len());
+        assert!(one.report.atlas_bytes <= one.report.budget_bytes);
+        assert!(one.report.dropped_depths().is_empty());
+    }
+
+    /// At every partly transparent texel of every mip level, the colour
+    /// (un-premultiplied) lies within the range of the class views' colours:
+    /// no fringe of a background colour. Checked in premultiplied form:
+    /// a·min − 2 ≤ c ≤ a·max + 2 (8-bit rounding of the composition and of
+    /// each mip reduction). A white fringe at half coverage would be ~128
+    /// against a bound of ~64.
+    #[test]
+    fn atlas_texels_have_no_fringe_at_any_level() {
+        let clusters = baked_clusters(600);
+        // The colour range of the sources: the class views' texels,
+        // un-premultiplied where coverage is high enough (α ≥ 32) for the
+        // division to be within 4 units.
+        let (mut lo, mut hi) = ([255u8; 3], [0u8; 3]);
+        for class in &clusters.classes {
+            for f in &class.frames {
+                let page = &clusters.pages[f.page as usize];
+                let view = page.crop(
+                    f.x as usize,
+                    f.y as usize,
+                    f.width as usize,
+                    f.height as usize,
+                );
+                for t in view.to_straight().chunks_exact(4).filter(|t| t[3] >= 32) {
+                    for k in 0..3 {
+                        lo[k] = lo[k].min(t[k]);
+                        hi[k] = hi[k].max(t[k]);
+                    }
+                }
+            }
+        }
+        assert!(hi[1] > lo[1], "{lo:?} {hi:?}");
+        let mut partial = 0;
+        for page in &clusters.pages {
+            for level in page.mip_chain(MIP_LEVELS) {
+                for t in &level.texels {
+                    let a = t[3] as f64 / 255.0;
+                    if t[3] == 0 {
+                        assert_eq!(t, &[0; 4], "an empty texel carries colour");
+                        continue;
+                    }
+                    if t[3] == 255 {
+                        continue;
+                    }
+                    partial += 1;
+                    for k in 0..3 {
+                        let c = t[k] as f64;
+                        assert!(
+                            c >= a * lo[k] as f64 - 2.0 && c <= a * hi[k] as f64 + 2.0,
+                            "texel {t:?} outside {lo:?}–{hi:?}"
+                        );
+                    }
+                }
+            }
+        }
+        assert!(partial > 1000, "{partial} partly covered texels");
+    }
+
+    #[test]
+    fn composed_cluster_views_are_close_to_rendering_the_members() {
+        let clusters = baked_clusters(600);
+        let models: Vec<Model> = sources().into_iter().map(|c| c.model).collect();
+        let (mut diff, mut count) = (0.0, 0.0);
+        for node in baked(&clusters.tree).filter(|n| n.count >= 4).take(12) {
+            for view in ImpostorView::ALL {
+                let f = clusters.frames[node.frames as usize + view as usize];
+                let composed = clusters.pages[f.page as usize].crop(
+                    f.x as usize,
+                    f.y as usize,
+                    f.width as usize,
+                    f.height as usize,
+                );
+                let members = &clusters.tree.objects[node.members()];
+                let size = [f.width as usize, f.height as usize];
+                let rendered = render_node_view(node, members, view, size, &models);
+                for (a, b) in composed.texels.iter().zip(&rendered.texels) {
+                    diff += (a[3] as f64 - b[3] as f64).abs() / 255.0;
+                    count += 1.0;
+                }
+            }
+        }
+        let mean = diff / count;
+        // Coverage differs only where members overlap and at resampled edges.
+        assert!(
+            count > 10_000.0 && mean < 0.06,
+            "mean |Δα| {mean} over {count} texels"
+        );
+    }
+
+    #[test]
+    fn a_budget_too_small_and_an_empty_database_are_refused() {
+        let tiny = BakeOptions {
+            budget_bytes: 10_000,
+            ..small_options()
+        };
+        let e = bake(sources(), scattered(50), [0.0; 2], 2048.0, &tiny, &|_| {}).unwrap_err();
+        assert!(e.to_string().contains("budget of 10000 bytes"), "{e}");
+        let e = bake(
+            sources(),
+            Vec::new(),
+            [0.0; 2],
+            2048.0,
+            &small_options(),
+            &|_| {},
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("empty"), "{e}");
+        // A budget between: the deepest levels are dropped and said so.
+        let full = baked_clusters(600);
+        let half = BakeOptions {
+            budget_bytes: full.report.atlas_bytes / 2,
+            ..small_options()
+        };
+        let cut = bake(sources(), scattered(600), [0.0; 2], 2048.0, &half, &|_| {}).unwrap();
+        let dropped = cut.report.dropped_depths();
+        assert!(!dropped.is_empty());
+        assert!(cut.report.atlas_bytes <= half.budget_bytes);
+        let deepest = cut
+            .report
+            .levels
+            .iter()
+            .filter(|l| l.clusters > 0)
+            .map(|l| l.depth)
+            .max();
+        assert_eq!(
+            dropped.last().copied(),
+            deepest,
+            "the deepest levels go first"
+        );
+        assert!(baked(&cut.tree).all(|n| !dropped.contains(&n.depth)));
+    }
+}

@@ -1,0 +1,857 @@
+//! What to draw from a camera: a cut through the quadtree, or one of the
+//! baselines — the plain list and the seed's blobs — behind the same
+//! [`Selection`] interface (vegetation thesis, §4.2.4: blobs, quadtree with
+//! clusters, the distance bands of fig. 4.13 and 4.15, the view switch of
+//! §4.1.3 and fig. 4.4).
+//!
+//! Distance bands generalise the seed's three regions to n: band i reaches
+//! `until_m` and draws clusters of at most `max_cluster` objects; nothing
+//! beyond the last band is drawn. A cluster is further refused where the
+//! screen would magnify its texture by more than `magnification` (texels
+//! per metre against pixels per metre at its nearest point); the cut then
+//! descends to its children.
+
+use super::quadtree::{ClusterObject, Node, NONE};
+use super::views::ImpostorView;
+use super::Clusters;
+use crate::camera::Camera;
+use glam::DVec3;
+
+/// One distance band.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Band {
+    /// Outer edge of the band, metres from the eye.
+    pub until_m: f64,
+    /// Most objects one drawn cluster may stand for inside this band.
+    pub max_cluster: u32,
+}
+
+/// The parameters of a cut.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CutOptions {
+    /// Bands by increasing distance.
+    pub bands: Vec<Band>,
+    /// Elevation of the line of sight above which an impostor shows its top
+    /// view, degrees (the seed's θ, 45° after its 0–90° sweep).
+    pub view_angle_deg: f64,
+    /// Width of the cross-fade around the view-angle threshold and around
+    /// each 45° boundary between side views, degrees (0: the view flips).
+    pub crossfade_deg: f64,
+    /// Largest ratio of screen pixels to texture texels a cluster may be
+    /// drawn at.
+    pub magnification: f64,
+}
+
+impl Default for CutOptions {
+    /// Five bands from 300 m to 20 km, clusters of 1, 4, 16, 64 and 256.
+    fn default() -> Self {
+        CutOptions {
+            bands: [
+                (300.0, 1),
+                (1_000.0, 4),
+                (3_000.0, 16),
+                (8_000.0, 64),
+                (20_000.0, 256),
+            ]
+            .map(|(until_m, max_cluster)| Band {
+                until_m,
+                max_cluster,
+            })
+            .to_vec(),
+            view_angle_deg: 45.0,
+            crossfade_deg: 10.0,
+            magnification: 1.5,
+        }
+    }
+}
+
+impl CutOptions {
+    /// The seed's configurations 1–3 (fig. 4.15) for a terrain whose
+    /// diagonal is `diagonal_m`: three bands, d₁ = diagonal/8, d₂ =
+    /// diagonal/4 and d₃ = 2 × diagonal (beyond the terrain, as in the
+    /// seed's test, so that nothing is culled by distance). The figure is not
+    /// in the text; its prose fixes the middle band (at most 2 objects per
+    /// cluster in configuration 1, 6 in configuration 3) and table 4.4 shows
+    /// configuration 1 drawing the fewest billboards, so configuration 1
+    /// groups the most in the far band. Maximum cluster sizes per band:
+    /// 1: (1, 2, 64); 2: (1, 4, 16); 3: (1, 6, 8). Texture magnification is
+    /// not limited, as the seed did not limit it.
+    pub fn seed_configuration(number: u8, diagonal_m: f64) -> Option<CutOptions> {
+        let sizes = match number {
+            1 => [1, 2, 64],
+            2 => [1, 4, 16],
+            3 => [1, 6, 8],
+            _ => return None,
+        };
+        let until = [diagonal_m / 8.0, diagonal_m / 4.0, 2.0 * diagonal_m];
+        Some(CutOptions {
+            bands: (0..3)
+                .map(|i| Band {
+                    until_m: until[i],
+                    max_cluster: sizes[i],
+                })
+                .collect(),
+            magnification: f64::INFINITY,
+            ..CutOptions::default()
+        })
+    }
+
+    /// Check the bands: increasing distances, sizes at least 1.
+    pub fn check(&self) -> Result<(), String> {
+        if self.bands.is_empty() {
+            return Err("no distance bands".into());
+        }
+        for (i, b) in self.bands.iter().enumerate() {
+            if !b.until_m.is_finite() || b.until_m <= 0.0 || b.max_cluster == 0 {
+                return Err(format!(
+                    "band {}: needs a positive distance and a cluster size of at least 1",
+                    i + 1
+                ));
+            }
+            if i > 0 && b.until_m <= self.bands[i - 1].until_m {
+                return Err(format!("band {}: distances must increase", i + 1));
+            }
+        }
+        if !(0.0..=90.0).contains(&self.view_angle_deg)
+            || self.crossfade_deg.is_nan()
+            || self.crossfade_deg < 0.0
+        {
+            return Err("the view angle must lie in 0–90° and the cross-fade be ≥ 0".into());
+        }
+        Ok(())
+    }
+
+    /// Distance beyond which nothing is drawn, metres.
+    pub fn last_distance(&self) -> f64 {
+        self.bands.last().map_or(0.0, |b| b.until_m)
+    }
+
+    /// Largest cluster allowed at `distance_m`; `None` beyond the last band.
+    pub fn max_cluster_at(&self, distance_m: f64) -> Option<u32> {
+        self.bands
+            .iter()
+            .find(|b| distance_m <= b.until_m)
+            .map(|b| b.max_cluster)
+    }
+
+    /// Nearest distance at which a cluster of `count` objects may be drawn:
+    /// the inner edge of the first band that allows it.
+    pub fn nearest_distance_for(&self, count: u32) -> Option<f64> {
+        let i = self.bands.iter().position(|b| b.max_cluster >= count)?;
+        Some(if i == 0 {
+            0.0
+        } else {
+            self.bands[i - 1].until_m
+        })
+    }
+
+    /// Largest cluster any band allows.
+    pub fn largest_cluster(&self) -> u32 {
+        self.bands.iter().map(|b| b.max_cluster).max().unwrap_or(1)
+    }
+}
+
+/// What one instance stands for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Drawn {
+    /// One object, by its index in tree order (`Clusters::tree.objects`).
+    Object(u32),
+    /// A quadtree node drawn from its baked views: all its members.
+    Node(u32),
+}
+
+/// An atlas frame: page and texel rectangle.
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    bytemuck::Pod,
+    bytemuck::Zeroable,
+    serde::Serialize,
+    serde::Deserialize,
+)]
+pub struct Frame {
+    pub page: u32,
+    pub x: u32,
+    pub y: u32,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// One view of an instance: which, how much of it (cross-fade weight),
+/// where in the atlas, and its size in metres (width, height).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ViewDraw {
+    pub view: ImpostorView,
+    pub weight: f32,
+    pub frame: Frame,
+    pub size: [f32; 2],
+}
+
+/// One impostor to draw.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Instance {
+    pub drawn: Drawn,
+    /// Foot of the billboard: centre of the footprint at the lowest ground,
+    /// terrain frame, metres. A top view lies at `foot.z + top_m`.
+    pub foot: [f32; 3],
+    /// Height of the top view above the foot, metres.
+    pub top_m: f32,
+    /// Compass direction from the instance to the eye, degrees clockwise
+    /// from north: a side view is turned about the vertical to face it.
+    pub yaw_deg: f32,
+    /// Views with non-zero weight, `views[..view_count]`; weights sum to 1.
+    pub views: [ViewDraw; 3],
+    pub view_count: u8,
+}
+
+impl Instance {
+    pub fn views(&self) -> &[ViewDraw] {
+        &self.views[..self.view_count as usize]
+    }
+}
+
+/// What a selection returns; cleared and refilled each frame so its
+/// allocation is reused.
+#[derive(Debug, Clone, Default)]
+pub struct DrawList {
+    pub instances: Vec<Instance>,
+    /// Objects the instances stand for.
+    pub represented: usize,
+    /// Clusters drawn per quadtree depth (objects drawn one by one are not
+    /// counted here).
+    pub clusters_per_depth: Vec<u32>,
+}
+
+impl DrawList {
+    pub fn clear(&mut self) {
+        self.instances.clear();
+        self.represented = 0;
+        self.clusters_per_depth.clear();
+    }
+}
+
+/// A way to choose what to draw.
+pub trait Selection {
+    fn name(&self) -> &'static str;
+    /// Fill `out` (cleared first) for `camera`.
+    fn select(&self, camera: &Camera, options: &CutOptions, out: &mut DrawList);
+}
+
+/// The views to draw and their weights for a line of sight `elevation_deg`
+/// above the horizon and seen from compass direction `azimuth_deg` (from the
+/// object towards the eye). Above the threshold θ the top view (§4.1.3);
+/// below, the side view nearest the azimuth. Within ±crossfade/2 of θ the
+/// top view fades in linearly; within ±crossfade/2 of a 45° boundary the
+/// two sides share linearly. Weights sum to 1.
+pub fn choose_views(
+    elevation_deg: f64,
+    azimuth_deg: f64,
+    options: &CutOptions,
+) -> ([(ImpostorView, f32); 3], usize) {
+    let half = options.crossfade_deg / 2.0;
+    let ramp = |x: f64| {
+        if half == 0.0 {
+            if x >= 0.0 {
+                1.0
+            } else {
+                0.0
+            }
+        } else {
+            ((x + half) / (2.0 * half)).clamp(0.0, 1.0)
+        }
+    };
+    let top = ramp(elevation_deg - options.view_angle_deg);
+    let azimuth = azimuth_deg.rem_euclid(360.0);
+    // Nearest side and the next one towards the azimuth.
+    let nearest = ((azimuth / 90.0).round() as usize) % 4;
+    let offset = azimuth - nearest as f64 * 90.0;
+    let offset = if offset > 180.0 {
+        offset - 360.0
+    } else {
+        offset
+    };
+    let neighbour = if offset >= 0.0 {
+        (nearest + 1) % 4
+    } else {
+        (nearest + 3) % 4
+    };
+    // Share of the neighbour: 0 until the blend starts, ½ at the boundary.
+    let shared = 1.0 - ramp(45.0 - offset.abs());
+    let mut out = [(ImpostorView::Top, 0.0f32); 3];
+    let mut n = 0;
+    for (view, weight) in [
+        (ImpostorView::Top, top),
+        (ImpostorView::SIDES[nearest].0, (1.0 - top) * (1.0 - shared)),
+        (ImpostorView::SIDES[neighbour].0, (1.0 - top) * shared),
+    ] {
+        if weight > 0.0 {
+            out[n] = (view, weight as f32);
+            n += 1;
+        }
+    }
+    (out, n)
+}
+
+/// Is the box `[min, max]` at least partly inside the frustum `planes`
+/// (inward normals)? Conservative: a box near a corner may pass.
+#[inline]
+pub fn box_in_frustum(planes: &[[f64; 4]; 6], min: [f32; 3], max: [f32; 3]) -> bool {
+    planes.iter().all(|p| {
+        // The box corner furthest along the plane normal.
+        let corner = [0, 1, 2].map(|k| if p[k] >= 0.0 { max[k] } else { min[k] } as f64);
+        p[0] * corner[0] + p[1] * corner[1] + p[2] * corner[2] + p[3] >= 0.0
+    })
+}
+
+/// Distance from `eye` to the nearest point of the box, metres (0 inside).
+#[inline]
+pub fn box_distance(eye: DVec3, min: [f32; 3], max: [f32; 3]) -> f64 {
+    let gap = |k: usize, e: f64| (min[k] as f64 - e).max(e - max[k] as f64).max(0.0);
+    let d = DVec3::new(gap(0, eye.x), gap(1, eye.y), gap(2, eye.z));
+    d.length()
+}
+
+/// Frustum and distance of one camera, computed once per selection.
+struct View<'c> {
+    camera: &'c Camera,
+    planes: [[f64; 4]; 6],
+    last: f64,
+    /// Screen pixels per metre at 1 m from the eye.
+    pixels_per_m_at_1m: f64,
+}
+
+impl<'c> View<'c> {
+    fn new(camera: &'c Camera, options: &CutOptions) -> Self {
+        View {
+            camera,
+            planes: camera.frustum_planes(),
+            last: options.last_distance(),
+            pixels_per_m_at_1m: camera.plane_distance_px(),
+        }
+    }
+
+    /// Inside the frustum and no further than the last band.
+    fn sees(&self, min: [f32; 3], max: [f32; 3]) -> Option<f64> {
+        if !box_in_frustum(&self.planes, min, max) {
+            return None;
+        }
+        let d = box_distance(self.camera.position, min, max);
+        (d <= self.last).then_some(d)
+    }
+}
+
+/// Builds instances with their view choice.
+impl Clusters {
+    /// The instance of object `index` (tree order).
+    fn object_instance(&self, index: u32, view: &View, options: &CutOptions) -> Instance {
+        let o: &ClusterObject = &self.tree.objects[index as usize];
+        let class = &self.classes[o.class as usize];
+        let (d, h) = (o.diameter, o.height);
+        self.instance(
+            Drawn::Object(index),
+            o.foot,
+            h,
+            |v| class.frames[v as usize],
+            |v| match v {
+                ImpostorView::Top => [d, d],
+                _ => [d, h],
+            },
+            view,
+            options,
+        )
+    }
+
+    /// The instance of node `index`, drawn from its baked views.
+    fn node_instance(
+        &self,
+        index: u32,
+        node: &Node,
+        view: &View,
+        options: &CutOptions,
+    ) -> Instance {
+        let foot = [
+            (node.min[0] + node.max[0]) / 2.0,
+            (node.min[1] + node.max[1]) / 2.0,
+            node.min[2],
+        ];
+        let size = [0, 1, 2].map(|k| node.max[k] - node.min[k]);
+        self.instance(
+            Drawn::Node(index),
+            foot,
+            size[2],
+            |v| self.frames[node.frames as usize + v as usize],
+            |v| v.extent(size),
+            view,
+            options,
+        )
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn instance(
+        &self,
+        drawn: Drawn,
+        foot: [f32; 3],
+        height: f32,
+        frame: impl Fn(ImpostorView) -> Frame,
+        size: impl Fn(ImpostorView) -> [f32; 2],
+        view: &View,
+        options: &CutOptions,
+    ) -> Instance {
+        let eye = view.camera.position;
+        let (dx, dy) = (eye.x - foot[0] as f64, eye.y - foot[1] as f64);
+        let dz = eye.z - (foot[2] as f64 + height as f64 / 2.0);
+        let azimuth = dx.atan2(dy).to_degrees();
+        let elevation = dz.atan2(dx.hypot(dy)).to_degrees();
+        let (chosen, n) = choose_views(elevation, azimuth, options);
+        let mut views = [ViewDraw {
+            view: ImpostorView::Top,
+            weight: 0.0,
+            frame: Frame::default(),
+            size: [0.0; 2],
+        }; 3];
+        for (slot, &(v, weight)) in views.iter_mut().zip(&chosen[..n]) {
+            *slot = ViewDraw {
+                view: v,
+                weight,
+                frame: frame(v),
+                size: size(v),
+            };
+        }
+        Instance {
+            drawn,
+            foot,
+            top_m: height,
+            yaw_deg: azimuth.rem_euclid(360.0) as f32,
+            views,
+            view_count: n as u8,
+        }
+    }
+}
+
+/// The plain list: every object inside the frustum and the last band, one
+/// by one (the seed's starting point).
+pub struct ObjectList<'a>(pub &'a Clusters);
+
+impl Selection for ObjectList<'_> {
+    fn name(&self) -> &'static str {
+        "list"
+    }
+
+    fn select(&self, camera: &Camera, options: &CutOptions, out: &mut DrawList) {
+        out.clear();
+        let view = View::new(camera, options);
+        for (i, o) in self.0.tree.objects.iter().enumerate() {
+            let [min, max] = o.bounds();
+            if view.sees(min, max).is_some() {
+                out.instances
+                    .push(self.0.object_instance(i as u32, &view, options));
+            }
+        }
+        out.represented = out.instances.len();
+    }
+}
+
+/// The seed's blobs (§4.2.4.2): greedy squares of side K metres. A blob
+/// touching the frustum draws all its members; a blob beyond the last band
+/// draws none.
+pub struct Blobs<'a> {
+    clusters: &'a Clusters,
+    blobs: Vec<Blob>,
+}
+
+/// Members (tree-order object indices) and the box they fill.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Blob {
+    pub members: Vec<u32>,
+    pub min: [f32; 3],
+    pub max: [f32; 3],
+}
+
+impl<'a> Blobs<'a> {
+    /// Group the objects: take the first object left (database order), put
+    /// every object left inside the K×K square centred on it in its blob,
+    /// repeat until none is left.
+    pub fn new(clusters: &'a Clusters, side_m: f32) -> Blobs<'a> {
+        let objects = &clusters.tree.objects;
+        let mut order: Vec<u32> = (0..objects.len() as u32).collect();
+        order.sort_by_key(|&i| objects[i as usize].row);
+        // Spatial hash of cell K: the square around an object touches at
+        // most the 3×3 cells around its own.
+        let cell = |v: f32| (v / side_m).floor() as i64;
+        let mut grid: std::collections::HashMap<(i64, i64), Vec<u32>> = Default::default();
+        for &i in &order {
+            let f = objects[i as usize].foot;
+            grid.entry((cell(f[0]), cell(f[1]))).or_default().push(i);
+        }
+        let mut taken = vec![false; objects.len()];
+        let mut blobs = Vec::new();
+        let half = side_m / 2.0;
+        for &seed in &order {
+            if taken[seed as usize] {
+                continue;
+            }
+            let centre = objects[seed as usize].foot;
+            let mut members = Vec::new();
+            let (cx, cy) = (cell(centre[0]), cell(centre[1]));
+            for gy in cy - 1..=cy + 1 {
+                for gx in cx - 1..=cx + 1 {
+                    for &i in grid.get(&(gx, gy)).map_or(&[][..], |v| v.as_slice()) {
+                        let f = objects[i as usize].foot;
+                        if !taken[i as usize]
+                            && (f[0] - centre[0]).abs() <= half
+                            && (f[1] - centre[1]).abs() <= half
+                        {
+                            taken[i as usize] = true;
+                            members.push(i);
+                        }
+                    }
+                }
+            }
+            members.sort_unstable_by_key(|&i| objects[i as usize].row);
+            let (mut min, mut max) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+            for &i in &members {
+                let [lo, hi] = objects[i as usize].bounds();
+                for k in 0..3 {
+                    min[k] = min[k].min(lo[k]);
+                    max[k] = max[k].max(hi[k]);
+                }
+            }
+            blobs.push(Blob { members, min, max });
+        }
+        Blobs { clusters, blobs }
+    }
+
+    pub fn blobs(&self) -> &[Blob] {
+        &self.blobs
+    }
+}
+
+impl Selection for Blobs<'_> {
+    fn name(&self) -> &'static str {
+        "blobs"
+    }
+
+    fn select(&self, camera: &Camera, options: &CutOptions, out: &mut DrawList) {
+        out.clear();
+        let view = View::new(camera, options);
+        for blob in &self.blobs {
+            if view.sees(blob.min, blob.max).is_some() {
+                for &i in &blob.members {
+                    out.instances
+                        .push(self.clusters.object_instance(i, &view, options));
+                }
+            }
+        }
+        out.represented = out.instances.len();
+    }
+}
+
+/// The cut through the quadtree (§4.2.4.3, with n bands): from the root,
+/// a node outside the frustum or beyond the last band is skipped with all
+/// its members; a node whose size its band allows, whose views were baked
+/// and whose texture the screen would not magnify too much is drawn as one
+/// impostor; otherwise its children are visited, and a leaf's objects are
+/// drawn one by one.
+pub struct QuadtreeCut<'a>(pub &'a Clusters);
+
+impl Selection for QuadtreeCut<'_> {
+    fn name(&self) -> &'static str {
+        "quadtree"
+    }
+
+    fn select(&self, camera: &Camera, options: &CutOptions, out: &mut DrawList) {
+        out.clear();
+        let clusters = self.0;
+        if clusters.tree.nodes.is_empty() {
+            return;
+        }
+        let view = View::new(camera, options);
+        let mut stack = vec![0u32];
+        while let Some(index) = stack.pop() {
+            let node = &clusters.tree.nodes[index as usize];
+            let Some(distance) = view.sees(node.min, node.max) else {
+                continue;
+            };
+            if node.count > 1 && clusters.may_draw_node(node, distance, &view, options) {
+                out.instances
+                    .push(clusters.node_instance(index, node, &view, options));
+                out.represented += node.count as usize;
+                let depth = node.depth as usize;
+                if out.clusters_per_depth.len() <= depth {
+                    out.clusters_per_depth.resize(depth + 1, 0);
+                }
+                out.clusters_per_depth[depth] += 1;
+            } else if node.is_leaf() {
+                for i in node.members() {
+                    let [min, max] = clusters.tree.objects[i].bounds();
+                    if node.count == 1 || view.sees(min, max).is_some() {
+                        out.instances
+                            .push(clusters.object_instance(i as u32, &view, options));
+                        out.represented += 1;
+                    }
+                }
+            } else {
+                // Children in reverse so that the south-west one is drawn first.
+                stack.extend(node.children.iter().rev().filter(|&&c| c != NONE));
+            }
+        }
+    }
+}
+
+impl Clusters {
+    /// May `node`, `distance_m` from the eye at its nearest, be drawn as one
+    /// impostor?
+    fn may_draw_node(
+        &self,
+        node: &Node,
+        distance_m: f64,
+        view: &View,
+        options: &CutOptions,
+    ) -> bool {
+        if node.frames == NONE
+            || options
+                .max_cluster_at(distance_m)
+                .is_none_or(|m| node.count > m)
+        {
+            return false;
+        }
+        // Texels per metre of the front view against screen pixels per metre.
+        let front = self.frames[node.frames as usize + ImpostorView::Front as usize];
+        let width_m = (node.max[0] - node.min[0]).max(1e-3) as f64;
+        let texels_per_m = front.width as f64 / width_m;
+        let pixels_per_m = view.pixels_per_m_at_1m / distance_m.max(1e-9);
+        pixels_per_m <= texels_per_m * options.magnification
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn options(crossfade: f64) -> CutOptions {
+        CutOptions {
+            crossfade_deg: crossfade,
+            ..CutOptions::default()
+        }
+    }
+
+    fn weights(e: f64, a: f64, o: &CutOptions) -> Vec<(ImpostorView, f32)> {
+        let (v, n) = choose_views(e, a, o);
+        v[..n].to_vec()
+    }
+
+    #[test]
+    fn views_flip_at_the_threshold_and_the_azimuth_boundaries() {
+        let hard = options(0.0);
+        assert_eq!(weights(44.9, 180.0, &hard), [(ImpostorView::Front, 1.0)]);
+        assert_eq!(weights(45.0, 180.0, &hard), [(ImpostorView::Top, 1.0)]);
+        assert_eq!(weights(10.0, 44.9, &hard), [(ImpostorView::Back, 1.0)]);
+        assert_eq!(weights(10.0, 45.1, &hard), [(ImpostorView::Right, 1.0)]);
+        assert_eq!(weights(10.0, 225.1, &hard), [(ImpostorView::Left, 1.0)]);
+        assert_eq!(weights(10.0, 359.0, &hard), [(ImpostorView::Back, 1.0)]);
+
+        let soft = options(10.0);
+        // Outside the fades: one view.
+        assert_eq!(weights(30.0, 100.0, &soft), [(ImpostorView::Right, 1.0)]);
+        assert_eq!(weights(60.0, 100.0, &soft), [(ImpostorView::Top, 1.0)]);
+        // At the threshold, half top; at a side boundary, half each.
+        assert_eq!(
+            weights(45.0, 90.0, &soft),
+            [(ImpostorView::Top, 0.5), (ImpostorView::Right, 0.5)]
+        );
+        assert_eq!(
+            weights(0.0, 135.0, &soft),
+            [(ImpostorView::Front, 0.5), (ImpostorView::Right, 0.5)]
+        );
+        let three = weights(43.0, 137.0, &soft);
+        assert_eq!(three.len(), 3);
+        for e in (0..=90).map(|e| e as f64) {
+            for a in (0..720).map(|a| a as f64 * 0.5) {
+                let w = weights(e, a, &soft);
+                let sum: f32 = w.iter().map(|v| v.1).sum();
+                assert!((sum - 1.0).abs() < 1e-6, "{e} {a}: {w:?}");
+                assert!(w.iter().all(|v| v.1 > 0.0));
+            }
+        }
+        // Weights move continuously through a fade.
+        let share = |a: f64| {
+            weights(0.0, a, &soft)
+                .iter()
+                .find(|v| v.0 == ImpostorView::Right)
+                .map_or(0.0, |v| v.1)
+        };
+        assert_eq!(share(39.0), 0.0);
+        assert!((share(42.5) - 0.25).abs() < 1e-6);
+        assert!((share(47.5) - 0.75).abs() < 1e-6);
+        assert_eq!(share(51.0), 1.0);
+    }
+
+    #[test]
+    fn bands_answer_sizes_and_distances() {
+        let o = CutOptions::default();
+        assert!(o.check().is_ok());
+        assert_eq!(o.max_cluster_at(0.0), Some(1));
+        assert_eq!(o.max_cluster_at(2_000.0), Some(16));
+        assert_eq!(o.max_cluster_at(20_001.0), None);
+        assert_eq!(o.nearest_distance_for(1), Some(0.0));
+        assert_eq!(o.nearest_distance_for(5), Some(1_000.0));
+        assert_eq!(o.nearest_distance_for(300), None);
+        for n in 1..=3 {
+            let c = CutOptions::seed_configuration(n, 10_000.0).unwrap();
+            assert!(c.check().is_ok());
+            assert_eq!(c.last_distance(), 20_000.0);
+        }
+        assert_eq!(
+            CutOptions::seed_configuration(2, 1.0).unwrap().bands[1].max_cluster,
+            4
+        );
+        let mut bad = CutOptions::default();
+        bad.bands[2].until_m = 10.0;
+        assert!(bad.check().unwrap_err().contains("band 3"));
+    }
+}
+
+#[cfg(test)]
+mod selection_tests {
+    use super::*;
+    use crate::cluster::bake::tests::baked_clusters;
+    use std::collections::HashSet;
+
+    /// Cameras over and around the 2 km test square, headings and pitches
+    /// all round.
+    fn cameras(count: usize) -> Vec<Camera> {
+        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        (0..count)
+            .map(|_| Camera {
+                position: DVec3::new(
+                    next() * 3000.0 - 500.0,
+                    next() * 3000.0 - 500.0,
+                    120.0 + next() * 600.0,
+                ),
+                heading_deg: next() * 360.0,
+                pitch_deg: -next() * 80.0,
+                incl_px: 540.0,
+                fov_x_deg: 40.0 + next() * 50.0,
+                width: 1920,
+                height: 1080,
+                near_m: 1.0,
+                far_m: 50_000.0,
+            })
+            .collect()
+    }
+
+    /// Objects each instance stands for.
+    fn represented(clusters: &Clusters, list: &DrawList) -> Vec<u32> {
+        list.instances
+            .iter()
+            .flat_map(|i| match i.drawn {
+                Drawn::Object(o) => o..o + 1,
+                Drawn::Node(n) => {
+                    let r = clusters.tree.nodes[n as usize].members();
+                    r.start as u32..r.end as u32
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_cut_represents_every_visible_object_exactly_once() {
+        let clusters = baked_clusters(600);
+        let mut options = CutOptions::default();
+        // Bands scaled to the 2 km square so that every band is used.
+        for (b, until) in options
+            .bands
+            .iter_mut()
+            .zip([100.0, 300.0, 700.0, 1500.0, 2500.0])
+        {
+            b.until_m = until;
+        }
+        let mut list = DrawList::default();
+        let (mut clusters_drawn, mut objects_drawn) = (0, 0);
+        for camera in cameras(300) {
+            let planes = camera.frustum_planes();
+            QuadtreeCut(&clusters).select(&camera, &options, &mut list);
+            let drawn = represented(&clusters, &list);
+            let unique: HashSet<u32> = drawn.iter().copied().collect();
+            assert_eq!(unique.len(), drawn.len(), "an object drawn twice");
+            assert_eq!(list.represented, drawn.len());
+            for (i, o) in clusters.tree.objects.iter().enumerate() {
+                let [min, max] = o.bounds();
+                let visible = box_in_frustum(&planes, min, max)
+                    && box_distance(camera.position, min, max) <= options.last_distance();
+                if visible {
+                    assert!(unique.contains(&(i as u32)), "visible object {i} omitted");
+                }
+            }
+            for instance in &list.instances {
+                let w: f32 = instance.views().iter().map(|v| v.weight).sum();
+                assert!((w - 1.0).abs() < 1e-5);
+                match instance.drawn {
+                    Drawn::Node(n) => {
+                        let node = &clusters.tree.nodes[n as usize];
+                        let d = box_distance(camera.position, node.min, node.max);
+                        assert!(node.count <= options.max_cluster_at(d).unwrap());
+                        clusters_drawn += 1;
+                    }
+                    Drawn::Object(_) => objects_drawn += 1,
+                }
+            }
+        }
+        assert!(
+            clusters_drawn > 100 && objects_drawn > 100,
+            "{clusters_drawn} {objects_drawn}"
+        );
+    }
+
+    #[test]
+    fn blobs_draw_whole_blobs_that_touch_the_view_and_nothing_far() {
+        let clusters = baked_clusters(600);
+        let blobs = Blobs::new(&clusters, 150.0);
+        // Every object in one blob, no blob wider than K.
+        let mut all: Vec<u32> = blobs
+            .blobs()
+            .iter()
+            .flat_map(|b| b.members.clone())
+            .collect();
+        all.sort_unstable();
+        assert_eq!(all, (0..600).collect::<Vec<u32>>());
+        assert!(blobs.blobs().len() > 20 && blobs.blobs().len() < 600);
+        let options = CutOptions {
+            bands: vec![Band {
+                until_m: 1200.0,
+                max_cluster: 1,
+            }],
+            ..CutOptions::default()
+        };
+        let mut list = DrawList::default();
+        let mut lists = DrawList::default();
+        for camera in cameras(100) {
+            blobs.select(&camera, &options, &mut list);
+            let drawn: HashSet<u32> = represented(&clusters, &list).into_iter().collect();
+            assert_eq!(drawn.len(), list.instances.len());
+            let planes = camera.frustum_planes();
+            for blob in blobs.blobs() {
+                let visible = box_in_frustum(&planes, blob.min, blob.max)
+                    && box_distance(camera.position, blob.min, blob.max) <= 1200.0;
+                for m in &blob.members {
+                    assert_eq!(drawn.contains(m), visible, "blob rule broken");
+                }
+            }
+            // The list draws exactly what it sees; blobs draw a superset.
+            ObjectList(&clusters).select(&camera, &options, &mut lists);
+            let seen: HashSet<u32> = represented(&clusters, &lists).into_iter().collect();
+            assert!(seen.is_subset(&drawn));
+        }
+    }
+}

@@ -1,0 +1,94 @@
+//! Vegetation clusters (vegetation thesis, chapter 4): impostors of each
+//! class rendered from 3D models, a quadtree over the vegetation database
+//! whose nodes carry baked views of their members, atlases under a memory
+//! budget, and the cut that chooses what to draw from a camera.
+//!
+//! - [`model`]: vegetation models — OBJ files or the procedural trees.
+//! - [`views`]: the five orthographic views, rasterised on the CPU.
+//! - [`image`]: premultiplied images and their mip levels.
+//! - [`quadtree`]: the tree over the objects.
+//! - [`bake`]: class impostors, cluster views, atlas packing, the budget.
+//! - [`cut`]: selection from a camera — quadtree cut, plain list, blobs.
+//! - [`store`]: the `clusters/` folder of a bundle, and its validation.
+
+pub mod bake;
+pub mod cut;
+pub mod image;
+pub mod model;
+pub mod quadtree;
+pub mod store;
+pub mod views;
+
+use crate::geo::TerrainFrame;
+use crate::veg::db::VegObject;
+use cut::Frame;
+use image::PremulImage;
+use quadtree::{ClusterObject, Quadtree};
+
+/// The impostor of one vegetation class.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ClassImpostor {
+    pub name: String,
+    /// Where the model came from: a file, or `procedural:KIND`.
+    pub model: String,
+    /// Height over crown diameter: an object of this class with diameter d
+    /// stands d × aspect tall.
+    pub aspect: f32,
+    /// Atlas frames of the top, front, back, left and right views.
+    pub frames: [Frame; 5],
+}
+
+/// Everything the clusters stage makes, and what a viewer draws from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Clusters {
+    pub classes: Vec<ClassImpostor>,
+    pub tree: Quadtree,
+    /// Frames of the baked nodes, five per node (`Node::frames` indexes it).
+    pub frames: Vec<Frame>,
+    /// Atlas pages, level 0 (mip levels are [`image::PremulImage::mip_chain`]).
+    pub pages: Vec<PremulImage>,
+    pub report: bake::BakeReport,
+}
+
+/// The classes of a database, sorted by name: what [`ClusterObject::class`]
+/// indexes.
+pub fn class_names(database: &[VegObject]) -> Vec<String> {
+    let set: std::collections::BTreeSet<&str> = database.iter().map(|o| o.class.as_str()).collect();
+    set.into_iter().map(str::to_string).collect()
+}
+
+/// The database's objects in the terrain frame, standing on the ground:
+/// `ground(x, y)` is the terrain height at a terrain-frame point (`None` off
+/// the terrain), `aspect[class]` the height-to-diameter ratio of each class
+/// of `classes`. Returns the objects and how many were off the terrain
+/// (left out).
+pub fn objects_on_terrain(
+    database: &[VegObject],
+    classes: &[String],
+    aspect: &[f32],
+    frame: &TerrainFrame,
+    ground: &dyn Fn(f64, f64) -> Option<f64>,
+) -> (Vec<ClusterObject>, usize) {
+    let mut off = 0;
+    let mut objects = Vec::with_capacity(database.len());
+    for (row, o) in database.iter().enumerate() {
+        let class = classes.iter().position(|c| *c == o.class);
+        let placed = class
+            .zip(frame.terrain_from_world(o.x, o.y))
+            .and_then(|(class, (x, y))| {
+                let z = ground(x, y)?;
+                Some(ClusterObject {
+                    foot: [x as f32, y as f32, z as f32],
+                    diameter: o.size as f32,
+                    height: o.size as f32 * aspect[class],
+                    class: class as u32,
+                    row: row as u32,
+                })
+            });
+        match placed {
+            Some(p) if p.diameter > 0.0 => objects.push(p),
+            _ => off += 1,
+        }
+    }
+    (objects, off)
+}

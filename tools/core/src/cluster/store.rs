@@ -1,0 +1,317 @@
+//! The `clusters/` folder of a bundle (see `docs/formats.md#clusters`):
+//!
+//! - `index.json`: options, classes with their frames, pages, the bake
+//!   report;
+//! - `nodes.bin`, `objects.bin`, `frames.bin`: little-endian records of
+//!   [`Node`], [`ClusterObject`] and [`Frame`] (68, 28 and 20 bytes);
+//! - `atlas_NNN.png`: the pages, level 0, RGBA8 **premultiplied**.
+//!
+//! Everything is deterministic, so the files enter the golden hashes.
+
+use super::bake::{BakeOptions, BakeReport, ALIGN, MIP_LEVELS};
+use super::cut::Frame;
+use super::image::PremulImage;
+use super::quadtree::{ClusterObject, Node, Quadtree, NONE};
+use super::{ClassImpostor, Clusters};
+use crate::bundle::names;
+use crate::bundle::{Artifact, Bundle, BundleWriter};
+use crate::raster::png;
+use crate::{Error, Result};
+use std::collections::BTreeMap;
+
+/// Version of the `clusters/` layout.
+pub const VERSION: u32 = 1;
+
+/// `clusters/index.json`.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ClusterIndex {
+    pub version: u32,
+    pub options: BakeOptions,
+    pub classes: Vec<ClassImpostor>,
+    pub pages: Vec<Page>,
+    pub nodes: usize,
+    pub objects: usize,
+    /// Database objects left out because they stand off the terrain.
+    pub off_terrain: usize,
+    pub frames: usize,
+    /// Texels of alignment and gutter between frames, and the mip levels a
+    /// reader should build from level 0.
+    pub align: usize,
+    pub mip_levels: usize,
+    pub report: BakeReport,
+}
+
+/// One atlas page.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Page {
+    pub file: String,
+    pub width: usize,
+    pub height: usize,
+}
+
+/// File and manifest key of atlas page `i`.
+fn page_name(i: usize) -> (String, String) {
+    (
+        format!("{}_atlas_{i:03}", names::CLUSTERS_PREFIX),
+        format!("{}/atlas_{i:03}.png", names::CLUSTERS_DIR),
+    )
+}
+
+/// Write `clusters` into the bundle being built; returns the artifacts to
+/// list in the manifest.
+pub fn write(
+    writer: &BundleWriter,
+    clusters: &Clusters,
+    options: &BakeOptions,
+    off_terrain: usize,
+) -> Result<BTreeMap<String, Artifact>> {
+    let mut artifacts = BTreeMap::new();
+    let mut pages = Vec::new();
+    for (i, page) in clusters.pages.iter().enumerate() {
+        let (key, file) = page_name(i);
+        let bytes = png::encode_rgba(page.bytes(), page.width, page.height)?;
+        artifacts.insert(key, writer.write_file(&file, &bytes)?);
+        pages.push(Page {
+            file,
+            width: page.width,
+            height: page.height,
+        });
+    }
+    for (name, bytes) in [
+        (
+            names::CLUSTER_NODES,
+            bytemuck::cast_slice::<Node, u8>(&clusters.tree.nodes),
+        ),
+        (
+            names::CLUSTER_OBJECTS,
+            bytemuck::cast_slice::<ClusterObject, u8>(&clusters.tree.objects),
+        ),
+        (
+            names::CLUSTER_FRAMES,
+            bytemuck::cast_slice::<Frame, u8>(&clusters.frames),
+        ),
+    ] {
+        artifacts.insert(name.key.into(), writer.write_file(name.file, bytes)?);
+    }
+    let index = ClusterIndex {
+        version: VERSION,
+        options: options.clone(),
+        classes: clusters.classes.clone(),
+        pages,
+        nodes: clusters.tree.nodes.len(),
+        objects: clusters.tree.objects.len(),
+        off_terrain,
+        frames: clusters.frames.len(),
+        align: ALIGN,
+        mip_levels: MIP_LEVELS,
+        report: clusters.report.clone(),
+    };
+    let mut json = serde_json::to_string_pretty(&index)
+        .map_err(|e| Error::Input(format!("cluster index: {e}")))?;
+    json.push('\n');
+    let name = names::CLUSTER_INDEX;
+    artifacts.insert(
+        name.key.into(),
+        writer.write_file(name.file, json.as_bytes())?,
+    );
+    Ok(artifacts)
+}
+
+/// Is a manifest key one of the clusters' artifacts?
+pub fn is_cluster_artifact(key: &str) -> bool {
+    key.starts_with(names::CLUSTERS_PREFIX)
+}
+
+/// The bundle's cluster index, when it has clusters.
+pub fn read_index(bundle: &Bundle) -> Result<Option<ClusterIndex>> {
+    let Some(artifact) = bundle.manifest.artifacts.get(names::CLUSTER_INDEX.key) else {
+        return Ok(None);
+    };
+    let path = bundle.dir.join(&artifact.file);
+    let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+    let index: ClusterIndex = serde_json::from_str(&text)
+        .map_err(|e| Error::invalid(&path, format!("not a cluster index: {e}")))?;
+    if index.version != VERSION {
+        return Err(Error::invalid(
+            &path,
+            format!(
+                "cluster layout version {}, this build reads {VERSION}",
+                index.version
+            ),
+        ));
+    }
+    Ok(Some(index))
+}
+
+/// Records of type `T` from a cluster artifact, `count` of them.
+fn records<T: bytemuck::Pod>(bundle: &Bundle, key: &str, count: usize) -> Result<Vec<T>> {
+    let artifact = bundle.artifact(key)?;
+    let path = bundle.dir.join(&artifact.file);
+    let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+    if bytes.len() != count * size_of::<T>() {
+        return Err(Error::invalid(
+            &path,
+            format!(
+                "{} bytes, expected {count} records of {} bytes",
+                bytes.len(),
+                size_of::<T>()
+            ),
+        ));
+    }
+    Ok(bytemuck::pod_collect_to_vec(&bytes))
+}
+
+/// The bundle's clusters with their pages decoded, when it has them.
+pub fn read(bundle: &Bundle) -> Result<Option<(ClusterIndex, Clusters)>> {
+    let Some(index) = read_index(bundle)? else {
+        return Ok(None);
+    };
+    let nodes = records::<Node>(bundle, names::CLUSTER_NODES.key, index.nodes)?;
+    let objects = records::<ClusterObject>(bundle, names::CLUSTER_OBJECTS.key, index.objects)?;
+    let frames = records::<Frame>(bundle, names::CLUSTER_FRAMES.key, index.frames)?;
+    let mut pages = Vec::with_capacity(index.pages.len());
+    for (i, page) in index.pages.iter().enumerate() {
+        let (key, _) = page_name(i);
+        let artifact = bundle.artifact(&key)?;
+        let path = bundle.dir.join(&artifact.file);
+        let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+        let (rgba, width, height) =
+            png::decode_rgba(&bytes).map_err(|e| Error::invalid(&path, e.to_string()))?;
+        if (width, height) != (page.width, page.height) {
+            return Err(Error::invalid(
+                &path,
+                format!(
+                    "{width}×{height}, the index says {}×{}",
+                    page.width, page.height
+                ),
+            ));
+        }
+        pages.push(PremulImage {
+            width,
+            height,
+            texels: rgba
+                .chunks_exact(4)
+                .map(|p| [p[0], p[1], p[2], p[3]])
+                .collect(),
+        });
+    }
+    let clusters = Clusters {
+        classes: index.classes.clone(),
+        tree: Quadtree { nodes, objects },
+        frames,
+        pages,
+        report: index.report.clone(),
+    };
+    Ok(Some((index, clusters)))
+}
+
+/// Check the clusters against the vegetation database and themselves:
+/// every database object on the terrain appears once, at its place, with
+/// its class and size; nodes nest and count their members; frames lie in
+/// their pages. One line per problem (at most a few of each kind).
+pub fn validate(bundle: &Bundle) -> Vec<String> {
+    let fail = |e: Error| vec![format!("clusters: {e}")];
+    let (index, clusters) = match read(bundle) {
+        Ok(Some(c)) => c,
+        Ok(None) => return Vec::new(),
+        Err(e) => return fail(e),
+    };
+    let database = match bundle.vegetation() {
+        Ok(Some(d)) => d,
+        Ok(None) => {
+            return vec!["clusters: the bundle has clusters but no vegetation database".into()]
+        }
+        Err(e) => return fail(e),
+    };
+    let mut problems = Vec::new();
+    let mut report = |p: String| {
+        if problems.len() < 10 {
+            problems.push(format!("clusters: {p}"));
+        }
+    };
+    if index.objects + index.off_terrain != database.len() {
+        report(format!(
+            "{} objects and {} off the terrain, but the database has {}",
+            index.objects,
+            index.off_terrain,
+            database.len()
+        ));
+    }
+    let frame = bundle.frame();
+    let mut seen = vec![false; database.len()];
+    for (i, o) in clusters.tree.objects.iter().enumerate() {
+        let Some(row) = database.get(o.row as usize) else {
+            report(format!("object {i}: row {} is not in the database", o.row));
+            continue;
+        };
+        if std::mem::replace(&mut seen[o.row as usize], true) {
+            report(format!("object {i}: row {} appears twice", o.row));
+        }
+        let class = clusters
+            .classes
+            .get(o.class as usize)
+            .map(|c| c.name.as_str());
+        if class != Some(row.class.as_str()) {
+            report(format!(
+                "object {i}: class {class:?}, the database says {:?}",
+                row.class
+            ));
+        }
+        let at = frame.terrain_from_world(row.x, row.y);
+        let moved = at.is_none_or(|(x, y)| {
+            (x - o.foot[0] as f64).abs() > 0.05 || (y - o.foot[1] as f64).abs() > 0.05
+        });
+        if moved || (o.diameter as f64 - row.size).abs() > 1e-3 {
+            report(format!(
+                "object {i} (row {}): position or size differs from the database",
+                o.row
+            ));
+        }
+    }
+    let nodes = &clusters.tree.nodes;
+    if nodes.first().map(|n| n.count as usize) != Some(clusters.tree.objects.len()) {
+        report("the root does not hold every object".into());
+    }
+    for (i, n) in nodes.iter().enumerate() {
+        if n.members().end > clusters.tree.objects.len() {
+            report(format!("node {i}: members beyond the object table"));
+            continue;
+        }
+        let children: Vec<&Node> = n
+            .children
+            .iter()
+            .filter(|&&c| c != NONE)
+            .filter_map(|&c| nodes.get(c as usize))
+            .collect();
+        if !n.is_leaf() && children.iter().map(|c| c.count).sum::<u32>() != n.count {
+            report(format!(
+                "node {i}: children do not add up to its {} members",
+                n.count
+            ));
+        }
+        for o in &clusters.tree.objects[n.members()] {
+            let [lo, hi] = o.bounds();
+            if (0..3).any(|k| lo[k] < n.min[k] || hi[k] > n.max[k]) {
+                report(format!("node {i}: a member lies outside its box"));
+                break;
+            }
+        }
+        if n.frames != NONE && n.frames as usize + 5 > clusters.frames.len() {
+            report(format!("node {i}: frames beyond the frame table"));
+        }
+    }
+    let all_frames = clusters
+        .frames
+        .iter()
+        .chain(clusters.classes.iter().flat_map(|c| c.frames.iter()));
+    for f in all_frames {
+        let inside = index.pages.get(f.page as usize).is_some_and(|p| {
+            (f.x + f.width) as usize <= p.width && (f.y + f.height) as usize <= p.height
+        });
+        if !inside {
+            report(format!("frame {f:?} lies outside its page"));
+            break;
+        }
+    }
+    problems
+}
