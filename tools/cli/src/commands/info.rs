@@ -1,8 +1,10 @@
 //! `relevo info`: describe a bundle.
 
+use super::bake::print_report;
 use anyhow::Result;
 use clap::Args;
 use relevo_core::bundle::Bundle;
+use relevo_core::cluster::store;
 use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
@@ -59,6 +61,30 @@ fn describe(path: &Path, json: bool) -> Result<()> {
             *per_class.entry(o.class.as_str()).or_insert(0usize) += 1;
         }
         println!("  vegetation   {} objects {per_class:?}", objects.len());
+    }
+    if let Some(index) = store::read_index(&bundle)? {
+        let o = &index.options;
+        let bands: Vec<String> = o
+            .cut
+            .bands
+            .iter()
+            .map(|b| format!("{}:{}", b.until_m, b.max_cluster))
+            .collect();
+        println!(
+            "  clusters     {} objects ({} off the terrain), {} nodes, {} pages; bands {}",
+            index.objects,
+            index.off_terrain,
+            index.nodes,
+            index.pages.len(),
+            bands.join(",")
+        );
+        for c in &index.classes {
+            println!(
+                "    class {:<12} model {} (height {:.2} × diameter)",
+                c.name, c.model, c.aspect
+            );
+        }
+        print_report(&index.report);
     }
     for (name, a) in m.artifacts.iter().chain(&m.exports) {
         println!(

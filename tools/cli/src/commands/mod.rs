@@ -1,6 +1,7 @@
 //! The `relevo` command line: the argument tree and the dispatch. Each
 //! subcommand is one module holding its clap arguments and its `run`.
 
+pub mod bake;
 mod fill;
 mod hierarchy;
 mod info;
@@ -84,6 +85,13 @@ pub enum Command {
     /// Vegetation: detect objects in imagery from marked samples; score detections.
     #[command(subcommand)]
     Veg(veg::VegCommand),
+    /// (Re)bake a bundle's vegetation clusters: impostors, quadtree views, atlases.
+    #[command(after_help = "Examples:
+  relevo bake olinda.relevo
+  relevo bake olinda.relevo --model forest=conifer --budget-mib 64
+  relevo bake olinda.relevo --model forest=models/palm.obj --bands 300:1,1000:4,4000:32
+  relevo bake olinda.relevo --json   # the bake report: counts and atlas bytes per depth")]
+    Bake(bake::BakeArgs),
     /// Describe a bundle.
     #[command(after_help = "Examples:
   relevo info olinda.relevo
@@ -106,6 +114,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Mesh(a) => mesh::run(a),
         Command::Render(a) => render::run(a),
         Command::Veg(a) => veg::run(a),
+        Command::Bake(a) => bake::run(a),
         Command::Info(a) => info::run(a),
         Command::Validate(a) => validate::run(a),
     }

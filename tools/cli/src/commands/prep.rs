@@ -97,6 +97,7 @@ pub fn run(a: PrepArgs) -> Result<()> {
                     samples,
                     options: Default::default(),
                 }),
+                clusters: None,
             };
             region.check()?;
             region

@@ -6,6 +6,7 @@
 
 pub mod region;
 
+use crate::commands::bake::ClustersSummary;
 use crate::ingest::crs;
 use crate::ingest::gdalio::{self, GridSpec};
 use crate::ingest::stitch::{stitch, Mosaic, StitchOptions};
@@ -19,7 +20,9 @@ use relevo_core::bundle::{
     sha256_file, Artifact, BundleWriter, ColorInfo, Crs, Dtype, GridInfo, InputFile, Manifest,
     StageTiming, FORMAT, FORMAT_VERSION,
 };
-use relevo_core::geo::GeoTransform;
+use relevo_core::cluster::bake::BakeOptions;
+use relevo_core::cluster::{store, Clusters};
+use relevo_core::geo::{GeoTransform, TerrainFrame};
 use relevo_core::grid::HeightGrid;
 use relevo_core::lp::Hierarchy;
 use relevo_core::raster::fill::{fill_holes, FillReport};
@@ -45,6 +48,7 @@ const STAGES: &[(&str, Stage)] = &[
     ("hierarchy", stage_hierarchy),
     ("drape", stage_drape),
     ("vegetation", stage_vegetation),
+    ("clusters", stage_clusters),
     ("write", stage_write),
 ];
 
@@ -61,6 +65,8 @@ pub struct Summary {
     pub color: Option<[usize; 2]>,
     /// Vegetation objects found, when the region has samples.
     pub vegetation: Option<usize>,
+    /// The clusters baked from them.
+    pub clusters: Option<ClustersSummary>,
     pub timings: Vec<StageTiming>,
 }
 
@@ -81,6 +87,8 @@ struct Build<'a> {
     /// The drape as RGBA8, as written to `color.rgba8`.
     rgba: Vec<u8>,
     vegetation: Option<(VegImage, Extraction)>,
+    /// The baked clusters, the objects left off the terrain, the options.
+    clusters: Option<(Clusters, usize, BakeOptions)>,
     artifacts: BTreeMap<String, Artifact>,
     exports: BTreeMap<String, Artifact>,
 }
@@ -105,6 +113,7 @@ pub fn prep(region: &Region, out: &Path, force: bool) -> Result<Summary> {
         color: None,
         rgba: Vec::new(),
         vegetation: None,
+        clusters: None,
         artifacts: BTreeMap::new(),
         exports: BTreeMap::new(),
     };
@@ -328,6 +337,34 @@ fn stage_vegetation(b: &mut Build) -> Result<()> {
     Ok(())
 }
 
+/// Bake the vegetation clusters: class impostors from their models, the
+/// quadtree's views, the atlases.
+fn stage_clusters(b: &mut Build) -> Result<()> {
+    let Some((_, extraction)) = &b.vegetation else {
+        return Ok(());
+    };
+    let grid = b.grid.as_ref().context("grid stage did not run")?;
+    let section = b.region.clusters.clone().unwrap_or_default();
+    let frame = TerrainFrame {
+        side: grid.side,
+        cell_size_m: b.cell_size_m,
+        geotransform: grid.geotransform,
+    };
+    // From the database as stored (millimetres), so that `relevo bake`
+    // on the bundle reproduces these clusters byte for byte.
+    let database = db::from_csv(&db::to_csv(&extraction.objects))?;
+    let (clusters, off_terrain) = crate::commands::bake::bake_with_progress(
+        &database,
+        &frame,
+        &grid.heights,
+        &grid.mask,
+        &section.models,
+        &section.options,
+    )?;
+    b.clusters = Some((clusters, off_terrain, section.options));
+    Ok(())
+}
+
 /// Write the arrays and the GeoTIFF exports into the staging directory.
 fn stage_write(b: &mut Build) -> Result<()> {
     let grid = b.grid.as_ref().context("grid stage did not run")?;
@@ -420,6 +457,10 @@ fn stage_write(b: &mut Build) -> Result<()> {
         b.exports
             .insert(export.key.into(), b.writer.record_file(export.file)?);
     }
+    if let Some((clusters, off_terrain, options)) = &b.clusters {
+        b.artifacts
+            .extend(store::write(&b.writer, clusters, options, *off_terrain)?);
+    }
     Ok(())
 }
 
@@ -486,6 +527,7 @@ fn finish(b: Build, timings: Vec<StageTiming>) -> Result<Summary> {
         fill: b.fill,
         color: color.map(|c| [c.width, c.height]),
         vegetation: b.vegetation.as_ref().map(|(_, e)| e.objects.len()),
+        clusters: b.clusters.as_ref().map(|(c, _, _)| ClustersSummary::of(c)),
         timings,
     })
 }

@@ -5,6 +5,7 @@
 
 use crate::ingest::gdalio::Resampling;
 use anyhow::{anyhow, bail, Context, Result};
+use relevo_core::cluster::model::TreeKind;
 use relevo_core::grid::Squaring;
 use relevo_core::raster::encoding::Encoding;
 use relevo_core::raster::mosaic::Overlap;
@@ -36,6 +37,22 @@ pub struct Region {
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub terrain_drape: bool,
     pub vegetation: Option<VegetationSection>,
+    /// Vegetation clusters (baked whenever there is vegetation; this
+    /// section only changes their models and options).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clusters: Option<ClustersSection>,
+}
+
+/// `[clusters]`: a model per vegetation class and the bake's options.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClustersSection {
+    /// Class name → built-in model (`broadleaf`, `conifer`, `dead`,
+    /// `stand`) or OBJ file.
+    #[serde(default)]
+    pub models: std::collections::BTreeMap<String, String>,
+    #[serde(default)]
+    pub options: relevo_core::cluster::bake::BakeOptions,
 }
 
 fn one() -> f64 {
@@ -162,6 +179,13 @@ impl Region {
         if let Some(vegetation) = &mut region.vegetation {
             resolve(&mut vegetation.samples);
         }
+        if let Some(clusters) = &mut region.clusters {
+            for model in clusters.models.values_mut() {
+                if TreeKind::from_name(model).is_none() && Path::new(model).is_relative() {
+                    *model = base.join(&*model).display().to_string();
+                }
+            }
+        }
         region.check().with_context(|| path.display().to_string())?;
         Ok(region)
     }
@@ -196,6 +220,13 @@ impl Region {
         }
         if self.terrain_drape && self.image.is_some() {
             bail!("terrain_drape and [image] both give the drape: choose one");
+        }
+        if let Some(clusters) = &self.clusters {
+            clusters
+                .options
+                .cut
+                .check()
+                .map_err(|e| anyhow!("[clusters.options.cut]: {e}"))?;
         }
         if self.vegetation.is_some() && self.image.is_none() {
             bail!("[vegetation] needs [image]: vegetation is extracted from the imagery");

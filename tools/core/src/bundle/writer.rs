@@ -1,3 +1,4 @@
+use super::Bundle;
 use super::{
     names, sha256_bytes, sha256_file, Artifact, Crs, Dtype, GridInfo, Manifest, FORMAT,
     FORMAT_VERSION, MANIFEST_FILE,
@@ -41,6 +42,28 @@ impl BundleWriter {
             staging,
             committed: false,
         })
+    }
+
+    /// Start rewriting `bundle` in place: the staging directory receives
+    /// every artifact and export whose key passes `keep` (hard-linked where
+    /// the file system allows, copied otherwise), and the returned manifest
+    /// lists only those. Until [`commit`](BundleWriter::commit) the bundle
+    /// is untouched.
+    pub fn rewrite(bundle: &Bundle, keep: impl Fn(&str) -> bool) -> Result<(Self, Manifest)> {
+        let writer = BundleWriter::create(&bundle.dir, true)?;
+        let mut manifest = bundle.manifest.clone();
+        manifest.artifacts.retain(|key, _| keep(key));
+        manifest.exports.retain(|key, _| keep(key));
+        for a in manifest.artifacts.values().chain(manifest.exports.values()) {
+            let (from, to) = (bundle.dir.join(&a.file), writer.staging.join(&a.file));
+            if let Some(parent) = to.parent() {
+                fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+            }
+            if fs::hard_link(&from, &to).is_err() {
+                fs::copy(&from, &to).map_err(|e| Error::io(&from, e))?;
+            }
+        }
+        Ok((writer, manifest))
     }
 
     /// The staging directory, for writers that produce files themselves.

@@ -38,8 +38,10 @@ pub fn page_bytes(w: usize, h: usize) -> u64 {
         .sum()
 }
 
-/// What a bake is asked to do.
+/// What a bake is asked to do (REGION.toml `[clusters.options]`; any
+/// field left out takes its default).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct BakeOptions {
     /// The cut the textures are sized for.
     pub cut: CutOptions,

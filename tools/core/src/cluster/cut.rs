@@ -26,8 +26,9 @@ pub struct Band {
     pub max_cluster: u32,
 }
 
-/// The parameters of a cut.
+/// The parameters of a cut (fields left out take their defaults).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct CutOptions {
     /// Bands by increasing distance.
     pub bands: Vec<Band>,
@@ -94,6 +95,35 @@ impl CutOptions {
             magnification: f64::INFINITY,
             ..CutOptions::default()
         })
+    }
+
+    /// Bands from text `UNTIL_M:MAX_CLUSTER,…`, e.g. `300:1,1000:4,3000:16`
+    /// (checked).
+    pub fn parse_bands(text: &str) -> Result<Vec<Band>, String> {
+        let bands = text
+            .split(',')
+            .map(|band| {
+                let (until, size) = band
+                    .split_once(':')
+                    .ok_or_else(|| format!("{band:?}: expected UNTIL_M:MAX_CLUSTER"))?;
+                Ok(Band {
+                    until_m: until
+                        .trim()
+                        .parse()
+                        .map_err(|_| format!("{until:?} is not a distance in metres"))?,
+                    max_cluster: size
+                        .trim()
+                        .parse()
+                        .map_err(|_| format!("{size:?} is not a cluster size"))?,
+                })
+            })
+            .collect::<Result<Vec<Band>, String>>()?;
+        CutOptions {
+            bands: bands.clone(),
+            ..CutOptions::default()
+        }
+        .check()?;
+        Ok(bands)
     }
 
     /// Check the bands: increasing distances, sizes at least 1.
@@ -710,6 +740,13 @@ mod tests {
             CutOptions::seed_configuration(2, 1.0).unwrap().bands[1].max_cluster,
             4
         );
+        assert_eq!(CutOptions::parse_bands("300:1, 1000:4").unwrap().len(), 2);
+        assert!(CutOptions::parse_bands("300:1,200:4")
+            .unwrap_err()
+            .contains("increase"));
+        assert!(CutOptions::parse_bands("300")
+            .unwrap_err()
+            .contains("UNTIL_M"));
         let mut bad = CutOptions::default();
         bad.bands[2].until_m = 10.0;
         assert!(bad.check().unwrap_err().contains("band 3"));

@@ -20,10 +20,16 @@ pub mod store;
 pub mod views;
 
 use crate::geo::TerrainFrame;
+use crate::horizon::Terrain;
 use crate::veg::db::VegObject;
+use crate::{Error, Result};
+use bake::{BakeOptions, ClassSource};
 use cut::Frame;
 use image::PremulImage;
+use model::{Model, TreeKind};
 use quadtree::{ClusterObject, Quadtree};
+use std::collections::BTreeMap;
+use std::path::Path;
 
 /// The impostor of one vegetation class.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -91,4 +97,67 @@ pub fn objects_on_terrain(
         }
     }
     (objects, off)
+}
+
+/// The model of each class: `models` maps a class name to a built-in kind
+/// (`broadleaf`, `conifer`, `dead`, `stand`) or to an OBJ file; a class not
+/// named gets the kind its name suggests ([`TreeKind::for_class`]).
+pub fn class_sources(
+    classes: &[String],
+    models: &BTreeMap<String, String>,
+) -> Result<Vec<ClassSource>> {
+    classes
+        .iter()
+        .map(|name| {
+            let procedural =
+                |kind: TreeKind| (format!("procedural:{}", kind.name()), kind.model(1));
+            let (source, model) = match models.get(name) {
+                None => procedural(TreeKind::for_class(name)),
+                Some(choice) => match TreeKind::from_name(choice) {
+                    Some(kind) => procedural(kind),
+                    None => (choice.clone(), Model::load_obj(Path::new(choice))?),
+                },
+            };
+            Ok(ClassSource {
+                name: name.clone(),
+                source,
+                model,
+            })
+        })
+        .collect()
+}
+
+/// The whole clusters stage on a vegetation database over a terrain (the
+/// one path `prep`, `bake`, the tests and the benchmarks take): models per
+/// class, objects on the ground, the bake. Returns the clusters and the
+/// number of objects left out off the terrain.
+pub fn bake_database(
+    database: &[VegObject],
+    frame: &TerrainFrame,
+    heights: &[f32],
+    mask: &[u8],
+    models: &BTreeMap<String, String>,
+    options: &BakeOptions,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<(Clusters, usize)> {
+    if database.is_empty() {
+        return Err(Error::Input(
+            "the vegetation database is empty: there is nothing to cluster".into(),
+        ));
+    }
+    let classes = class_names(database);
+    let sources = class_sources(&classes, models)?;
+    let aspect: Vec<f32> = sources.iter().map(|c| c.model.aspect()).collect();
+    let terrain = Terrain::new(frame.side, frame.cell_size_m, heights, mask, None);
+    let ground = |x: f64, y: f64| terrain.surface(x, y);
+    let (objects, off_terrain) = objects_on_terrain(database, &classes, &aspect, frame, &ground);
+    if objects.is_empty() {
+        return Err(Error::Input(format!(
+            "none of the {} vegetation objects stands on the terrain",
+            database.len()
+        )));
+    }
+    let side_m = ((frame.side - 1) as f64 * frame.cell_size_m) as f32;
+    let clusters = bake::bake(sources, objects, [0.0, 0.0], side_m, options, progress)?;
+    Ok((clusters, off_terrain))
 }
