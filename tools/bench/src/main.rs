@@ -5,6 +5,7 @@
 //! `relevo` binary.
 
 mod bench;
+mod clusters;
 mod view;
 
 use clap::{Args, Parser, Subcommand};
@@ -21,7 +22,8 @@ use std::process::ExitCode;
   cargo run --release -p relevo-bench -- hierarchy --max-side 8193 --runs 3
   cargo run --release -p relevo-bench -- render --json --runs 3
   cargo run --release -p relevo-bench -- veg --json --runs 3 --max-side 10000
-  cargo run --release -p relevo-bench -- view --json --runs 3"
+  cargo run --release -p relevo-bench -- view --json --runs 3
+  cargo run --release -p relevo-bench -- clusters --json --runs 5"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -62,6 +64,21 @@ enum BenchCommand {
         /// Side of the largest tiled test image (up to 10000).
         #[arg(long, default_value_t = 10000)]
         max_side: usize,
+    },
+    /// Vegetation clusters: draws per frame of the list, blobs and quadtree
+    /// (the seed's table 4.4, then 10k–1M objects), selection and bake time.
+    #[command(after_help = "Examples:
+  relevo-bench clusters
+  relevo-bench clusters --json --runs 5 --max-objects 1000000")]
+    Clusters {
+        #[command(flatten)]
+        common: BenchArgs,
+        /// Largest object count of the large-scale runs (10k, 100k, 1M).
+        #[arg(long, default_value_t = 1_000_000)]
+        max_objects: usize,
+        /// Atlas budget of the large-scale bakes, MiB.
+        #[arg(long, default_value_t = 256)]
+        budget_mib: u64,
     },
     /// The viewer's renderer: frame time of every mode at 1280×720 and
     /// 1920×1080 on the GPU found (lavapipe without one).
@@ -108,6 +125,11 @@ fn main() -> ExitCode {
             a.max_side,
             a.common.json,
         ),
+        BenchCommand::Clusters {
+            common: a,
+            max_objects,
+            budget_mib,
+        } => clusters::clusters(&a.repo, a.runs.max(1), max_objects, budget_mib, a.json),
         BenchCommand::Ingest(a) => bench::ingest(&a.repo, &a.data, a.runs.max(1), a.json),
         BenchCommand::Render(a) => bench::render(&a.data, a.runs.max(1), a.json),
         BenchCommand::Veg {

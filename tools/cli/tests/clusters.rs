@@ -99,7 +99,7 @@ fn bake_repeats_prep_byte_for_byte_on_any_thread_count() {
     assert!(cluster_files(&bundle) != baked);
     let info = relevo_ok(["info".as_ref(), bundle.as_os_str()]);
     assert!(
-        info.contains("procedural:conifer") && info.contains("dropped"),
+        info.contains("procedural:conifer") && info.contains("left out"),
         "{info}"
     );
     relevo_ok(["validate".as_ref(), bundle.as_os_str()]);

@@ -50,7 +50,10 @@ pub struct ClustersSummary {
     pub baked_nodes: usize,
     pub pages: usize,
     pub atlas_bytes: u64,
-    pub dropped_depths: Vec<u32>,
+    /// Clusters left out of the atlas by the budget.
+    pub left_out: usize,
+    /// Distance from which budget-capped clusters are sharp, metres.
+    pub sharp_from_m: Option<f64>,
 }
 
 impl ClustersSummary {
@@ -61,7 +64,8 @@ impl ClustersSummary {
             baked_nodes: c.frames.len() / 5,
             pages: c.pages.len(),
             atlas_bytes: c.report.atlas_bytes,
-            dropped_depths: c.report.dropped_depths(),
+            left_out: c.report.left_out(),
+            sharp_from_m: c.report.sharp_from_m,
         }
     }
 }
@@ -155,26 +159,29 @@ pub fn run(a: BakeArgs) -> Result<()> {
 
 /// The bake report as a table: per depth, nodes, clusters, baked, bytes.
 pub fn print_report(report: &BakeReport) {
-    println!("  depth     nodes  clusters     baked   atlas MiB");
+    let mib = |b: u64| b as f64 / (1u64 << 20) as f64;
+    println!("  depth     nodes  clusters     baked   reduced   atlas MiB");
     for l in &report.levels {
         println!(
-            "  {:>5} {:>9} {:>9} {:>9} {:>11.2}{}",
+            "  {:>5} {:>9} {:>9} {:>9} {:>9} {:>11.2}",
             l.depth,
             l.nodes,
             l.clusters,
             l.baked,
-            l.atlas_bytes as f64 / (1u64 << 20) as f64,
-            if l.dropped {
-                "  dropped (over budget)"
-            } else {
-                ""
-            }
+            l.reduced,
+            mib(l.atlas_bytes)
         );
     }
     println!(
         "  class impostors {:.2} MiB; pages {:.2} MiB of a {:.0} MiB budget",
-        report.class_bytes as f64 / (1u64 << 20) as f64,
-        report.atlas_bytes as f64 / (1u64 << 20) as f64,
-        report.budget_bytes as f64 / (1u64 << 20) as f64
+        mib(report.class_bytes),
+        mib(report.atlas_bytes),
+        mib(report.budget_bytes)
     );
+    if let (Some(cap), Some(from)) = (report.density_cap, report.sharp_from_m) {
+        println!(
+            "  over budget at full detail: cluster views capped at {cap:.3} texels/m (sharp from {from:.0} m on a 1920-px screen); {} clusters left out, their objects drawn from smaller clusters or one by one",
+            report.left_out()
+        );
+    }
 }

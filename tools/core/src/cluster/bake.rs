@@ -92,12 +92,16 @@ pub struct LevelReport {
     pub nodes: usize,
     /// Nodes a cut may draw as clusters (2 to the largest band size members).
     pub clusters: usize,
-    /// Clusters whose views were baked (0 when the level was dropped).
+    /// Clusters whose views were baked; the others were left out because
+    /// the budget capped their parent too (the parent serves the same
+    /// distances).
     pub baked: usize,
+    /// Baked clusters whose texel density the budget reduced (sharp only
+    /// from farther than their band starts).
+    pub reduced: usize,
     /// Texture bytes of the baked views with their mip levels, estimated
     /// from their frames and gutters.
     pub atlas_bytes: u64,
-    pub dropped: bool,
 }
 
 /// What a bake did.
@@ -110,15 +114,17 @@ pub struct BakeReport {
     /// Bytes of the atlas pages as written, with mip levels.
     pub atlas_bytes: u64,
     pub budget_bytes: u64,
+    /// When the budget binds: the texel density cluster views were capped
+    /// at (texels per metre), and the distance from which capped clusters
+    /// are sharp on the reference screen (metres).
+    pub density_cap: Option<f64>,
+    pub sharp_from_m: Option<f64>,
 }
 
 impl BakeReport {
-    pub fn dropped_depths(&self) -> Vec<u32> {
-        self.levels
-            .iter()
-            .filter(|l| l.dropped)
-            .map(|l| l.depth)
-            .collect()
+    /// Clusters left out of the atlas.
+    pub fn left_out(&self) -> usize {
+        self.levels.iter().map(|l| l.clusters - l.baked).sum()
     }
 }
 
@@ -202,12 +208,14 @@ pub fn bake(
     let object_count = objects.len();
     let mut tree = Quadtree::build(objects, origin, side_m, options.max_depth);
 
-    // Texel density per cluster from the nearest distance its size is
-    // allowed at, on the reference screen (pixels per metre at 1 m).
+    // Texel density each cluster needs: the screen's pixels per metre at
+    // the nearest distance its size is allowed at (reference screen), over
+    // the magnification the cut tolerates.
     let pixels_per_m_at_1m = options.reference_width_px as f64
         / (2.0 * (options.reference_fov_deg.to_radians() / 2.0).tan());
+    let magnification = options.cut.magnification.max(1.0);
     let largest = options.cut.largest_cluster();
-    let plans: Vec<Option<[[usize; 2]; 5]>> = tree
+    let need: Vec<Option<f64>> = tree
         .nodes
         .iter()
         .map(|n| {
@@ -215,14 +223,87 @@ pub fn bake(
                 return None;
             }
             let near = options.cut.nearest_distance_for(n.count)?;
-            let density = pixels_per_m_at_1m / near.max(1e-9) / options.cut.magnification.max(1.0);
-            Some(frame_sizes(size_of_node(n), density, options.max_frame_px))
+            Some(pixels_per_m_at_1m / near.max(1e-9) / magnification)
         })
         .collect();
+    let mut parent = vec![NONE; tree.nodes.len()];
+    for (i, n) in tree.nodes.iter().enumerate() {
+        for &c in n.children.iter().filter(|&&c| c != NONE) {
+            parent[c as usize] = i as u32;
+        }
+    }
 
-    // Levels per depth, then the budget: keep the shallowest levels (the
-    // large clusters that spare the most draws far away) while they fit,
-    // drop the rest.
+    // The budget caps the density (texels per metre) of every cluster view.
+    // A capped cluster is only sharp from farther away, where its parent —
+    // if capped too — is drawn instead; so a node whose parent is capped is
+    // not baked at all. Bytes grow with the cap: bisect for the largest cap
+    // whose atlas fits, then pack (and tighten if shelf waste overflows).
+    let plan = |cap: f64| -> Vec<Option<[[usize; 2]; 5]>> {
+        tree.nodes
+            .iter()
+            .enumerate()
+            .map(|(i, n)| {
+                let density = need[i]?;
+                let parent_capped =
+                    parent[i] != NONE && need[parent[i] as usize].is_some_and(|p| p > cap);
+                (!parent_capped)
+                    .then(|| frame_sizes(size_of_node(n), density.min(cap), options.max_frame_px))
+            })
+            .collect()
+    };
+    let estimate = |plans: &[Option<[[usize; 2]; 5]>]| -> u64 {
+        class_bytes
+            + plans
+                .iter()
+                .flatten()
+                .flat_map(|sizes| sizes.iter().map(|&s| frame_bytes(s)))
+                .sum::<u64>()
+    };
+    let mut cap = f64::INFINITY;
+    if estimate(&plan(cap)) > options.budget_bytes {
+        let (mut lo, mut hi) = (
+            1e-6f64,
+            need.iter().flatten().fold(1e-6f64, |m, &v| m.max(v)),
+        );
+        for _ in 0..40 {
+            let mid = (lo * hi).sqrt();
+            if estimate(&plan(mid)) <= options.budget_bytes {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        cap = lo;
+    }
+    let (plans, layout, pages_size) = loop {
+        let plans = plan(cap);
+        let mut sizes: Vec<[usize; 2]> = class_views
+            .iter()
+            .flatten()
+            .map(|i| [i.width, i.height])
+            .collect();
+        sizes.extend(plans.iter().flatten().flatten());
+        let (layout, pages_size) = pack(&sizes, options.page_px as usize)?;
+        let bytes: u64 = pages_size.iter().map(|&[w, h]| page_bytes(w, h)).sum();
+        if bytes <= options.budget_bytes {
+            break (plans, layout, pages_size);
+        }
+        if cap < 1e-5 {
+            return Err(Error::Input(format!(
+                "an atlas budget of {} bytes cannot hold the class impostors and the coarsest clusters ({bytes} bytes)",
+                options.budget_bytes
+            )));
+        }
+        cap = if cap.is_finite() {
+            cap * 0.9
+        } else {
+            need.iter().flatten().fold(0f64, |m, &v| m.max(v)) * 0.9
+        };
+    };
+    let baked_nodes: Vec<usize> = (0..tree.nodes.len())
+        .filter(|&i| plans[i].is_some())
+        .collect();
+
     let depths = tree.nodes_per_depth().len();
     let mut levels: Vec<LevelReport> = (0..depths)
         .map(|d| LevelReport {
@@ -230,60 +311,27 @@ pub fn bake(
             nodes: 0,
             clusters: 0,
             baked: 0,
+            reduced: 0,
             atlas_bytes: 0,
-            dropped: false,
         })
         .collect();
-    for (node, plan) in tree.nodes.iter().zip(&plans) {
+    for (i, node) in tree.nodes.iter().enumerate() {
         let level = &mut levels[node.depth as usize];
         level.nodes += 1;
-        if let Some(sizes) = plan {
-            level.clusters += 1;
+        level.clusters += need[i].is_some() as usize;
+        if let Some(sizes) = &plans[i] {
+            level.baked += 1;
+            level.reduced += need[i].is_some_and(|n| n > cap) as usize;
             level.atlas_bytes += sizes.iter().map(|&s| frame_bytes(s)).sum::<u64>();
         }
     }
-    let mut keep_depths = depths;
-    let mut total = class_bytes;
-    for level in &levels {
-        if total + level.atlas_bytes > options.budget_bytes {
-            keep_depths = level.depth as usize;
-            break;
-        }
-        total += level.atlas_bytes;
-    }
-
-    // Pack; if the pages come out over the budget (shelf waste), drop one
-    // more level and pack again.
-    let (layout, pages_size, baked_nodes) = loop {
-        let baked_nodes: Vec<usize> = (0..tree.nodes.len())
-            .filter(|&i| plans[i].is_some() && (tree.nodes[i].depth as usize) < keep_depths)
-            .collect();
-        let mut sizes: Vec<[usize; 2]> = class_views
-            .iter()
-            .flatten()
-            .map(|i| [i.width, i.height])
-            .collect();
-        for &i in &baked_nodes {
-            sizes.extend(plans[i].iter().flatten());
-        }
-        let (layout, pages_size) = pack(&sizes, options.page_px as usize)?;
-        let bytes: u64 = pages_size.iter().map(|&[w, h]| page_bytes(w, h)).sum();
-        if bytes <= options.budget_bytes || keep_depths == 0 {
-            break (layout, pages_size, baked_nodes);
-        }
-        keep_depths -= 1;
-    };
-    for level in &mut levels {
-        level.dropped = level.clusters > 0 && level.depth as usize >= keep_depths;
-    }
-    for &i in &baked_nodes {
-        levels[tree.nodes[i].depth as usize].baked += 1;
-    }
-    if levels.iter().any(|l| l.dropped) {
+    let sharp_from_m = cap
+        .is_finite()
+        .then(|| pixels_per_m_at_1m / (cap * magnification));
+    if let Some(d) = sharp_from_m {
         tracing::warn!(
-            dropped = ?levels.iter().filter(|l| l.dropped).map(|l| l.depth).collect::<Vec<_>>(),
             budget = options.budget_bytes,
-            "cluster levels over the atlas budget were not baked; their objects are drawn from deeper clusters or one by one"
+            "the atlas budget caps cluster textures at {cap:.3} texels/m: clusters are sharp from {d:.0} m; nearer, smaller clusters give way to objects one by one"
         );
     }
 
@@ -355,6 +403,8 @@ pub fn bake(
             class_bytes,
             atlas_bytes,
             budget_bytes: options.budget_bytes,
+            density_cap: cap.is_finite().then_some(cap),
+            sharp_from_m,
         },
     })
 }
@@ -617,7 +667,7 @@ pub(crate) mod tests {
         assert_eq!(one, on(1));
         assert!(one.frames.len() > 100, "{} frames", one.frames.len());
         assert!(one.report.atlas_bytes <= one.report.budget_bytes);
-        assert!(one.report.dropped_depths().is_empty());
+        assert_eq!(one.report.left_out(), 0);
     }
 
     /// At every partly transparent texel of every mip level, the colour
@@ -726,28 +776,20 @@ pub(crate) mod tests {
         )
         .unwrap_err();
         assert!(e.to_string().contains("empty"), "{e}");
-        // A budget between: the deepest levels are dropped and said so.
+        // A budget between: cluster textures are capped, clusters whose
+        // parent is capped too are left out, and the report says so.
         let full = baked_clusters(600);
+        assert_eq!(full.report.density_cap, None);
         let half = BakeOptions {
             budget_bytes: full.report.atlas_bytes / 2,
             ..small_options()
         };
         let cut = bake(sources(), scattered(600), [0.0; 2], 2048.0, &half, &|_| {}).unwrap();
-        let dropped = cut.report.dropped_depths();
-        assert!(!dropped.is_empty());
-        assert!(cut.report.atlas_bytes <= half.budget_bytes);
-        let deepest = cut
-            .report
-            .levels
-            .iter()
-            .filter(|l| l.clusters > 0)
-            .map(|l| l.depth)
-            .max();
-        assert_eq!(
-            dropped.last().copied(),
-            deepest,
-            "the deepest levels go first"
-        );
-        assert!(baked(&cut.tree).all(|n| !dropped.contains(&n.depth)));
+        let r = &cut.report;
+        assert!(r.atlas_bytes <= half.budget_bytes);
+        assert!(r.density_cap.is_some() && r.sharp_from_m.is_some());
+        assert!(r.levels.iter().any(|l| l.reduced > 0));
+        assert!(r.left_out() > 0, "{:?}", r.levels);
+        assert!(baked(&cut.tree).count() < baked(&full.tree).count());
     }
 }

@@ -1,0 +1,303 @@
+//! Vegetation clusters: draws per frame of the plain list, the seed's blobs
+//! and the quadtree cut — under the seed's table 4.4 conditions on the
+//! sample region, and at 10k–1M objects over a 4097² terrain — with the
+//! selection time, and the bake's time and atlas bytes.
+
+use crate::bench::{emit, median, tempfile_dir};
+use anyhow::{Context, Result};
+use glam::DVec3;
+use relevo::prep::region::Region;
+use relevo_core::bundle::Bundle;
+use relevo_core::camera::Camera;
+use relevo_core::cluster::bake::BakeOptions;
+use relevo_core::cluster::cut::{Blobs, CutOptions, DrawList, ObjectList, QuadtreeCut, Selection};
+use relevo_core::cluster::{bake_database, Clusters};
+use relevo_core::geo::{GeoTransform, TerrainFrame};
+use relevo_core::grid::fractal_heights;
+use relevo_core::veg::db::VegObject;
+use serde_json::json;
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::Instant;
+
+/// The seed's table 4.4 (objects, then drawn billboards of configurations
+/// 1, 2 and 3 — averages over its flight points; list and blobs draw all).
+const SEED_TABLE_4_4: [(usize, [u32; 3]); 10] = [
+    (100, [25, 60, 78]),
+    (200, [49, 125, 157]),
+    (300, [71, 166, 219]),
+    (400, [120, 219, 300]),
+    (500, [143, 266, 417]),
+    (600, [163, 327, 486]),
+    (700, [171, 394, 556]),
+    (800, [197, 479, 608]),
+    (900, [197, 531, 660]),
+    (1000, [201, 641, 729]),
+];
+
+pub fn clusters(
+    repo: &Path,
+    runs: usize,
+    max_objects: usize,
+    budget_mib: u64,
+    json_lines: bool,
+) -> Result<()> {
+    relevo::ingest::gdalio::init();
+    let dir = tempfile_dir()?;
+    let region = Region::load(&repo.join("data/olinda/REGION.toml"))?;
+    let bundle = relevo::prep::prep(&region, &dir.join("olinda.relevo"), true)?.bundle;
+    let bundle = Bundle::open(&bundle)?;
+    let database = bundle
+        .vegetation()?
+        .context("the sample region has no vegetation")?;
+    seed_table(&bundle, &database, json_lines)?;
+    large(
+        &database,
+        &bundle.frame(),
+        runs,
+        max_objects,
+        budget_mib,
+        json_lines,
+    )?;
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(())
+}
+
+/// Table 4.4: 100–1000 of the sample region's real detections (every k-th),
+/// one fixed camera seeing the whole region, d₃ beyond the diagonal, 3000 m
+/// blobs, 64-texel cluster views as in the seed.
+fn seed_table(bundle: &Bundle, database: &[VegObject], json_lines: bool) -> Result<()> {
+    let frame = bundle.frame();
+    let side_m = (frame.side - 1) as f64 * frame.cell_size_m;
+    let diagonal = side_m * std::f64::consts::SQRT_2;
+    let (heights, mask) = (bundle.heights()?, bundle.mask()?);
+    // South of the region, 4 km up, looking north and down over all of it.
+    let camera = Camera {
+        position: DVec3::new(side_m / 2.0, -3_000.0, 4_000.0),
+        heading_deg: 0.0,
+        pitch_deg: -35.0,
+        incl_px: 540.0,
+        fov_x_deg: 100.0,
+        width: 1920,
+        height: 1080,
+        near_m: 1.0,
+        far_m: 100_000.0,
+    };
+    if !json_lines {
+        println!(
+            "objects | visible | list | blobs 3000 m | quadtree 1 (seed) | 2 (seed) | 3 (seed)"
+        );
+    }
+    for (count, seed) in SEED_TABLE_4_4 {
+        let step = database.len() / count;
+        let subset: Vec<VegObject> = database.iter().step_by(step).take(count).cloned().collect();
+        let mut draws = Vec::new();
+        for config in 1..=3u8 {
+            let cut = CutOptions::seed_configuration(config, diagonal).context("configuration")?;
+            let options = BakeOptions {
+                cut: cut.clone(),
+                class_frame_px: 64,
+                max_frame_px: 64,
+                ..BakeOptions::default()
+            };
+            let (clusters, _) = bake_database(
+                &subset,
+                &frame,
+                &heights,
+                &mask,
+                &BTreeMap::new(),
+                &options,
+                &|_| {},
+            )?;
+            let mut list = DrawList::default();
+            if config == 1 {
+                ObjectList(&clusters).select(&camera, &cut, &mut list);
+                draws.push(list.len());
+                Blobs::new(&clusters, 3_000.0).select(&camera, &cut, &mut list);
+                draws.push(list.len());
+            }
+            QuadtreeCut(&clusters).select(&camera, &cut, &mut list);
+            draws.push(list.len());
+        }
+        emit(
+            json_lines,
+            json!({"bench": "clusters-table-4.4", "objects": count, "list": draws[0], "blobs": draws[1],
+                   "quadtree": [draws[2], draws[3], draws[4]], "seed_quadtree": seed}),
+            format!(
+                "{count} | {} | {} | {} | {} ({}) | {} ({}) | {} ({})",
+                draws[0],
+                draws[0],
+                draws[1],
+                draws[2],
+                seed[0],
+                draws[3],
+                seed[1],
+                draws[4],
+                seed[2]
+            ),
+        );
+    }
+    Ok(())
+}
+
+/// 10k, 100k and 1M objects: the real detections tiled k×k over a 4097²
+/// fractal terrain of 10 m cells (41 km), 8 headings from the centre at
+/// 1920×1080.
+fn large(
+    database: &[VegObject],
+    source: &TerrainFrame,
+    runs: usize,
+    max_objects: usize,
+    budget_mib: u64,
+    json_lines: bool,
+) -> Result<()> {
+    let side = 4097;
+    let cell = 10.0;
+    let heights = fractal_heights(side, 1);
+    let mask = vec![1u8; side * side];
+    let extent = (side - 1) as f64 * cell;
+    let frame = TerrainFrame {
+        side,
+        cell_size_m: cell,
+        geotransform: GeoTransform::north_up(-cell / 2.0, extent + cell / 2.0, cell, cell),
+    };
+    let source_side = (source.side - 1) as f64 * source.cell_size_m;
+    let relative: Vec<(f64, f64, &VegObject)> = database
+        .iter()
+        .filter_map(|o| {
+            let (x, y) = source.terrain_from_world(o.x, o.y)?;
+            Some((x / source_side, y / source_side, o))
+        })
+        .collect();
+    for count in [10_000usize, 100_000, 1_000_000]
+        .into_iter()
+        .filter(|&n| n <= max_objects)
+    {
+        let tiles = count.div_ceil(relative.len());
+        let k = (tiles as f64).sqrt().ceil() as usize;
+        let tile_m = extent / k as f64;
+        let objects: Vec<VegObject> = (0..count)
+            .map(|i| {
+                let (tile, (rx, ry, o)) = (i / relative.len(), relative[i % relative.len()]);
+                let (x, y) = (
+                    ((tile % k) as f64 + rx) * tile_m,
+                    ((tile / k) as f64 + ry) * tile_m,
+                );
+                let (east, north) = frame.world_from_terrain(x, y);
+                VegObject {
+                    id: i as u64 + 1,
+                    x: east,
+                    y: north,
+                    class: o.class.clone(),
+                    size: o.size,
+                    score: o.score,
+                }
+            })
+            .collect();
+        let options = BakeOptions {
+            budget_bytes: budget_mib << 20,
+            ..BakeOptions::default()
+        };
+        let start = Instant::now();
+        let (clusters, _) = bake_database(
+            &objects,
+            &frame,
+            &heights,
+            &mask,
+            &BTreeMap::new(),
+            &options,
+            &|_| {},
+        )?;
+        let bake_ms = start.elapsed().as_secs_f64() * 1e3;
+        let baked = clusters.frames.len() / 5;
+        emit(
+            json_lines,
+            json!({"bench": "clusters-bake", "objects": count, "budget_mib": budget_mib, "ms": bake_ms, "nodes": clusters.tree.nodes.len(),
+                   "baked_nodes": baked, "atlas_bytes": clusters.report.atlas_bytes,
+                   "density_cap": clusters.report.density_cap, "sharp_from_m": clusters.report.sharp_from_m,
+                   "levels": clusters.report.levels}),
+            format!(
+                "bake {count} objects: {bake_ms:.0} ms, {} nodes, {baked} baked, atlas {:.1} MiB, sharp from {:?} m",
+                clusters.tree.nodes.len(),
+                clusters.report.atlas_bytes as f64 / (1 << 20) as f64,
+                clusters.report.sharp_from_m.map(|d| d.round())
+            ),
+        );
+        select_all(
+            &clusters,
+            &frame,
+            &heights,
+            &options.cut,
+            (count, budget_mib),
+            runs,
+            json_lines,
+        );
+    }
+    Ok(())
+}
+
+/// Selection time and draws of each selection, 8 headings from the centre.
+fn select_all(
+    clusters: &Clusters,
+    frame: &TerrainFrame,
+    heights: &[f32],
+    cut: &CutOptions,
+    (count, budget_mib): (usize, u64),
+    runs: usize,
+    json_lines: bool,
+) {
+    let centre = (frame.side - 1) as f64 * frame.cell_size_m / 2.0;
+    let ground = heights[(frame.side / 2) * frame.side + frame.side / 2] as f64;
+    let blobs = Blobs::new(clusters, 3_000.0);
+    let quadtree = QuadtreeCut(clusters);
+    let list = ObjectList(clusters);
+    let selections: [&dyn Selection; 3] = [&list, &blobs, &quadtree];
+    let mut out = DrawList::default();
+    let one_thread = rayon::ThreadPoolBuilder::new().num_threads(1).build().ok();
+    // The quadtree walk is parallel; measure it on one thread too.
+    let runs_of = selections
+        .into_iter()
+        .map(|s| (s, s.name().to_string(), None))
+        .chain(one_thread.as_ref().map(|pool| {
+            (
+                &quadtree as &dyn Selection,
+                "quadtree, 1 thread".to_string(),
+                Some(pool),
+            )
+        }));
+    for (selection, name, pool) in runs_of {
+        let (mut times, mut draws, mut represented) = (Vec::new(), Vec::new(), Vec::new());
+        for heading in (0..8).map(|h| h as f64 * 45.0) {
+            let camera = Camera {
+                position: DVec3::new(centre, centre, ground + 300.0),
+                heading_deg: heading,
+                pitch_deg: -10.0,
+                incl_px: 540.0,
+                fov_x_deg: 60.0,
+                width: 1920,
+                height: 1080,
+                near_m: 1.0,
+                far_m: 50_000.0,
+            };
+            for _ in 0..runs {
+                let start = Instant::now();
+                match pool {
+                    Some(pool) => pool.install(|| selection.select(&camera, cut, &mut out)),
+                    None => selection.select(&camera, cut, &mut out),
+                }
+                times.push(start.elapsed().as_secs_f64() * 1e3);
+            }
+            draws.push(out.len() as f64);
+            represented.push(out.represented as f64);
+        }
+        let (ms, draws, represented) = (median(&times), median(&draws), median(&represented));
+        emit(
+            json_lines,
+            json!({"bench": "clusters-select", "objects": count, "selection": name, "budget_mib": budget_mib,
+                   "ms": ms, "draws": draws, "represented": represented}),
+            format!(
+                "select {count} objects, {name:<18}: {ms:.3} ms, {draws:.0} draws for {represented:.0} objects (medians over 8 headings)"
+            ),
+        );
+    }
+}
