@@ -943,6 +943,7 @@ mod tests {
 mod selection_tests {
     use super::*;
     use crate::cluster::bake::tests::baked_clusters;
+    use crate::cluster::checks;
     use std::collections::HashSet;
 
     /// Cameras over and around the 2 km test square, headings and pitches
@@ -974,19 +975,6 @@ mod selection_tests {
             .collect()
     }
 
-    /// Objects each instance stands for.
-    fn represented(clusters: &Clusters, list: &DrawList) -> Vec<u32> {
-        list.instances()
-            .flat_map(|i| match i.drawn {
-                Drawn::Object(o) => o..o + 1,
-                Drawn::Node(n) => {
-                    let r = clusters.tree.nodes[n as usize].members();
-                    r.start as u32..r.end as u32
-                }
-            })
-            .collect()
-    }
-
     #[test]
     fn the_cut_represents_every_visible_object_exactly_once() {
         let clusters = baked_clusters(600);
@@ -1002,30 +990,14 @@ mod selection_tests {
         let mut list = DrawList::default();
         let (mut clusters_drawn, mut objects_drawn) = (0, 0);
         for camera in cameras(300) {
-            let planes = camera.frustum_planes();
             QuadtreeCut(&clusters).select(&camera, &options, &mut list);
-            let drawn = represented(&clusters, &list);
-            let unique: HashSet<u32> = drawn.iter().copied().collect();
-            assert_eq!(unique.len(), drawn.len(), "an object drawn twice");
-            assert_eq!(list.represented, drawn.len());
-            for (i, o) in clusters.tree.objects.iter().enumerate() {
-                let [min, max] = o.bounds();
-                let visible = box_in_frustum(&planes, min, max)
-                    && box_distance(camera.position, min, max) <= options.last_distance();
-                if visible {
-                    assert!(unique.contains(&(i as u32)), "visible object {i} omitted");
-                }
-            }
+            assert_eq!(
+                checks::cut_problems(&clusters, &list, &camera, &options),
+                Vec::<String>::new()
+            );
             for instance in list.instances() {
-                let w: f32 = instance.views().iter().map(|v| v.weight).sum();
-                assert!((w - 1.0).abs() < 1e-5);
                 match instance.drawn {
-                    Drawn::Node(n) => {
-                        let node = &clusters.tree.nodes[n as usize];
-                        let d = box_distance(camera.position, node.min, node.max);
-                        assert!(node.count <= options.max_cluster_at(d).unwrap());
-                        clusters_drawn += 1;
-                    }
+                    Drawn::Node(_) => clusters_drawn += 1,
                     Drawn::Object(_) => objects_drawn += 1,
                 }
             }
@@ -1060,7 +1032,9 @@ mod selection_tests {
         let mut lists = DrawList::default();
         for camera in cameras(100) {
             blobs.select(&camera, &options, &mut list);
-            let drawn: HashSet<u32> = represented(&clusters, &list).into_iter().collect();
+            let drawn: HashSet<u32> = checks::represented_objects(&clusters, &list)
+                .into_iter()
+                .collect();
             assert_eq!(drawn.len(), list.len());
             let planes = camera.frustum_planes();
             for blob in blobs.blobs() {
@@ -1072,7 +1046,9 @@ mod selection_tests {
             }
             // The list draws exactly what it sees; blobs draw a superset.
             ObjectList(&clusters).select(&camera, &options, &mut lists);
-            let seen: HashSet<u32> = represented(&clusters, &lists).into_iter().collect();
+            let seen: HashSet<u32> = checks::represented_objects(&clusters, &lists)
+                .into_iter()
+                .collect();
             assert!(seen.is_subset(&drawn));
         }
     }

@@ -10,8 +10,11 @@
 //! - [`bake`]: class impostors, cluster views, atlas packing, the budget.
 //! - [`cut`]: selection from a camera — quadtree cut, plain list, blobs.
 //! - [`store`]: the `clusters/` folder of a bundle, and its validation.
+//! - [`checks`]: properties of bakes and cuts (no fringe, each object
+//!   once), shared by the tests and validation.
 
 pub mod bake;
+pub mod checks;
 pub mod cut;
 pub mod image;
 pub mod model;

@@ -300,6 +300,9 @@ pub fn validate(bundle: &Bundle) -> Vec<String> {
             report(format!("node {i}: frames beyond the frame table"));
         }
     }
+    for p in super::checks::fringe_problems(&clusters).1 {
+        report(format!("atlas {p}"));
+    }
     let all_frames = clusters
         .frames
         .iter()

@@ -187,6 +187,7 @@ fn raster_triangle(
     if area == 0.0 || !area.is_finite() {
         return;
     }
+    let inverse_area = 1.0 / area;
     let lo = |k: usize| s.iter().map(|p| p[k]).fold(f32::INFINITY, f32::min);
     let hi = |k: usize| s.iter().map(|p| p[k]).fold(f32::NEG_INFINITY, f32::max);
     let x0 = (lo(0).floor().max(0.0)) as usize;
@@ -199,8 +200,8 @@ fn raster_triangle(
         for x in x0..x1 {
             let px = x as f32 + 0.5;
             // Barycentric weights; the same sign as the area means inside.
-            let w0 = edge(s[1], s[2], px, py) / area;
-            let w1 = edge(s[2], s[0], px, py) / area;
+            let w0 = edge(s[1], s[2], px, py) * inverse_area;
+            let w1 = edge(s[2], s[0], px, py) * inverse_area;
             let w2 = 1.0 - w0 - w1;
             if w0 < 0.0 || w1 < 0.0 || w2 < 0.0 {
                 continue;

@@ -1,0 +1,177 @@
+//! Properties every bake and every cut must have, as functions: the unit
+//! tests, the end-to-end tests on real regions and `relevo validate` call
+//! the same code.
+
+use super::bake::{render_node_view, MIP_LEVELS};
+use super::cut::{box_distance, box_in_frustum, CutOptions, DrawList, Drawn};
+use super::image::PremulImage;
+use super::model::Model;
+use super::quadtree::NONE;
+use super::views::ImpostorView;
+use super::Clusters;
+use crate::camera::Camera;
+
+/// Rounding allowed by [`fringe_problems`], in 8-bit units of premultiplied
+/// colour: the composition's and each mip reduction's.
+pub const FRINGE_TOLERANCE: f64 = 2.0;
+
+/// The texels of an atlas frame.
+pub fn frame_image(clusters: &Clusters, f: &super::cut::Frame) -> PremulImage {
+    clusters.pages[f.page as usize].crop(
+        f.x as usize,
+        f.y as usize,
+        f.width as usize,
+        f.height as usize,
+    )
+}
+
+/// Per-channel colour range of the class views (the sources every texel is
+/// made from), un-premultiplied where coverage is high enough (α ≥ 32) for
+/// the division to be within 4 units.
+pub fn source_colour_range(clusters: &Clusters) -> ([u8; 3], [u8; 3]) {
+    let (mut lo, mut hi) = ([255u8; 3], [0u8; 3]);
+    for f in clusters.classes.iter().flat_map(|c| &c.frames) {
+        for t in frame_image(clusters, f)
+            .to_straight()
+            .chunks_exact(4)
+            .filter(|t| t[3] >= 32)
+        {
+            for k in 0..3 {
+                lo[k] = lo[k].min(t[k]);
+                hi[k] = hi[k].max(t[k]);
+            }
+        }
+    }
+    (lo, hi)
+}
+
+/// No fringe at any mip level: an empty texel carries no colour, and a
+/// partly covered one, un-premultiplied, lies within the sources' colour
+/// range — checked as a·min − tol ≤ c ≤ a·max + tol. (A white fringe at
+/// half coverage would be ~128 where the bound is ~64.) Returns the
+/// number of partly covered texels checked and the problems (at most 5).
+pub fn fringe_problems(clusters: &Clusters) -> (usize, Vec<String>) {
+    let (lo, hi) = source_colour_range(clusters);
+    let (mut partial, mut problems) = (0, Vec::new());
+    for (p, page) in clusters.pages.iter().enumerate() {
+        for (level, image) in page.mip_chain(MIP_LEVELS).iter().enumerate() {
+            for (i, t) in image.texels.iter().enumerate() {
+                let a = t[3] as f64 / 255.0;
+                let bad = match t[3] {
+                    0 => t[..3] != [0; 3],
+                    255 => false,
+                    _ => {
+                        partial += 1;
+                        (0..3).any(|k| {
+                            let c = t[k] as f64;
+                            c < a * lo[k] as f64 - FRINGE_TOLERANCE
+                                || c > a * hi[k] as f64 + FRINGE_TOLERANCE
+                        })
+                    }
+                };
+                if bad && problems.len() < 5 {
+                    problems.push(format!(
+                        "page {p} level {level} texel {i}: {t:?} lies outside the sources' colours {lo:?}–{hi:?}"
+                    ));
+                }
+            }
+        }
+    }
+    (partial, problems)
+}
+
+/// The objects (tree order) each instance of `list` stands for.
+pub fn represented_objects(clusters: &Clusters, list: &DrawList) -> Vec<u32> {
+    list.instances()
+        .flat_map(|i| match i.drawn {
+            Drawn::Object(o) => o..o + 1,
+            Drawn::Node(n) => {
+                let r = clusters.tree.nodes[n as usize].members();
+                r.start as u32..r.end as u32
+            }
+        })
+        .collect()
+}
+
+/// A quadtree cut from `camera`: every object inside the frustum and the
+/// last band represented, none twice, every drawn cluster allowed by its
+/// band, baked, and its weights summing to 1. Returns the problems (at most 5).
+pub fn cut_problems(
+    clusters: &Clusters,
+    list: &DrawList,
+    camera: &Camera,
+    options: &CutOptions,
+) -> Vec<String> {
+    let mut problems = Vec::new();
+    let drawn = represented_objects(clusters, list);
+    let mut seen = vec![false; clusters.tree.objects.len()];
+    for &o in &drawn {
+        if std::mem::replace(&mut seen[o as usize], true) {
+            problems.push(format!("object {o} drawn twice"));
+        }
+    }
+    if drawn.len() != list.represented {
+        problems.push(format!(
+            "{} objects drawn, the list says {}",
+            drawn.len(),
+            list.represented
+        ));
+    }
+    let planes = camera.frustum_planes();
+    for (i, o) in clusters.tree.objects.iter().enumerate() {
+        let [min, max] = o.bounds();
+        let visible = box_in_frustum(&planes, min, max)
+            && box_distance(camera.position, min, max) <= options.last_distance();
+        if visible && !seen[i] {
+            problems.push(format!("visible object {i} omitted"));
+        }
+    }
+    for instance in list.instances() {
+        let weights: f32 = instance.views().iter().map(|v| v.weight).sum();
+        if (weights - 1.0).abs() > 1e-5 {
+            problems.push(format!(
+                "{:?}: view weights sum to {weights}",
+                instance.drawn
+            ));
+        }
+        if let Drawn::Node(n) = instance.drawn {
+            let node = &clusters.tree.nodes[n as usize];
+            let d = box_distance(camera.position, node.min, node.max);
+            if node.frames == NONE || options.max_cluster_at(d).is_none_or(|m| node.count > m) {
+                problems.push(format!(
+                    "node {n} ({} objects at {d:.0} m) drawn against its band",
+                    node.count
+                ));
+            }
+        }
+    }
+    problems.truncate(5);
+    problems
+}
+
+/// How far composed cluster views are from rendering their members'
+/// models: mean |Δα| (coverage, 0–1) over the views of up to `nodes` baked
+/// clusters of 4 to 16 members (where overlaps between members are
+/// frequent and a render stays cheap), and the texels compared.
+pub fn composition_difference(clusters: &Clusters, models: &[Model], nodes: usize) -> (f64, usize) {
+    let (mut diff, mut count) = (0.0, 0usize);
+    let baked = clusters
+        .tree
+        .nodes
+        .iter()
+        .filter(|n| n.frames != NONE && (4..=16).contains(&n.count));
+    for node in baked.take(nodes) {
+        for view in ImpostorView::ALL {
+            let f = clusters.frames[node.frames as usize + view as usize];
+            let composed = frame_image(clusters, &f);
+            let members = &clusters.tree.objects[node.members()];
+            let size = [f.width as usize, f.height as usize];
+            let rendered = render_node_view(node, members, view, size, models);
+            for (a, b) in composed.texels.iter().zip(&rendered.texels) {
+                diff += (a[3] as f64 - b[3] as f64).abs() / 255.0;
+                count += 1;
+            }
+        }
+    }
+    (diff / count.max(1) as f64, count)
+}
