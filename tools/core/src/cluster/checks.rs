@@ -26,19 +26,24 @@ pub fn frame_image(clusters: &Clusters, f: &super::cut::Frame) -> PremulImage {
 }
 
 /// Per-channel colour range of the class views (the sources every texel is
-/// made from), un-premultiplied where coverage is high enough (α ≥ 32) for
-/// the division to be within 4 units.
+/// made from). A texel of coverage A and premultiplied value P holds a
+/// colour within (P ± ½)·255/A; texels with A ≥ 16 add that whole interval
+/// (at most 16 units wide), so colours seen only at thin edges — a trunk,
+/// a twig — count too.
 pub fn source_colour_range(clusters: &Clusters) -> ([u8; 3], [u8; 3]) {
     let (mut lo, mut hi) = ([255u8; 3], [0u8; 3]);
     for f in clusters.classes.iter().flat_map(|c| &c.frames) {
         for t in frame_image(clusters, f)
-            .to_straight()
-            .chunks_exact(4)
-            .filter(|t| t[3] >= 32)
+            .texels
+            .iter()
+            .filter(|t| t[3] >= 16)
         {
+            let a = t[3] as f64;
             for k in 0..3 {
-                lo[k] = lo[k].min(t[k]);
-                hi[k] = hi[k].max(t[k]);
+                let low = ((t[k] as f64 - 0.5) * 255.0 / a).floor().clamp(0.0, 255.0) as u8;
+                let high = ((t[k] as f64 + 0.5) * 255.0 / a).ceil().clamp(0.0, 255.0) as u8;
+                lo[k] = lo[k].min(low);
+                hi[k] = hi[k].max(high);
             }
         }
     }
