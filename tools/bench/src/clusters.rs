@@ -301,3 +301,113 @@ fn select_all(
         );
     }
 }
+
+/// The pictures of docs/algorithms.md#clusters: the five views of every
+/// built-in model, and cluster views baked on the sample region, each over
+/// a light background.
+pub fn pictures(repo: &Path, out: &Path) -> Result<()> {
+    use relevo_core::cluster::bake::{bake, ClassSource};
+    use relevo_core::cluster::checks::frame_image;
+    use relevo_core::cluster::image::PremulImage;
+    use relevo_core::cluster::model::TreeKind;
+
+    /// Paste `images` left to right (bottoms aligned) over a light
+    /// background, `gap` texels apart.
+    fn strip(rows: &[Vec<PremulImage>], gap: usize) -> (Vec<u8>, usize, usize) {
+        let width = rows
+            .iter()
+            .map(|r| r.iter().map(|i| i.width + gap).sum::<usize>() + gap)
+            .max()
+            .unwrap_or(0);
+        let heights: Vec<usize> = rows
+            .iter()
+            .map(|r| r.iter().map(|i| i.height).max().unwrap_or(0))
+            .collect();
+        let height = heights.iter().map(|h| h + gap).sum::<usize>() + gap;
+        let mut rgba: Vec<u8> = [232u8, 238, 240, 255].repeat(width * height);
+        let mut y0 = gap;
+        for (row, row_height) in rows.iter().zip(&heights) {
+            let mut x0 = gap;
+            for image in row {
+                let top = y0 + row_height - image.height;
+                for y in 0..image.height {
+                    for x in 0..image.width {
+                        let t = image.texel(x, y);
+                        let i = ((top + y) * width + x0 + x) * 4;
+                        for k in 0..3 {
+                            let background = rgba[i + k] as u32 * (255 - t[3] as u32) / 255;
+                            rgba[i + k] = (background + t[k] as u32).min(255) as u8;
+                        }
+                    }
+                }
+                x0 += image.width + gap;
+            }
+            y0 += row_height + gap;
+        }
+        (rgba, width, height)
+    }
+    let write = |name: &str, (rgba, w, h): (Vec<u8>, usize, usize)| -> Result<()> {
+        let bytes = relevo_core::raster::png::encode_rgba(&rgba, w, h)?;
+        relevo_core::atomic::write_file(&out.join(name), &bytes)?;
+        println!("{}", out.join(name).display());
+        Ok(())
+    };
+
+    // Every built-in model's views: one class each, baked alone.
+    let sources: Vec<ClassSource> = TreeKind::ALL
+        .iter()
+        .map(|k| ClassSource {
+            name: k.name().into(),
+            source: format!("procedural:{}", k.name()),
+            model: k.model(1),
+        })
+        .collect();
+    let objects = (0..4u32)
+        .map(|class| relevo_core::cluster::quadtree::ClusterObject {
+            foot: [10.0 + 20.0 * class as f32, 10.0, 0.0],
+            diameter: 8.0,
+            height: 8.0,
+            class,
+            row: class,
+        })
+        .collect();
+    let options = BakeOptions {
+        class_frame_px: 128,
+        ..BakeOptions::default()
+    };
+    let kinds = bake(sources, objects, [0.0; 2], 128.0, &options, &|_| {})?;
+    let rows: Vec<Vec<PremulImage>> = kinds
+        .classes
+        .iter()
+        .map(|c| c.frames.iter().map(|f| frame_image(&kinds, f)).collect())
+        .collect();
+    write("impostor_views.png", strip(&rows, 8))?;
+
+    // Cluster views of the sample region: front and top of a few clusters
+    // of growing size.
+    relevo::ingest::gdalio::init();
+    let dir = tempfile_dir()?;
+    let region = Region::load(&repo.join("data/olinda/REGION.toml"))?;
+    let bundle = relevo::prep::prep(&region, &dir.join("olinda.relevo"), true)?.bundle;
+    let (_, clusters) =
+        relevo_core::cluster::store::read(&Bundle::open(&bundle)?)?.context("no clusters")?;
+    let mut rows = Vec::new();
+    for wanted in [4u32, 16, 64] {
+        let node = clusters
+            .tree
+            .nodes
+            .iter()
+            .filter(|n| n.frames != relevo_core::cluster::quadtree::NONE && n.count >= wanted)
+            .min_by_key(|n| n.count)
+            .context("no baked cluster of that size")?;
+        rows.push(
+            [0usize, 1, 3]
+                .iter()
+                .map(|&v| frame_image(&clusters, &clusters.frames[node.frames as usize + v]))
+                .collect(),
+        );
+    }
+    write("cluster_views.png", strip(&rows, 8))?;
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(())
+}

@@ -69,7 +69,8 @@ enum BenchCommand {
     /// (the seed's table 4.4, then 10k–1M objects), selection and bake time.
     #[command(after_help = "Examples:
   relevo-bench clusters
-  relevo-bench clusters --json --runs 5 --max-objects 1000000")]
+  relevo-bench clusters --json --runs 5 --max-objects 1000000
+  relevo-bench clusters --pictures docs/images")]
     Clusters {
         #[command(flatten)]
         common: BenchArgs,
@@ -79,6 +80,9 @@ enum BenchCommand {
         /// Atlas budget of the large-scale bakes, MiB.
         #[arg(long, default_value_t = 256)]
         budget_mib: u64,
+        /// Instead of measuring, write the documentation's pictures here.
+        #[arg(long, value_name = "DIR")]
+        pictures: Option<PathBuf>,
     },
     /// The viewer's renderer: frame time of every mode at 1280×720 and
     /// 1920×1080 on the GPU found (lavapipe without one).
@@ -129,7 +133,11 @@ fn main() -> ExitCode {
             common: a,
             max_objects,
             budget_mib,
-        } => clusters::clusters(&a.repo, a.runs.max(1), max_objects, budget_mib, a.json),
+            pictures,
+        } => match pictures {
+            Some(dir) => clusters::pictures(&a.repo, &dir),
+            None => clusters::clusters(&a.repo, a.runs.max(1), max_objects, budget_mib, a.json),
+        },
         BenchCommand::Ingest(a) => bench::ingest(&a.repo, &a.data, a.runs.max(1), a.json),
         BenchCommand::Render(a) => bench::render(&a.data, a.runs.max(1), a.json),
         BenchCommand::Veg {

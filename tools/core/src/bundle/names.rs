@@ -55,7 +55,7 @@ pub const CLUSTER_OBJECTS: ArtifactName = ArtifactName {
     key: "clusters_objects",
     file: "clusters/objects.bin",
 };
-/// Atlas frames of the baked nodes, 20-byte records.
+/// Atlas frames of the baked nodes, 10-byte records.
 pub const CLUSTER_FRAMES: ArtifactName = ArtifactName {
     key: "clusters_frames",
     file: "clusters/frames.bin",

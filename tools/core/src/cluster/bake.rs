@@ -516,6 +516,12 @@ pub fn pack(sizes: &[[usize; 2]], page_px: usize) -> Result<(Vec<Frame>, Vec<[us
             .then(sizes[b][0].cmp(&sizes[a][0]))
             .then(a.cmp(&b))
     });
+    if page_px > u16::MAX as usize {
+        return Err(Error::Input(format!(
+            "atlas pages of {page_px} texels: at most {} per side",
+            u16::MAX
+        )));
+    }
     let mut frames = vec![Frame::default(); sizes.len()];
     let mut pages: Vec<[usize; 2]> = Vec::new();
     let (mut x, mut y, mut shelf) = (ALIGN, ALIGN, 0usize);
@@ -542,12 +548,14 @@ pub fn pack(sizes: &[[usize; 2]], page_px: usize) -> Result<(Vec<Frame>, Vec<[us
             shelf = 0;
         }
         let page = pages.len() - 1;
+        let too_many = || Error::Input(format!("more than {} atlas pages", u16::MAX));
         frames[i] = Frame {
-            page: page as u32,
-            x: x as u32,
-            y: y as u32,
-            width: w as u32,
-            height: h as u32,
+            page: u16::try_from(page).map_err(|_| too_many())?,
+            // All below `page_px`, which fits 16 bits (checked above).
+            x: x as u16,
+            y: y as u16,
+            width: w as u16,
+            height: h as u16,
         };
         pages[page][1] = pages[page][1].max(y + h + ALIGN);
         shelf = shelf.max(h);

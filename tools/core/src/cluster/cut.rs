@@ -191,7 +191,7 @@ pub enum Drawn {
     Node(u32),
 }
 
-/// An atlas frame: page and texel rectangle.
+/// An atlas frame: page and texel rectangle (of page level 0).
 #[repr(C)]
 #[derive(
     Debug,
@@ -206,11 +206,11 @@ pub enum Drawn {
     serde::Deserialize,
 )]
 pub struct Frame {
-    pub page: u32,
-    pub x: u32,
-    pub y: u32,
-    pub width: u32,
-    pub height: u32,
+    pub page: u16,
+    pub x: u16,
+    pub y: u16,
+    pub width: u16,
+    pub height: u16,
 }
 
 /// One view of an instance: which, how much of it (cross-fade weight),
@@ -471,16 +471,22 @@ pub fn frustum_mask(planes: &[[f64; 4]; 6], mask: u8, min: [f32; 3], max: [f32; 
 /// Distance from `eye` to the nearest point of the box, metres (0 inside).
 #[inline]
 pub fn box_distance(eye: DVec3, min: [f32; 3], max: [f32; 3]) -> f64 {
+    box_distance_squared(eye, min, max).sqrt()
+}
+
+/// [`box_distance`] squared.
+#[inline]
+pub fn box_distance_squared(eye: DVec3, min: [f32; 3], max: [f32; 3]) -> f64 {
     let gap = |k: usize, e: f64| (min[k] as f64 - e).max(e - max[k] as f64).max(0.0);
-    let d = DVec3::new(gap(0, eye.x), gap(1, eye.y), gap(2, eye.z));
-    d.length()
+    let (x, y, z) = (gap(0, eye.x), gap(1, eye.y), gap(2, eye.z));
+    x * x + y * y + z * z
 }
 
 /// Frustum and distance of one camera, computed once per selection.
 struct View<'c> {
     camera: &'c Camera,
     planes: [[f64; 4]; 6],
-    last: f64,
+    last_squared: f64,
     /// Screen pixels per metre at 1 m from the eye.
     pixels_per_m_at_1m: f64,
     choice: ViewChoice,
@@ -491,7 +497,7 @@ impl<'c> View<'c> {
         View {
             camera,
             planes: camera.frustum_planes(),
-            last: options.last_distance(),
+            last_squared: options.last_distance().powi(2),
             pixels_per_m_at_1m: camera.plane_distance_px(),
             choice: ViewChoice::new(options),
         }
@@ -507,8 +513,8 @@ impl<'c> View<'c> {
     #[inline]
     fn sees_within(&self, mask: u8, min: [f32; 3], max: [f32; 3]) -> Option<(f64, u8)> {
         let straddled = frustum_mask(&self.planes, mask, min, max)?;
-        let d = box_distance(self.camera.position, min, max);
-        (d <= self.last).then_some((d, straddled))
+        let d2 = box_distance_squared(self.camera.position, min, max);
+        (d2 <= self.last_squared).then(|| (d2.sqrt(), straddled))
     }
 }
 
@@ -725,7 +731,7 @@ impl Selection for Blobs<'_> {
 pub struct QuadtreeCut<'a>(pub &'a Clusters);
 
 /// Depth at which the walk splits into tasks run in parallel.
-const SPLIT_DEPTH: u32 = 3;
+const SPLIT_DEPTH: u32 = 5;
 
 impl Selection for QuadtreeCut<'_> {
     fn name(&self) -> &'static str {

@@ -3,7 +3,7 @@
 //! - `index.json`: options, classes with their frames, pages, the bake
 //!   report;
 //! - `nodes.bin`, `objects.bin`, `frames.bin`: little-endian records of
-//!   [`Node`], [`ClusterObject`] and [`Frame`] (68, 28 and 20 bytes);
+//!   [`Node`], [`ClusterObject`] and [`Frame`] (68, 28 and 10 bytes);
 //! - `atlas_NNN.png`: the pages, level 0, RGBA8 **premultiplied**.
 //!
 //! Everything is deterministic, so the files enter the golden hashes.
@@ -309,7 +309,8 @@ pub fn validate(bundle: &Bundle) -> Vec<String> {
         .chain(clusters.classes.iter().flat_map(|c| c.frames.iter()));
     for f in all_frames {
         let inside = index.pages.get(f.page as usize).is_some_and(|p| {
-            (f.x + f.width) as usize <= p.width && (f.y + f.height) as usize <= p.height
+            f.x as usize + f.width as usize <= p.width
+                && f.y as usize + f.height as usize <= p.height
         });
         if !inside {
             report(format!("frame {f:?} lies outside its page"));
