@@ -107,7 +107,7 @@ fn seed_table(bundle: &Bundle, database: &[VegObject], json_lines: bool) -> Resu
                 &mask,
                 &BTreeMap::new(),
                 &options,
-                &|_| {},
+                &|_, _| {},
             )?;
             let mut list = DrawList::default();
             if config == 1 {
@@ -206,7 +206,7 @@ fn large(
             &mask,
             &BTreeMap::new(),
             &options,
-            &|_| {},
+            &|_, _| {},
         )?;
         let bake_ms = start.elapsed().as_secs_f64() * 1e3;
         let baked = clusters.frames.len() / 5;
@@ -375,7 +375,7 @@ pub fn pictures(repo: &Path, out: &Path) -> Result<()> {
         class_frame_px: 128,
         ..BakeOptions::default()
     };
-    let kinds = bake(sources, objects, [0.0; 2], 128.0, &options, &|_| {})?;
+    let kinds = bake(sources, objects, [0.0; 2], 128.0, &options, &|_, _| {})?;
     let rows: Vec<Vec<PremulImage>> = kinds
         .classes
         .iter()

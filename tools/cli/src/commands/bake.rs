@@ -80,9 +80,18 @@ pub fn bake_with_progress(
     options: &BakeOptions,
 ) -> Result<(Clusters, usize)> {
     let bar = progress::bar(0, "clusters");
-    let result = bake_database(database, frame, heights, mask, models, options, &|n| {
-        bar.inc(n);
-    });
+    let result = bake_database(
+        database,
+        frame,
+        heights,
+        mask,
+        models,
+        options,
+        &|n, total| {
+            bar.set_length(total);
+            bar.inc(n);
+        },
+    );
     bar.finish_and_clear();
     Ok(result?)
 }

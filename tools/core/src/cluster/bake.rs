@@ -149,14 +149,14 @@ fn frame_bytes([w, h]: [usize; 2]) -> u64 {
 
 /// Bake the class impostors and the quadtree over `objects` (terrain
 /// frame, classes indexing `classes`) inside the square at `origin` with
-/// side `side_m`. `progress` is told how many clusters were composed.
+/// side `side_m`. `progress(done, total)` is told of each cluster composed.
 pub fn bake(
     classes: Vec<ClassSource>,
     objects: Vec<ClusterObject>,
     origin: [f32; 2],
     side_m: f32,
     options: &BakeOptions,
-    progress: &(dyn Fn(u64) + Sync),
+    progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Result<Clusters> {
     options.cut.check().map_err(Error::Input)?;
     if objects.is_empty() {
@@ -359,7 +359,7 @@ pub fn bake(
             let sizes = plans[i].unwrap_or_default();
             let views = ImpostorView::ALL
                 .map(|v| compose_view(node, members, v, sizes[v as usize], &class_mips));
-            progress(1);
+            progress(1, baked_nodes.len() as u64);
             views
         })
         .collect();
@@ -657,7 +657,7 @@ pub(crate) mod tests {
             [0.0; 2],
             2048.0,
             &small_options(),
-            &|_| {},
+            &|_, _| {},
         )
         .unwrap()
     }
@@ -720,7 +720,15 @@ pub(crate) mod tests {
             budget_bytes: 10_000,
             ..small_options()
         };
-        let e = bake(sources(), scattered(50), [0.0; 2], 2048.0, &tiny, &|_| {}).unwrap_err();
+        let e = bake(
+            sources(),
+            scattered(50),
+            [0.0; 2],
+            2048.0,
+            &tiny,
+            &|_, _| {},
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("budget of 10000 bytes"), "{e}");
         let e = bake(
             sources(),
@@ -728,7 +736,7 @@ pub(crate) mod tests {
             [0.0; 2],
             2048.0,
             &small_options(),
-            &|_| {},
+            &|_, _| {},
         )
         .unwrap_err();
         assert!(e.to_string().contains("empty"), "{e}");
@@ -740,7 +748,15 @@ pub(crate) mod tests {
             budget_bytes: full.report.atlas_bytes / 2,
             ..small_options()
         };
-        let cut = bake(sources(), scattered(600), [0.0; 2], 2048.0, &half, &|_| {}).unwrap();
+        let cut = bake(
+            sources(),
+            scattered(600),
+            [0.0; 2],
+            2048.0,
+            &half,
+            &|_, _| {},
+        )
+        .unwrap();
         let r = &cut.report;
         assert!(r.atlas_bytes <= half.budget_bytes);
         assert!(r.density_cap.is_some() && r.sharp_from_m.is_some());

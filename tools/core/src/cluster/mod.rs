@@ -141,7 +141,7 @@ pub fn bake_database(
     mask: &[u8],
     models: &BTreeMap<String, String>,
     options: &BakeOptions,
-    progress: &(dyn Fn(u64) + Sync),
+    progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Result<(Clusters, usize)> {
     if database.is_empty() {
         return Err(Error::Input(
