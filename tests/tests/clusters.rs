@@ -5,7 +5,6 @@
 //! an OBJ file named in REGION.toml.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use glam::DVec3;
 use relevo_core::bundle::Bundle;
 use relevo_core::camera::Camera;
 use relevo_core::cluster::checks;
@@ -27,33 +26,14 @@ fn olinda() -> (tempfile::TempDir, Clusters) {
     (dir, clusters)
 }
 
-/// Cameras over the 11.5 km region and around it: low and high, every
-/// heading, looking level to steeply down.
+/// Cameras over the 11.5 km region and around it, low and high.
 fn cameras(count: usize) -> Vec<Camera> {
-    let mut state = 0x0DDB_1A5E_5BAD_5EEDu64;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
-    (0..count)
-        .map(|_| Camera {
-            position: DVec3::new(
-                next() * 16_000.0 - 2_000.0,
-                next() * 16_000.0 - 2_000.0,
-                50.0 + next() * 3_000.0,
-            ),
-            heading_deg: next() * 360.0,
-            pitch_deg: -next() * 85.0,
-            incl_px: 540.0,
-            fov_x_deg: 30.0 + next() * 70.0,
-            width: 1920,
-            height: 1080,
-            near_m: 1.0,
-            far_m: 60_000.0,
-        })
-        .collect()
+    checks::random_cameras(
+        count,
+        11,
+        [-2_000.0, -2_000.0, 50.0],
+        [14_000.0, 14_000.0, 3_050.0],
+    )
 }
 
 #[test]

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{relevo, relevo_ok, repo};
+use common::{relevo, relevo_ok, repo, sample_bundle};
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
@@ -35,21 +35,10 @@ fn cluster_files(bundle: &Path) -> BTreeMap<String, Vec<u8>> {
         .collect()
 }
 
-fn olinda(dir: &Path) -> std::path::PathBuf {
-    let out = dir.join("olinda.relevo");
-    relevo_ok([
-        "prep".as_ref(),
-        repo("data/olinda/REGION.toml").as_os_str(),
-        "--out".as_ref(),
-        out.as_os_str(),
-    ]);
-    out
-}
-
 #[test]
 fn bake_repeats_prep_byte_for_byte_on_any_thread_count() {
     let dir = tempfile::tempdir().unwrap();
-    let bundle = olinda(dir.path());
+    let bundle = sample_bundle(dir.path());
     let info = relevo_ok(["info".as_ref(), bundle.as_os_str()]);
     assert!(info.contains("clusters     11769 objects"), "{info}");
     assert!(
@@ -108,7 +97,7 @@ fn bake_repeats_prep_byte_for_byte_on_any_thread_count() {
 #[test]
 fn bad_models_and_budgets_are_refused_leaving_the_bundle_as_it_was() {
     let dir = tempfile::tempdir().unwrap();
-    let bundle = olinda(dir.path());
+    let bundle = sample_bundle(dir.path());
     let before = contents(&bundle);
     let write = |name: &str, bytes: &[u8]| {
         let p = dir.path().join(name);

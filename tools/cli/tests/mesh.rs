@@ -36,17 +36,6 @@ fn khronos_validate(path: &Path) -> Value {
     report
 }
 
-fn sample_bundle(dir: &Path) -> std::path::PathBuf {
-    let out = dir.join("olinda.relevo");
-    relevo_ok([
-        "prep".as_ref(),
-        repo("data/olinda/REGION.toml").as_os_str(),
-        "--out".as_ref(),
-        out.as_os_str(),
-    ]);
-    out
-}
-
 #[test]
 fn sample_region_exports_valid_textured_gltf() {
     let d = tempfile::tempdir().unwrap();

@@ -40,6 +40,18 @@ where
     String::from_utf8_lossy(&out.stdout).to_string()
 }
 
+/// `relevo prep` of the sample region into `dir/olinda.relevo`.
+pub fn sample_bundle(dir: &Path) -> PathBuf {
+    let out = dir.join("olinda.relevo");
+    relevo_ok([
+        "prep".as_ref(),
+        repo("data/olinda/REGION.toml").as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    out
+}
+
 /// Run a GDAL command-line program (gdal-bin), asserting success.
 pub fn gdal_tool(program: &str, args: &[&str]) {
     let out = Command::new(program)

@@ -603,13 +603,8 @@ pub(crate) mod tests {
     /// Objects scattered over a 2 km square in clumps, on a gentle slope,
     /// of two classes.
     pub(crate) fn scattered(count: usize) -> Vec<ClusterObject> {
-        let mut state = 0x2545_F491_4F6C_DD1Du64;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut random = checks::uniform(0x2545_F491_4F6C_DD1D);
+        let mut next = move || random() as f32;
         (0..count)
             .map(|i| {
                 let (cx, cy) = (

@@ -180,3 +180,39 @@ pub fn composition_difference(clusters: &Clusters, models: &[Model], nodes: usiz
     }
     (diff / count.max(1) as f64, count)
 }
+
+/// A deterministic stream of uniform numbers in [0, 1) (xorshift64), for
+/// test scenes and cameras that are the same on every run.
+pub fn uniform(seed: u64) -> impl FnMut() -> f64 {
+    let mut state = seed.max(1);
+    move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// `count` cameras with eyes uniform in the box `[min, max]` (terrain
+/// frame, metres), any heading, looking from level to 85° down, fields of
+/// view of 30–100°, 1920×1080: what a cut must be right for.
+pub fn random_cameras(count: usize, seed: u64, min: [f64; 3], max: [f64; 3]) -> Vec<Camera> {
+    let mut next = uniform(seed);
+    (0..count)
+        .map(|_| {
+            let mut at = |k: usize| min[k] + next() * (max[k] - min[k]);
+            let position = glam::DVec3::new(at(0), at(1), at(2));
+            Camera {
+                position,
+                heading_deg: next() * 360.0,
+                pitch_deg: -next() * 85.0,
+                incl_px: 540.0,
+                fov_x_deg: 30.0 + next() * 70.0,
+                width: 1920,
+                height: 1080,
+                near_m: 1.0,
+                far_m: 60_000.0,
+            }
+        })
+        .collect()
+}

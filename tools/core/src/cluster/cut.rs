@@ -952,33 +952,9 @@ mod selection_tests {
     use crate::cluster::checks;
     use std::collections::HashSet;
 
-    /// Cameras over and around the 2 km test square, headings and pitches
-    /// all round.
+    /// Cameras over and around the 2 km test square.
     fn cameras(count: usize) -> Vec<Camera> {
-        let mut state = 0x9E37_79B9_7F4A_7C15u64;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
-        (0..count)
-            .map(|_| Camera {
-                position: DVec3::new(
-                    next() * 3000.0 - 500.0,
-                    next() * 3000.0 - 500.0,
-                    120.0 + next() * 600.0,
-                ),
-                heading_deg: next() * 360.0,
-                pitch_deg: -next() * 80.0,
-                incl_px: 540.0,
-                fov_x_deg: 40.0 + next() * 50.0,
-                width: 1920,
-                height: 1080,
-                near_m: 1.0,
-                far_m: 50_000.0,
-            })
-            .collect()
+        checks::random_cameras(count, 7, [-500.0, -500.0, 120.0], [2500.0, 2500.0, 720.0])
     }
 
     #[test]
