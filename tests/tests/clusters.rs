@@ -145,3 +145,33 @@ fn a_region_names_an_obj_model_for_its_class() {
         "green leaves"
     );
 }
+
+/// `validate` checks the clusters against the database: a database object
+/// moved after the bake is reported.
+#[test]
+fn validate_finds_clusters_that_disagree_with_the_database() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = prep_region(
+        &repo("data/olinda/REGION.toml"),
+        &dir.path().join("olinda.relevo"),
+    );
+    let bundle = Bundle::open(&out).unwrap();
+    let mut database = bundle.vegetation().unwrap().unwrap();
+    database[10].x += 100.0;
+    let (writer, mut manifest) =
+        relevo_core::bundle::BundleWriter::rewrite(&bundle, |key| key != "vegetation").unwrap();
+    let csv = relevo_core::veg::db::to_csv(&database);
+    manifest.artifacts.insert(
+        "vegetation".into(),
+        writer.write_file("vegetation.csv", csv.as_bytes()).unwrap(),
+    );
+    drop(bundle);
+    let out = writer.commit(&manifest).unwrap();
+    let problems = relevo_core::bundle::validate(&Bundle::open(&out).unwrap());
+    assert!(
+        problems
+            .iter()
+            .any(|p| p.contains("row 10") && p.contains("differs from the database")),
+        "{problems:?}"
+    );
+}

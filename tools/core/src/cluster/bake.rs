@@ -329,7 +329,8 @@ pub fn bake(
         .is_finite()
         .then(|| pixels_per_m_at_1m / (cap * magnification));
     if let Some(d) = sharp_from_m {
-        tracing::warn!(
+        // The report says it too (`relevo info`, `bake`): not a warning.
+        tracing::info!(
             budget = options.budget_bytes,
             "the atlas budget caps cluster textures at {cap:.3} texels/m: clusters are sharp from {d:.0} m; nearer, smaller clusters give way to objects one by one"
         );
