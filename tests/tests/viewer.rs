@@ -218,6 +218,66 @@ fn raycast_depth_agrees_with_the_full_resolution_mesh() {
     assert!(disagree * 100 <= pixels, "{disagree} pixels disagree");
 }
 
+/// The sample region's vegetation, from relevo-core's quadtree cut, in
+/// mesh and raycast modes: every view of the draw list becomes one GPU
+/// instance, and impostors show exactly where they are nearer than the
+/// terrain — the pixels of the composited frame that differ from the
+/// terrain alone are those where the vegetation drawn alone is in front.
+#[test]
+fn vegetation_is_drawn_from_the_cut_and_composited_through_the_depth() {
+    let d = tempfile::tempdir().unwrap();
+    let mut scene = olinda(d.path());
+    let (device, queue) = lavapipe();
+    let pose = relevo_core::scene::CameraPose::parse("292000,9113000,0,30,135").unwrap();
+    let mut flight = Flight::from_pose(&scene, &pose, SIZE[1]).unwrap();
+    flight.position.z = scene
+        .ground_height(flight.position.x, flight.position.y)
+        .unwrap()
+        + 120.0;
+    for mode in [Mode::Mesh, Mode::Raycast] {
+        let settings = Settings {
+            mode,
+            tau_px: 1.0,
+            ..Default::default()
+        };
+        let (with, stats) =
+            render_once(&device, &queue, &mut scene, &flight, &settings, SIZE, false).unwrap();
+        let list = &scene.vegetation.as_ref().unwrap().list;
+        let views: usize = list.instances().map(|i| i.views().len()).sum();
+        assert_eq!(
+            stats.impostor_views, views,
+            "{mode}: one GPU instance per view"
+        );
+        assert_eq!(stats.impostors, list.len());
+        assert!(stats.vegetation_represented > 1000, "{mode}: {stats:?}");
+        let off = Settings {
+            objects: false,
+            ..settings.clone()
+        };
+        let (terrain, _) =
+            render_once(&device, &queue, &mut scene, &flight, &off, SIZE, false).unwrap();
+        let alone = Settings {
+            terrain: false,
+            ..settings.clone()
+        };
+        let (vegetation, _) =
+            render_once(&device, &queue, &mut scene, &flight, &alone, SIZE, false).unwrap();
+        let (mut shown, mut mismatched) = (0usize, 0usize);
+        for i in 0..with.depth.len() {
+            let differs = with.rgba[4 * i..4 * i + 4] != terrain.rgba[4 * i..4 * i + 4];
+            let in_front = vegetation.depth[i] < terrain.depth[i];
+            shown += differs as usize;
+            mismatched += (differs != in_front) as usize;
+        }
+        eprintln!("{mode}: {shown} vegetation pixels, {mismatched} where the depth says otherwise");
+        assert!(shown > 2000, "{mode}: {shown} vegetation pixels");
+        assert!(
+            mismatched * 100 <= shown,
+            "{mode}: {mismatched} of {shown} pixels mismatched"
+        );
+    }
+}
+
 /// A building placed behind a ridge of the Alps is hidden exactly where
 /// the terrain is in front of it, in both modes: the pixels where the
 /// composited frame shows the building are those where the building alone

@@ -37,7 +37,7 @@ pub const KEYS: &[(&str, &str)] = &[
     ("t", "drape texture"),
     ("g", "geomorphing"),
     ("f", "terrain following"),
-    ("F1", "objects"),
+    ("F1", "objects and vegetation"),
     ("c", "copy the camera string"),
     ("Home", "home view"),
     ("h", "this help"),
@@ -347,7 +347,7 @@ impl ViewerApp {
             ui.checkbox(&mut f.follow_terrain, "terrain following (f)");
             ui.add(egui::Slider::new(&mut f.fov_x_deg, 20.0..=120.0).text("field of view (°)"));
         }
-        ui.checkbox(&mut self.settings.objects, "objects (F1)");
+        ui.checkbox(&mut self.settings.objects, "objects and vegetation (F1)");
         ui.checkbox(&mut self.settings.terrain, "terrain");
         ui.separator();
         let label = ui.label("Camera X,Y,Z,HEADING[,INCL]");

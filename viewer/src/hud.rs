@@ -60,6 +60,19 @@ pub fn lines(r: &Readings) -> Vec<String> {
         Some(o) => format!("objects off ({} features)", o.features),
     };
     lines.push(format!("{objects}   h: help"));
+    if let Some(v) = r.scene.and_then(|scene| scene.vegetation.as_ref()) {
+        lines.push(if s.objects {
+            format!(
+                "vegetation: {} objects represented, {} impostors drawn ({} views), cut {:.2} ms",
+                r.stats.vegetation_represented,
+                r.stats.impostors,
+                r.stats.impostor_views,
+                r.stats.cut_ms
+            )
+        } else {
+            format!("vegetation off ({} objects)", v.clusters.tree.objects.len())
+        });
+    }
     lines
 }
 

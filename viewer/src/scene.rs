@@ -1,10 +1,13 @@
 //! The bundle the viewer shows, opened once through relevo-core: its frame,
 //! mapped heights and mask, the LP hierarchy over the mapped array, the
-//! raycaster's terrain (owned for the session) and the drape. Everything the
+//! raycaster's terrain (owned for the session), the drape and the
+//! vegetation clusters. Everything the
 //! viewer computes about terrain goes through these core types.
 
 use anyhow::{Context, Result};
 use relevo_core::bundle::{Array, Bundle, LpArray};
+use relevo_core::cluster::cut::{CutOptions, DrawList, QuadtreeCut, Selection};
+use relevo_core::cluster::{store, Clusters};
 use relevo_core::geo::TerrainFrame;
 use relevo_core::horizon::{self, Terrain};
 use relevo_core::lp::refine::Refiner;
@@ -37,6 +40,24 @@ pub struct Scene {
     pub raycaster: horizon::Renderer,
     /// Objects placed on the terrain, when a placement file was loaded.
     pub objects: Option<ObjectMesh>,
+    /// The bundle's vegetation clusters with the cut they were baked for,
+    /// and the draw list the cut refills each frame.
+    pub vegetation: Option<Vegetation>,
+}
+
+/// Vegetation to draw: relevo-core's clusters, the cut's options and the
+/// draw list reused across frames.
+pub struct Vegetation {
+    pub clusters: Clusters,
+    pub cut: CutOptions,
+    pub list: DrawList,
+}
+
+impl Vegetation {
+    /// Choose what to draw from `camera` (relevo-core's quadtree cut).
+    pub fn select(&mut self, camera: &relevo_core::camera::Camera) {
+        QuadtreeCut(&self.clusters).select(camera, &self.cut, &mut self.list);
+    }
 }
 
 impl Scene {
@@ -46,6 +67,11 @@ impl Scene {
         let frame = bundle.frame();
         let lp = bundle.lp()?;
         let drape = bundle.drape()?;
+        let vegetation = store::read(&bundle)?.map(|(index, clusters)| Vegetation {
+            clusters,
+            cut: index.options.cut,
+            list: DrawList::default(),
+        });
         let color = drape.as_ref().and_then(|d| d.color_source(&frame));
         let terrain = Terrain::new(
             frame.side,
@@ -92,6 +118,7 @@ impl Scene {
             refiner: Refiner::new(),
             raycaster: horizon::Renderer::default(),
             objects: None,
+            vegetation,
         })
     }
 
@@ -101,6 +128,12 @@ impl Scene {
         let mesh = read_placement(path, &self.frame, &|x, y| terrain.surface(x, y))?;
         self.objects = Some(mesh);
         Ok(())
+    }
+
+    /// Whether there is anything to draw over the terrain: placed objects
+    /// or vegetation.
+    pub fn has_objects(&self) -> bool {
+        self.objects.is_some() || self.vegetation.is_some()
     }
 
     /// Side of the terrain frame's square, metres.

@@ -7,6 +7,7 @@ mod mesh;
 mod objects;
 mod raycast;
 mod targets;
+mod vegetation;
 mod zbuffer;
 
 pub use targets::{Readback, Targets, COLOUR_FORMAT, DEPTH_FORMAT};
@@ -213,7 +214,7 @@ pub struct Settings {
     pub texture: bool,
     /// The raycaster's options (bands, fixed point, prefilter).
     pub raycast: RenderOptions,
-    /// Draw the scene's objects (the seed's F1).
+    /// Draw the scene's objects and vegetation (the seed's F1).
     pub objects: bool,
     /// Draw the terrain (off: objects alone, to check composition).
     pub terrain: bool,
@@ -249,6 +250,14 @@ pub struct FrameStats {
     pub triangles: usize,
     /// Object triangles submitted to the GPU.
     pub object_triangles: usize,
+    /// Vegetation objects the impostors stand for, and the impostors drawn
+    /// (quadtree clusters and single objects; a view cross-fading into
+    /// another counts twice in `impostor_views`).
+    pub vegetation_represented: usize,
+    pub impostors: usize,
+    pub impostor_views: usize,
+    /// relevo-core's cut, milliseconds.
+    pub cut_ms: f64,
     /// Refinement (mesh mode), milliseconds.
     pub refine_ms: f64,
     /// Building and uploading the vertex buffer (mesh mode).
@@ -271,6 +280,8 @@ pub struct Renderer {
     zbuffer: zbuffer::ZBufferPass,
     /// Built on the first frame that draws objects.
     objects: Option<objects::ObjectPass>,
+    /// Built on the first frame that draws vegetation.
+    vegetation: Option<vegetation::VegetationPass>,
     /// What the targets hold: the camera, settings and objects (vertex
     /// count) of the last frame and its figures. A frame asking for the
     /// same is already drawn.
@@ -292,6 +303,7 @@ impl Renderer {
             raycast: raycast::RaycastPass::new(device),
             zbuffer: zbuffer::ZBufferPass::new(device),
             objects: None,
+            vegetation: None,
             drawn: None,
         }
     }
@@ -328,7 +340,7 @@ impl Renderer {
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("relevo-view frame"),
         });
-        let objects_drawn = settings.objects && scene.objects.is_some();
+        let objects_drawn = settings.objects && scene.has_objects();
         match settings.mode {
             _ if !settings.terrain => {
                 self.targets
@@ -367,6 +379,19 @@ impl Renderer {
             pass.draw(&mut encoder, &self.targets);
             stats.object_triangles = objects.triangles();
         }
+        if let Some(vegetation) = scene.vegetation.as_mut().filter(|_| settings.objects) {
+            let start = Instant::now();
+            vegetation.select(camera);
+            stats.cut_ms = start.elapsed().as_secs_f64() * 1e3;
+            let pass = self.vegetation.get_or_insert_with(|| {
+                vegetation::VegetationPass::new(device, queue, &vegetation.clusters)
+            });
+            pass.prepare(device, queue, &vegetation.list, camera);
+            pass.draw(&mut encoder, &self.targets);
+            stats.vegetation_represented = vegetation.list.represented;
+            stats.impostors = vegetation.list.len();
+            stats.impostor_views = pass.drawn();
+        }
         let start = Instant::now();
         queue.submit([encoder.finish()]);
         stats.submit_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -377,7 +402,7 @@ impl Renderer {
     /// The depth of the last frame when it was a terrain-only raycast:
     /// exactly the CPU depth buffer (not uploaded for such frames).
     pub fn raycast_depth<'a>(&self, scene: &'a Scene, settings: &Settings) -> Option<&'a [f32]> {
-        let objects_drawn = settings.objects && scene.objects.is_some();
+        let objects_drawn = settings.objects && scene.has_objects();
         (settings.mode == Mode::Raycast && settings.terrain && !objects_drawn)
             .then(|| scene.raycaster.frame().depth.as_slice())
     }

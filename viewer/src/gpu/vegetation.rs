@@ -1,0 +1,285 @@
+//! The vegetation pass: the bundle's impostor atlases as one mip-mapped
+//! texture array, and per frame one GPU instance per view of each
+//! instance of relevo-core's quadtree cut, drawn after the terrain and
+//! depth-tested against it. The instance buffer is reused across frames.
+
+use super::targets::Targets;
+use super::{eye_relative_view_projection, COLOUR_FORMAT};
+use bytemuck::{Pod, Zeroable};
+use eframe::egui_wgpu::wgpu;
+use relevo_core::camera::Camera;
+use relevo_core::cluster::bake::MIP_LEVELS;
+use relevo_core::cluster::cut::DrawList;
+use relevo_core::cluster::views::ImpostorView;
+use relevo_core::cluster::Clusters;
+
+/// One view of one impostor, as the shader reads it.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct GpuImpostor {
+    /// Foot relative to the eye, metres.
+    foot: [f32; 3],
+    /// 0: side view (billboard), 1: top view (shell texture).
+    kind: u32,
+    facing: [f32; 2],
+    size: [f32; 2],
+    top: f32,
+    /// The pixels' dither thresholds this view takes: [from, to).
+    share: [f32; 2],
+    uv: [f32; 4],
+    page: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct Uniforms {
+    view_proj: [[f32; 4]; 4],
+}
+
+pub struct VegetationPass {
+    pipeline: wgpu::RenderPipeline,
+    bind_group: wgpu::BindGroup,
+    uniforms: wgpu::Buffer,
+    instance_buffer: wgpu::Buffer,
+    instances: Vec<GpuImpostor>,
+    /// Texels of the atlas array's level 0 (pages are padded to it).
+    atlas_size: [f32; 2],
+}
+
+impl VegetationPass {
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, clusters: &Clusters) -> Self {
+        let (atlas, atlas_size) = upload_atlas(device, queue, clusters);
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("impostor sampler"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            ..Default::default()
+        });
+        let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("vegetation uniforms"),
+            size: size_of::<Uniforms>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("vegetation bindings"),
+            entries: &[
+                super::uniform_entry(),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D2Array,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 2,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
+            ],
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("vegetation bindings"),
+            layout: &layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: uniforms.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&atlas),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::Sampler(&sampler),
+                },
+            ],
+        });
+        let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("vegetation.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("vegetation.wgsl").into()),
+        });
+        let attributes = wgpu::vertex_attr_array![
+            0 => Float32x3, 1 => Uint32, 2 => Float32x2, 3 => Float32x2,
+            4 => Float32, 5 => Float32x2, 6 => Float32x4, 7 => Uint32
+        ];
+        let pipeline = super::pipeline(
+            device,
+            "vegetation",
+            &shader,
+            &layout,
+            Some(wgpu::VertexBufferLayout {
+                array_stride: size_of::<GpuImpostor>() as u64,
+                step_mode: wgpu::VertexStepMode::Instance,
+                attributes: &attributes,
+            }),
+            wgpu::PrimitiveTopology::TriangleStrip,
+            "fs_main",
+            (true, wgpu::CompareFunction::Less),
+        );
+        VegetationPass {
+            pipeline,
+            bind_group,
+            uniforms,
+            instance_buffer: super::vertex_buffer(device, "impostors", 4),
+            instances: Vec::new(),
+            atlas_size,
+        }
+    }
+
+    /// Upload one GPU instance per view of every instance in `list`, relative
+    /// to the eye; the buffer grows when a frame needs more, never shrinks.
+    pub fn prepare(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        list: &DrawList,
+        camera: &Camera,
+    ) {
+        let eye = camera.position;
+        let [tw, th] = self.atlas_size;
+        self.instances.clear();
+        for instance in list.instances() {
+            let foot = [
+                (instance.foot[0] as f64 - eye.x) as f32,
+                (instance.foot[1] as f64 - eye.y) as f32,
+                (instance.foot[2] as f64 - eye.z) as f32,
+            ];
+            let mut from = 0.0;
+            for view in instance.views() {
+                let f = view.frame;
+                let to = from + view.weight;
+                self.instances.push(GpuImpostor {
+                    foot,
+                    kind: (view.view == ImpostorView::Top) as u32,
+                    facing: instance.facing,
+                    size: view.size,
+                    top: instance.top_m,
+                    share: [from, to],
+                    uv: [
+                        f.x as f32 / tw,
+                        f.y as f32 / th,
+                        (f.x + f.width) as f32 / tw,
+                        (f.y + f.height) as f32 / th,
+                    ],
+                    page: f.page as u32,
+                });
+                from = to;
+            }
+            // The last view takes the rounding of the weights.
+            if let Some(last) = self.instances.last_mut() {
+                last.share[1] = last.share[1].max(1.0);
+            }
+        }
+        let bytes: &[u8] = bytemuck::cast_slice(&self.instances);
+        if bytes.len() as u64 > self.instance_buffer.size() {
+            self.instance_buffer = super::vertex_buffer(
+                device,
+                "impostors",
+                (bytes.len() as u64).next_power_of_two(),
+            );
+        }
+        queue.write_buffer(&self.instance_buffer, 0, bytes);
+        let uniforms = Uniforms {
+            view_proj: eye_relative_view_projection(camera),
+        };
+        queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&uniforms));
+    }
+
+    /// GPU instances of the last frame (views, not objects).
+    pub fn drawn(&self) -> usize {
+        self.instances.len()
+    }
+
+    /// Draw over the terrain already in the targets.
+    pub fn draw(&self, encoder: &mut wgpu::CommandEncoder, targets: &Targets) {
+        if self.instances.is_empty() {
+            return;
+        }
+        let mut pass = targets.begin(encoder, None, "vegetation");
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        pass.set_vertex_buffer(0, self.instance_buffer.slice(..));
+        pass.draw(0..4, 0..self.instances.len() as u32);
+    }
+}
+
+/// The atlas pages as one texture array (pages padded to the largest),
+/// each layer with relevo-core's premultiplied mip chain.
+fn upload_atlas(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    clusters: &Clusters,
+) -> (wgpu::TextureView, [f32; 2]) {
+    let width = clusters
+        .pages
+        .iter()
+        .map(|p| p.width)
+        .max()
+        .unwrap_or(1)
+        .max(1) as u32;
+    let height = clusters
+        .pages
+        .iter()
+        .map(|p| p.height)
+        .max()
+        .unwrap_or(1)
+        .max(1) as u32;
+    let layers = clusters.pages.len().max(1) as u32;
+    let levels = (MIP_LEVELS as u32).min(32 - width.min(height).leading_zeros());
+    let texture = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("impostor atlas"),
+        size: wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: layers,
+        },
+        mip_level_count: levels,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: COLOUR_FORMAT,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    for (layer, page) in clusters.pages.iter().enumerate() {
+        for (mip, image) in page.mip_chain(levels as usize).iter().enumerate() {
+            queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &texture,
+                    mip_level: mip as u32,
+                    origin: wgpu::Origin3d {
+                        x: 0,
+                        y: 0,
+                        z: layer as u32,
+                    },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                image.bytes(),
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(4 * image.width as u32),
+                    rows_per_image: Some(image.height as u32),
+                },
+                wgpu::Extent3d {
+                    width: image.width as u32,
+                    height: image.height as u32,
+                    depth_or_array_layers: 1,
+                },
+            );
+        }
+    }
+    let view = texture.create_view(&wgpu::TextureViewDescriptor {
+        dimension: Some(wgpu::TextureViewDimension::D2Array),
+        ..Default::default()
+    });
+    (view, [width as f32, height as f32])
+}
