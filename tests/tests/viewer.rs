@@ -275,6 +275,30 @@ fn vegetation_is_drawn_from_the_cut_and_composited_through_the_depth() {
             mismatched * 100 <= shown,
             "{mode}: {mismatched} of {shown} pixels mismatched"
         );
+
+        // The plain list draws every object one by one: the clusters stand
+        // in for them with about the same coverage, with far fewer draws.
+        let list = Settings {
+            vegetation: relevo_view::gpu::VegetationSelection::List,
+            ..settings.clone()
+        };
+        let (each, list_stats) =
+            render_once(&device, &queue, &mut scene, &flight, &list, SIZE, false).unwrap();
+        let covered = |frame: &relevo_view::gpu::Readback| {
+            (0..frame.depth.len())
+                .filter(|&i| frame.rgba[4 * i..4 * i + 4] != terrain.rgba[4 * i..4 * i + 4])
+                .count()
+        };
+        let (clustered, one_by_one) = (covered(&with), covered(&each));
+        eprintln!(
+            "{mode}: quadtree {} impostors cover {clustered} pixels, list {} cover {one_by_one}",
+            stats.impostors, list_stats.impostors
+        );
+        assert!(list_stats.impostors > 3 * stats.impostors);
+        assert!(
+            clustered.abs_diff(one_by_one) * 20 <= one_by_one,
+            "{mode}: {clustered} against {one_by_one} pixels"
+        );
     }
 }
 

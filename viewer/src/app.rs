@@ -38,6 +38,9 @@ pub const KEYS: &[(&str, &str)] = &[
     ("g", "geomorphing"),
     ("f", "terrain following"),
     ("F1", "objects and vegetation"),
+    ("F12", "vegetation as sprites / billboards"),
+    ("a", "impostors' alpha (off: whole quads)"),
+    ("b", "impostors' filtering (blur)"),
     ("c", "copy the camera string"),
     ("Home", "home view"),
     ("h", "this help"),
@@ -253,6 +256,15 @@ impl ViewerApp {
             if i.key_pressed(Key::F1) {
                 s.objects = !s.objects;
             }
+            if i.key_pressed(Key::F12) {
+                s.sprites = !s.sprites;
+            }
+            if i.key_pressed(Key::A) {
+                s.alpha = !s.alpha;
+            }
+            if i.key_pressed(Key::B) {
+                s.blur = !s.blur;
+            }
             if i.key_pressed(Key::H) {
                 self.show_help = !self.show_help;
             }
@@ -349,6 +361,9 @@ impl ViewerApp {
         }
         ui.checkbox(&mut self.settings.objects, "objects and vegetation (F1)");
         ui.checkbox(&mut self.settings.terrain, "terrain");
+        if let Some(vegetation) = self.scene.as_ref().and_then(|s| s.vegetation.as_ref()) {
+            vegetation_panel(ui, &mut self.settings, vegetation);
+        }
         ui.separator();
         let label = ui.label("Camera X,Y,Z,HEADING[,INCL]");
         ui.text_edit_singleline(&mut self.camera_text)
@@ -636,4 +651,32 @@ pub fn run(start: Start) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// The vegetation controls: the selection, sprites, alpha, blur, the view
+/// angle, and the cut's bands as the bundle was baked for them.
+fn vegetation_panel(ui: &mut egui::Ui, s: &mut Settings, vegetation: &crate::scene::Vegetation) {
+    use crate::gpu::VegetationSelection;
+    ui.separator();
+    ui.label("Vegetation");
+    ui.horizontal(|ui| {
+        ui.selectable_value(&mut s.vegetation, VegetationSelection::Quadtree, "quadtree");
+        ui.selectable_value(&mut s.vegetation, VegetationSelection::List, "list");
+        ui.selectable_value(
+            &mut s.vegetation,
+            VegetationSelection::Blobs { side_m: 3000.0 },
+            "blobs 3 km",
+        );
+    });
+    ui.checkbox(&mut s.sprites, "sprites (F12)");
+    ui.checkbox(&mut s.alpha, "alpha (a)");
+    ui.checkbox(&mut s.blur, "blur (b)");
+    ui.add(egui::Slider::new(&mut s.view_angle_deg, 0.0..=90.0).text("top view above (°)"));
+    let bands: Vec<String> = vegetation
+        .cut
+        .bands
+        .iter()
+        .map(|b| format!("≤{:.0} m: {}", b.until_m, b.max_cluster))
+        .collect();
+    ui.label(format!("bands (largest cluster): {}", bands.join(", ")));
 }

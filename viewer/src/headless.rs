@@ -4,7 +4,8 @@
 
 use crate::flight::Flight;
 use crate::gpu::{
-    FrameStats, Mode, Readback, Renderer, Settings, Targets, COLOUR_FORMAT, DEPTH_FORMAT,
+    FrameStats, Mode, Readback, Renderer, Settings, Targets, VegetationSelection, COLOUR_FORMAT,
+    DEPTH_FORMAT,
 };
 use crate::hud;
 use crate::scene::Scene;
@@ -69,9 +70,29 @@ pub struct RenderArgs {
     /// Objects to composite: a GeoJSON placement file (see docs/formats.md).
     #[arg(long)]
     pub objects: Option<PathBuf>,
-    /// Draw the objects alone, without the terrain.
-    #[arg(long, requires = "objects")]
+    /// Draw the objects and vegetation alone, without the terrain.
+    #[arg(long)]
     pub no_terrain: bool,
+    /// What chooses the bundle's vegetation: quadtree (relevo-core's cut),
+    /// or the baselines list and blobs[:SIDE_M].
+    #[arg(long, default_value = "quadtree", value_parser = VegetationSelection::parse)]
+    pub vegetation: VegetationSelection,
+    /// No objects or vegetation.
+    #[arg(long)]
+    pub no_objects: bool,
+    /// Vegetation as sprites (two crossed quads) instead of billboards.
+    #[arg(long)]
+    pub sprites: bool,
+    /// Vegetation impostors as whole quads, without their alpha.
+    #[arg(long)]
+    pub no_alpha: bool,
+    /// Vegetation textures unfiltered (nearest texel, no mip levels).
+    #[arg(long)]
+    pub no_blur: bool,
+    /// Elevation of the line of sight above which impostors show their top
+    /// view, degrees.
+    #[arg(long, default_value_t = 45.0)]
+    pub view_angle: f64,
     /// Paint the window's HUD into the image.
     #[arg(long)]
     pub hud: bool,
@@ -271,8 +292,17 @@ pub fn run(a: RenderArgs) -> Result<()> {
         texture: !a.no_texture,
         terrain: !a.no_terrain,
         true_pitch: a.true_pitch,
+        objects: !a.no_objects,
+        vegetation: a.vegetation,
+        sprites: a.sprites,
+        alpha: !a.no_alpha,
+        blur: !a.no_blur,
+        view_angle_deg: a.view_angle,
         ..Default::default()
     };
+    if !(0.0..=90.0).contains(&a.view_angle) {
+        bail!("--view-angle {}: must lie in 0–90°", a.view_angle);
+    }
     settings.raycast.prefilter = a.prefilter;
     if a.fixed {
         settings.raycast.arithmetic = Arithmetic::Fixed;

@@ -61,17 +61,46 @@ pub fn lines(r: &Readings) -> Vec<String> {
     };
     lines.push(format!("{objects}   h: help"));
     if let Some(v) = r.scene.and_then(|scene| scene.vegetation.as_ref()) {
-        lines.push(if s.objects {
-            format!(
-                "vegetation: {} objects represented, {} impostors drawn ({} views), cut {:.2} ms",
+        if s.objects {
+            lines.push(format!(
+                "vegetation ({}{}): {} objects represented, {} impostors drawn ({} views), {:.2} ms",
+                s.vegetation,
+                if s.sprites { ", sprites" } else { "" },
                 r.stats.vegetation_represented,
                 r.stats.impostors,
                 r.stats.impostor_views,
                 r.stats.cut_ms
-            )
+            ));
+            let per_depth: Vec<String> = v
+                .list
+                .clusters_per_depth
+                .iter()
+                .enumerate()
+                .filter(|(_, &n)| n > 0)
+                .map(|(depth, n)| format!("d{depth}:{n}"))
+                .collect();
+            let bands: Vec<String> = v
+                .cut
+                .bands
+                .iter()
+                .map(|b| format!("{:.0}m:{}", b.until_m, b.max_cluster))
+                .collect();
+            lines.push(format!(
+                "clusters by depth {}   bands {}   top view above {:.0}°",
+                if per_depth.is_empty() {
+                    "none".to_string()
+                } else {
+                    per_depth.join(" ")
+                },
+                bands.join(" "),
+                s.view_angle_deg
+            ));
         } else {
-            format!("vegetation off ({} objects)", v.clusters.tree.objects.len())
-        });
+            lines.push(format!(
+                "vegetation off ({} objects)",
+                v.clusters.tree.objects.len()
+            ));
+        }
     }
     lines
 }

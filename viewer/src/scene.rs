@@ -4,9 +4,13 @@
 //! vegetation clusters. Everything the
 //! viewer computes about terrain goes through these core types.
 
+use crate::gpu::{Settings, VegetationSelection};
 use anyhow::{Context, Result};
 use relevo_core::bundle::{Array, Bundle, LpArray};
-use relevo_core::cluster::cut::{CutOptions, DrawList, QuadtreeCut, Selection};
+use relevo_core::camera::Camera;
+use relevo_core::cluster::cut::{
+    group_blobs, Blob, Blobs, CutOptions, DrawList, ObjectList, QuadtreeCut, Selection,
+};
 use relevo_core::cluster::{store, Clusters};
 use relevo_core::geo::TerrainFrame;
 use relevo_core::horizon::{self, Terrain};
@@ -45,18 +49,36 @@ pub struct Scene {
     pub vegetation: Option<Vegetation>,
 }
 
-/// Vegetation to draw: relevo-core's clusters, the cut's options and the
-/// draw list reused across frames.
+/// Vegetation to draw: relevo-core's clusters, the cut's options, the draw
+/// list reused across frames, and the blobs of the last blob baseline.
 pub struct Vegetation {
     pub clusters: Clusters,
     pub cut: CutOptions,
     pub list: DrawList,
+    blobs: Option<(f64, Vec<Blob>)>,
 }
 
 impl Vegetation {
-    /// Choose what to draw from `camera` (relevo-core's quadtree cut).
-    pub fn select(&mut self, camera: &relevo_core::camera::Camera) {
-        QuadtreeCut(&self.clusters).select(camera, &self.cut, &mut self.list);
+    /// Choose what to draw from `camera` with the selection and view angle
+    /// of `settings` (relevo-core's selections; blobs are grouped once per
+    /// side).
+    pub fn select(&mut self, camera: &Camera, settings: &Settings) {
+        self.cut.view_angle_deg = settings.view_angle_deg;
+        match settings.vegetation {
+            VegetationSelection::Quadtree => {
+                QuadtreeCut(&self.clusters).select(camera, &self.cut, &mut self.list);
+            }
+            VegetationSelection::List => {
+                ObjectList(&self.clusters).select(camera, &self.cut, &mut self.list);
+            }
+            VegetationSelection::Blobs { side_m } => {
+                if self.blobs.as_ref().is_none_or(|(k, _)| *k != side_m) {
+                    self.blobs = Some((side_m, group_blobs(&self.clusters, side_m as f32)));
+                }
+                let blobs = self.blobs.as_ref().map_or(&[][..], |(_, b)| b.as_slice());
+                Blobs::from_groups(&self.clusters, blobs).select(camera, &self.cut, &mut self.list);
+            }
+        }
     }
 }
 
@@ -71,6 +93,7 @@ impl Scene {
             clusters,
             cut: index.options.cut,
             list: DrawList::default(),
+            blobs: None,
         });
         let color = drape.as_ref().and_then(|d| d.color_source(&frame));
         let terrain = Terrain::new(

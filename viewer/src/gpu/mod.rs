@@ -221,6 +221,60 @@ pub struct Settings {
     /// Mesh and Z-buffer modes tilt the camera instead of shifting the
     /// projection plane (the raycast always shifts it).
     pub true_pitch: bool,
+    /// What chooses the vegetation drawn: relevo-core's quadtree cut, or a
+    /// baseline.
+    pub vegetation: VegetationSelection,
+    /// Sprites — two crossed quads showing the front and left views —
+    /// instead of billboards turned to the eye (the seed's F12).
+    pub sprites: bool,
+    /// Impostors cut out by their alpha (off: whole quads, as the seed's
+    /// tests drew them).
+    pub alpha: bool,
+    /// Impostor textures filtered and mip-mapped (off: the nearest texel
+    /// of the full-size level; the seed's blur toggle).
+    pub blur: bool,
+    /// Elevation of the line of sight above which impostors show their top
+    /// view, degrees (the seed's θ).
+    pub view_angle_deg: f64,
+}
+
+/// What chooses the vegetation drawn each frame (relevo-core's
+/// `cluster::cut` selections).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum VegetationSelection {
+    /// The quadtree cut: clusters far away, objects near.
+    Quadtree,
+    /// Every object in view, one by one.
+    List,
+    /// The seed's blobs of `side_m` metres.
+    Blobs { side_m: f64 },
+}
+
+impl VegetationSelection {
+    /// Parse `quadtree`, `list` or `blobs[:SIDE_M]` (3000 m by default).
+    pub fn parse(text: &str) -> Result<Self, String> {
+        match text {
+            "quadtree" => Ok(Self::Quadtree),
+            "list" => Ok(Self::List),
+            "blobs" => Ok(Self::Blobs { side_m: 3000.0 }),
+            _ => text
+                .strip_prefix("blobs:")
+                .and_then(|k| k.parse::<f64>().ok())
+                .filter(|k| k.is_finite() && *k > 0.0)
+                .map(|side_m| Self::Blobs { side_m })
+                .ok_or_else(|| format!("{text:?}: expected quadtree, list or blobs[:SIDE_M]")),
+        }
+    }
+}
+
+impl std::fmt::Display for VegetationSelection {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Quadtree => write!(f, "quadtree"),
+            Self::List => write!(f, "list"),
+            Self::Blobs { side_m } => write!(f, "blobs:{side_m}"),
+        }
+    }
 }
 
 impl Default for Settings {
@@ -236,6 +290,11 @@ impl Default for Settings {
             objects: true,
             terrain: true,
             true_pitch: false,
+            vegetation: VegetationSelection::Quadtree,
+            sprites: false,
+            alpha: true,
+            blur: true,
+            view_angle_deg: 45.0,
         }
     }
 }
@@ -381,12 +440,12 @@ impl Renderer {
         }
         if let Some(vegetation) = scene.vegetation.as_mut().filter(|_| settings.objects) {
             let start = Instant::now();
-            vegetation.select(camera);
+            vegetation.select(camera, settings);
             stats.cut_ms = start.elapsed().as_secs_f64() * 1e3;
             let pass = self.vegetation.get_or_insert_with(|| {
                 vegetation::VegetationPass::new(device, queue, &vegetation.clusters)
             });
-            pass.prepare(device, queue, &vegetation.list, camera);
+            pass.prepare(device, queue, vegetation, camera, settings);
             pass.draw(&mut encoder, &self.targets);
             stats.vegetation_represented = vegetation.list.represented;
             stats.impostors = vegetation.list.len();

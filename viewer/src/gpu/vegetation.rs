@@ -4,12 +4,14 @@
 //! depth-tested against it. The instance buffer is reused across frames.
 
 use super::targets::Targets;
+use super::Settings;
 use super::{eye_relative_view_projection, COLOUR_FORMAT};
+use crate::scene::Vegetation;
 use bytemuck::{Pod, Zeroable};
 use eframe::egui_wgpu::wgpu;
 use relevo_core::camera::Camera;
 use relevo_core::cluster::bake::MIP_LEVELS;
-use relevo_core::cluster::cut::DrawList;
+use relevo_core::cluster::cut::ViewDraw;
 use relevo_core::cluster::views::ImpostorView;
 use relevo_core::cluster::Clusters;
 
@@ -19,7 +21,8 @@ use relevo_core::cluster::Clusters;
 struct GpuImpostor {
     /// Foot relative to the eye, metres.
     foot: [f32; 3],
-    /// 0: side view (billboard), 1: top view (shell texture).
+    /// 0: side view (billboard), 1: top view (shell texture), 2 and 3:
+    /// sprite planes along x (front view) and along y (left view).
     kind: u32,
     facing: [f32; 2],
     size: [f32; 2],
@@ -34,14 +37,21 @@ struct GpuImpostor {
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct Uniforms {
     view_proj: [[f32; 4]; 4],
+    /// x: 1 when impostors are cut out by their alpha.
+    flags: [u32; 4],
 }
 
 pub struct VegetationPass {
     pipeline: wgpu::RenderPipeline,
+    /// Bindings with the filtered, mip-mapped sampler and with the nearest
+    /// texel of level 0.
     bind_group: wgpu::BindGroup,
+    sharp_bind_group: wgpu::BindGroup,
     uniforms: wgpu::Buffer,
     instance_buffer: wgpu::Buffer,
     instances: Vec<GpuImpostor>,
+    /// Sample with the filtered sampler (else the nearest texel).
+    blur: bool,
     /// Texels of the atlas array's level 0 (pages are padded to it).
     atlas_size: [f32; 2],
 }
@@ -56,6 +66,11 @@ impl VegetationPass {
             mag_filter: wgpu::FilterMode::Linear,
             min_filter: wgpu::FilterMode::Linear,
             mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            ..Default::default()
+        });
+        let sharp_sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("impostor sampler, nearest"),
+            lod_max_clamp: 0.0,
             ..Default::default()
         });
         let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
@@ -86,24 +101,27 @@ impl VegetationPass {
                 },
             ],
         });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("vegetation bindings"),
-            layout: &layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: uniforms.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&atlas),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::Sampler(&sampler),
-                },
-            ],
-        });
+        let bind = |sampler: &wgpu::Sampler| {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("vegetation bindings"),
+                layout: &layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: uniforms.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: wgpu::BindingResource::TextureView(&atlas),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: wgpu::BindingResource::Sampler(sampler),
+                    },
+                ],
+            })
+        };
+        let (bind_group, sharp_bind_group) = (bind(&sampler), bind(&sharp_sampler));
         let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("vegetation.wgsl"),
             source: wgpu::ShaderSource::Wgsl(include_str!("vegetation.wgsl").into()),
@@ -129,42 +147,46 @@ impl VegetationPass {
         VegetationPass {
             pipeline,
             bind_group,
+            sharp_bind_group,
             uniforms,
             instance_buffer: super::vertex_buffer(device, "impostors", 4),
             instances: Vec::new(),
+            blur: true,
             atlas_size,
         }
     }
 
-    /// Upload one GPU instance per view of every instance in `list`, relative
-    /// to the eye; the buffer grows when a frame needs more, never shrinks.
+    /// Upload one GPU instance per view of every instance the selection
+    /// left in `vegetation.list`, relative to the eye (with sprites, the
+    /// side views become the two crossed planes); the buffer grows when a
+    /// frame needs more, never shrinks.
     pub fn prepare(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-        list: &DrawList,
+        vegetation: &Vegetation,
         camera: &Camera,
+        settings: &Settings,
     ) {
         let eye = camera.position;
         let [tw, th] = self.atlas_size;
+        let clusters = &vegetation.clusters;
         self.instances.clear();
-        for instance in list.instances() {
+        for instance in vegetation.list.instances() {
             let foot = [
                 (instance.foot[0] as f64 - eye.x) as f32,
                 (instance.foot[1] as f64 - eye.y) as f32,
                 (instance.foot[2] as f64 - eye.z) as f32,
             ];
-            let mut from = 0.0;
-            for view in instance.views() {
+            let impostor = |view: &ViewDraw, kind: u32, share: [f32; 2]| {
                 let f = view.frame;
-                let to = from + view.weight;
-                self.instances.push(GpuImpostor {
+                GpuImpostor {
                     foot,
-                    kind: (view.view == ImpostorView::Top) as u32,
+                    kind,
                     facing: instance.facing,
                     size: view.size,
                     top: instance.top_m,
-                    share: [from, to],
+                    share,
                     uv: [
                         f.x as f32 / tw,
                         f.y as f32 / th,
@@ -172,12 +194,30 @@ impl VegetationPass {
                         (f.y + f.height) as f32 / th,
                     ],
                     page: f.page as u32,
-                });
+                }
+            };
+            let mut from = 0.0;
+            let views = instance.views();
+            for (k, view) in views.iter().enumerate() {
+                // The last view takes the rounding of the weights.
+                let to = if k + 1 == views.len() {
+                    1.0
+                } else {
+                    from + view.weight
+                };
+                if view.view == ImpostorView::Top {
+                    self.instances.push(impostor(view, 1, [from, to]));
+                } else if !settings.sprites {
+                    self.instances.push(impostor(view, 0, [from, to]));
+                } else if from == 0.0 || views[k - 1].view == ImpostorView::Top {
+                    // Sprites: the side share goes to the two crossed planes.
+                    let share = [from, 1.0];
+                    for (kind, plane) in [(2, ImpostorView::Front), (3, ImpostorView::Left)] {
+                        let plane_view = clusters.view_of(instance.drawn, plane);
+                        self.instances.push(impostor(&plane_view, kind, share));
+                    }
+                }
                 from = to;
-            }
-            // The last view takes the rounding of the weights.
-            if let Some(last) = self.instances.last_mut() {
-                last.share[1] = last.share[1].max(1.0);
             }
         }
         let bytes: &[u8] = bytemuck::cast_slice(&self.instances);
@@ -191,8 +231,10 @@ impl VegetationPass {
         queue.write_buffer(&self.instance_buffer, 0, bytes);
         let uniforms = Uniforms {
             view_proj: eye_relative_view_projection(camera),
+            flags: [settings.alpha as u32, 0, 0, 0],
         };
         queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&uniforms));
+        self.blur = settings.blur;
     }
 
     /// GPU instances of the last frame (views, not objects).
@@ -207,7 +249,12 @@ impl VegetationPass {
         }
         let mut pass = targets.begin(encoder, None, "vegetation");
         pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
+        let bindings = if self.blur {
+            &self.bind_group
+        } else {
+            &self.sharp_bind_group
+        };
+        pass.set_bind_group(0, bindings, &[]);
         pass.set_vertex_buffer(0, self.instance_buffer.slice(..));
         pass.draw(0..4, 0..self.instances.len() as u32);
     }

@@ -9,6 +9,8 @@
 
 struct Uniforms {
     view_proj: mat4x4<f32>,
+    // x: 1 when impostors are cut out by their alpha.
+    flags: vec4<u32>,
 };
 
 @group(0) @binding(0) var<uniform> u: Uniforms;
@@ -16,7 +18,8 @@ struct Uniforms {
 @group(0) @binding(2) var atlas_sampler: sampler;
 
 struct Instance {
-    // Foot relative to the eye (metres); kind 0 = side view, 1 = top view.
+    // Foot relative to the eye (metres); kind 0 = side view, 1 = top view,
+    // 2 and 3 = sprite planes along x (front view) and y (left view).
     @location(0) foot: vec3<f32>,
     @location(1) kind: u32,
     // Unit horizontal vector towards the eye; width and height (metres).
@@ -43,9 +46,16 @@ fn vs_main(@builtin(vertex_index) corner: u32, i: Instance) -> VertexOut {
     let s = f32(corner & 1u);
     let t = f32(corner >> 1u);
     var position: vec3<f32>;
-    if i.kind == 0u {
-        // The eye's right: the facing vector turned a quarter clockwise.
-        let right = vec3<f32>(-i.facing.y, i.facing.x, 0.0);
+    if i.kind != 1u {
+        // A side view's right: the eye's right for a billboard (the facing
+        // vector turned a quarter clockwise), east for the front plane and
+        // south for the left plane of a sprite (the views' own rights).
+        var right = vec3<f32>(-i.facing.y, i.facing.x, 0.0);
+        if i.kind == 2u {
+            right = vec3<f32>(1.0, 0.0, 0.0);
+        } else if i.kind == 3u {
+            right = vec3<f32>(0.0, -1.0, 0.0);
+        }
         position = i.foot + right * ((s - 0.5) * i.size.x) + vec3<f32>(0.0, 0.0, t * i.size.y);
     } else {
         // Top view: image up is north.
@@ -69,8 +79,13 @@ fn dither(pixel: vec2<u32>) -> f32 {
 fn fs_main(v: VertexOut) -> @location(0) vec4<f32> {
     let texel = textureSample(atlas, atlas_sampler, v.uv, v.page);
     let threshold = dither(vec2<u32>(v.clip.xy));
-    if texel.a < 0.5 || threshold < v.share.x || threshold >= v.share.y {
+    let cut_out = u.flags.x == 1u && texel.a < 0.5;
+    if cut_out || threshold < v.share.x || threshold >= v.share.y {
         discard;
+    }
+    if u.flags.x == 0u {
+        // Without alpha the whole quad shows, empty texels black.
+        return vec4<f32>(texel.rgb, 1.0);
     }
     return vec4<f32>(texel.rgb / texel.a, 1.0);
 }

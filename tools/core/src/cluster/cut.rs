@@ -11,7 +11,7 @@
 //! per metre against pixels per metre at its nearest point); the cut then
 //! descends to its children.
 
-use super::quadtree::{ClusterObject, Node, NONE};
+use super::quadtree::{Node, NONE};
 use super::views::ImpostorView;
 use super::Clusters;
 use crate::camera::Camera;
@@ -520,54 +520,63 @@ impl<'c> View<'c> {
 
 /// Builds instances with their view choice.
 impl Clusters {
-    /// The instance of object `index` (tree order).
+    /// View `view` of what `drawn` stands for, with weight 1: its atlas
+    /// frame and size (metres). A viewer drawing sprites asks for views the
+    /// cut did not choose.
     #[inline]
-    fn object_instance(&self, index: u32, view: &View) -> Instance {
-        let o: &ClusterObject = &self.tree.objects[index as usize];
-        let class = &self.classes[o.class as usize];
-        let (d, h) = (o.diameter, o.height);
-        self.instance(
-            Drawn::Object(index),
-            o.foot,
-            h,
-            |v| class.frames[v as usize],
-            |v| match v {
-                ImpostorView::Top => [d, d],
-                _ => [d, h],
-            },
+    pub fn view_of(&self, drawn: Drawn, view: ImpostorView) -> ViewDraw {
+        let (frame, size) = match drawn {
+            Drawn::Object(i) => {
+                let o = &self.tree.objects[i as usize];
+                let frame = self.classes[o.class as usize].frames[view as usize];
+                let size = match view {
+                    ImpostorView::Top => [o.diameter, o.diameter],
+                    _ => [o.diameter, o.height],
+                };
+                (frame, size)
+            }
+            Drawn::Node(n) => {
+                let node = &self.tree.nodes[n as usize];
+                let frame = self.frames[node.frames as usize + view as usize];
+                (
+                    frame,
+                    view.extent([0, 1, 2].map(|k| node.max[k] - node.min[k])),
+                )
+            }
+        };
+        ViewDraw {
             view,
-        )
+            weight: 1.0,
+            frame,
+            size,
+        }
     }
 
-    /// The instance of node `index`, drawn from its baked views.
+    /// Foot (centre of the footprint at the lowest ground) and height of
+    /// what `drawn` stands for, metres.
     #[inline]
-    fn node_instance(&self, index: u32, node: &Node, view: &View) -> Instance {
-        let foot = [
-            (node.min[0] + node.max[0]) / 2.0,
-            (node.min[1] + node.max[1]) / 2.0,
-            node.min[2],
-        ];
-        let size = [0, 1, 2].map(|k| node.max[k] - node.min[k]);
-        self.instance(
-            Drawn::Node(index),
-            foot,
-            size[2],
-            |v| self.frames[node.frames as usize + v as usize],
-            |v| v.extent(size),
-            view,
-        )
+    fn foot_and_height(&self, drawn: Drawn) -> ([f32; 3], f32) {
+        match drawn {
+            Drawn::Object(i) => {
+                let o = &self.tree.objects[i as usize];
+                (o.foot, o.height)
+            }
+            Drawn::Node(n) => {
+                let node = &self.tree.nodes[n as usize];
+                let foot = [
+                    (node.min[0] + node.max[0]) / 2.0,
+                    (node.min[1] + node.max[1]) / 2.0,
+                    node.min[2],
+                ];
+                (foot, node.max[2] - node.min[2])
+            }
+        }
     }
 
+    /// The instance of `drawn` seen from the view's eye.
     #[inline]
-    fn instance(
-        &self,
-        drawn: Drawn,
-        foot: [f32; 3],
-        height: f32,
-        frame: impl Fn(ImpostorView) -> Frame,
-        size: impl Fn(ImpostorView) -> [f32; 2],
-        view: &View,
-    ) -> Instance {
+    fn instance(&self, drawn: Drawn, view: &View) -> Instance {
+        let (foot, height) = self.foot_and_height(drawn);
         let eye = view.camera.position;
         let to_eye = DVec3::new(
             eye.x - foot[0] as f64,
@@ -589,10 +598,8 @@ impl Clusters {
         }; 3];
         for (slot, &(v, weight)) in views.iter_mut().zip(&chosen[..n]) {
             *slot = ViewDraw {
-                view: v,
                 weight,
-                frame: frame(v),
-                size: size(v),
+                ..self.view_of(drawn, v)
             };
         }
         Instance {
@@ -621,7 +628,8 @@ impl Selection for ObjectList<'_> {
         for (i, o) in self.0.tree.objects.iter().enumerate() {
             let [min, max] = o.bounds();
             if view.sees(min, max).is_some() {
-                out.first.push(self.0.object_instance(i as u32, &view));
+                out.first
+                    .push(self.0.instance(Drawn::Object(i as u32), &view));
             }
         }
         out.represented = out.first.len();
@@ -633,7 +641,7 @@ impl Selection for ObjectList<'_> {
 /// draws none.
 pub struct Blobs<'a> {
     clusters: &'a Clusters,
-    blobs: Vec<Blob>,
+    blobs: std::borrow::Cow<'a, [Blob]>,
 }
 
 /// Members (tree-order object indices) and the box they fill.
@@ -649,58 +657,75 @@ impl<'a> Blobs<'a> {
     /// every object left inside the K×K square centred on it in its blob,
     /// repeat until none is left.
     pub fn new(clusters: &'a Clusters, side_m: f32) -> Blobs<'a> {
-        let objects = &clusters.tree.objects;
-        let mut order: Vec<u32> = (0..objects.len() as u32).collect();
-        order.sort_by_key(|&i| objects[i as usize].row);
-        // Spatial hash of cell K: the square around an object touches at
-        // most the 3×3 cells around its own.
-        let cell = |v: f32| (v / side_m).floor() as i64;
-        let mut grid: std::collections::HashMap<(i64, i64), Vec<u32>> = Default::default();
-        for &i in &order {
-            let f = objects[i as usize].foot;
-            grid.entry((cell(f[0]), cell(f[1]))).or_default().push(i);
+        Blobs {
+            clusters,
+            blobs: group_blobs(clusters, side_m).into(),
         }
-        let mut taken = vec![false; objects.len()];
-        let mut blobs = Vec::new();
-        let half = side_m / 2.0;
-        for &seed in &order {
-            if taken[seed as usize] {
-                continue;
-            }
-            let centre = objects[seed as usize].foot;
-            let mut members = Vec::new();
-            let (cx, cy) = (cell(centre[0]), cell(centre[1]));
-            for gy in cy - 1..=cy + 1 {
-                for gx in cx - 1..=cx + 1 {
-                    for &i in grid.get(&(gx, gy)).map_or(&[][..], |v| v.as_slice()) {
-                        let f = objects[i as usize].foot;
-                        if !taken[i as usize]
-                            && (f[0] - centre[0]).abs() <= half
-                            && (f[1] - centre[1]).abs() <= half
-                        {
-                            taken[i as usize] = true;
-                            members.push(i);
-                        }
-                    }
-                }
-            }
-            members.sort_unstable_by_key(|&i| objects[i as usize].row);
-            let (mut min, mut max) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-            for &i in &members {
-                let [lo, hi] = objects[i as usize].bounds();
-                for k in 0..3 {
-                    min[k] = min[k].min(lo[k]);
-                    max[k] = max[k].max(hi[k]);
-                }
-            }
-            blobs.push(Blob { members, min, max });
+    }
+
+    /// Blobs already grouped by [`group_blobs`] (a viewer keeps them for
+    /// its session).
+    pub fn from_groups(clusters: &'a Clusters, blobs: &'a [Blob]) -> Blobs<'a> {
+        Blobs {
+            clusters,
+            blobs: blobs.into(),
         }
-        Blobs { clusters, blobs }
     }
 
     pub fn blobs(&self) -> &[Blob] {
         &self.blobs
     }
+}
+
+/// The seed's greedy grouping into blobs of side `side_m` (see [`Blobs`]).
+pub fn group_blobs(clusters: &Clusters, side_m: f32) -> Vec<Blob> {
+    let objects = &clusters.tree.objects;
+    let mut order: Vec<u32> = (0..objects.len() as u32).collect();
+    order.sort_by_key(|&i| objects[i as usize].row);
+    // Spatial hash of cell K: the square around an object touches at
+    // most the 3×3 cells around its own.
+    let cell = |v: f32| (v / side_m).floor() as i64;
+    let mut grid: std::collections::HashMap<(i64, i64), Vec<u32>> = Default::default();
+    for &i in &order {
+        let f = objects[i as usize].foot;
+        grid.entry((cell(f[0]), cell(f[1]))).or_default().push(i);
+    }
+    let mut taken = vec![false; objects.len()];
+    let mut blobs = Vec::new();
+    let half = side_m / 2.0;
+    for &seed in &order {
+        if taken[seed as usize] {
+            continue;
+        }
+        let centre = objects[seed as usize].foot;
+        let mut members = Vec::new();
+        let (cx, cy) = (cell(centre[0]), cell(centre[1]));
+        for gy in cy - 1..=cy + 1 {
+            for gx in cx - 1..=cx + 1 {
+                for &i in grid.get(&(gx, gy)).map_or(&[][..], |v| v.as_slice()) {
+                    let f = objects[i as usize].foot;
+                    if !taken[i as usize]
+                        && (f[0] - centre[0]).abs() <= half
+                        && (f[1] - centre[1]).abs() <= half
+                    {
+                        taken[i as usize] = true;
+                        members.push(i);
+                    }
+                }
+            }
+        }
+        members.sort_unstable_by_key(|&i| objects[i as usize].row);
+        let (mut min, mut max) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+        for &i in &members {
+            let [lo, hi] = objects[i as usize].bounds();
+            for k in 0..3 {
+                min[k] = min[k].min(lo[k]);
+                max[k] = max[k].max(hi[k]);
+            }
+        }
+        blobs.push(Blob { members, min, max });
+    }
+    blobs
 }
 
 impl Selection for Blobs<'_> {
@@ -711,10 +736,11 @@ impl Selection for Blobs<'_> {
     fn select(&self, camera: &Camera, options: &CutOptions, out: &mut DrawList) {
         out.clear();
         let view = View::new(camera, options);
-        for blob in &self.blobs {
+        for blob in self.blobs.iter() {
             if view.sees(blob.min, blob.max).is_some() {
                 for &i in &blob.members {
-                    out.first.push(self.clusters.object_instance(i, &view));
+                    out.first
+                        .push(self.clusters.instance(Drawn::Object(i), &view));
                 }
             }
         }
@@ -793,14 +819,15 @@ impl QuadtreeCut<'_> {
             return;
         };
         if node.count > 1 && clusters.may_draw_node(node, distance, view, options) {
-            out.first.push(clusters.node_instance(index, node, view));
+            out.first.push(clusters.instance(Drawn::Node(index), view));
             out.represented += node.count as usize;
             out.count_clusters(node.depth as usize, 1);
         } else if node.is_leaf() {
             for i in node.members() {
                 let [min, max] = clusters.tree.objects[i].bounds();
                 if node.count == 1 || view.sees_within(mask, min, max).is_some() {
-                    out.first.push(clusters.object_instance(i as u32, view));
+                    out.first
+                        .push(clusters.instance(Drawn::Object(i as u32), view));
                     out.represented += 1;
                 }
             }
