@@ -15,7 +15,7 @@ use relevo_core::grid::{fractal_heights, HeightGrid};
 use relevo_core::horizon::Arithmetic;
 use relevo_core::zbuffer::{self, Representation};
 use relevo_view::flight::Flight;
-use relevo_view::gpu::{FrameStats, Mode, Renderer, Settings};
+use relevo_view::gpu::{FrameStats, Mode, Renderer, Settings, VegetationSelection};
 use relevo_view::headless::{device, wait_for_gpu};
 use relevo_view::scene::Scene;
 use serde_json::json;
@@ -132,7 +132,24 @@ pub fn view(
                     ));
                 }
             }
-            // Table 8.1: with objects, the raycast's depth is uploaded too.
+            // The vegetation, from the quadtree cut and, for comparison,
+            // from the plain list.
+            if scene.vegetation.is_some() {
+                for mode in [Mode::Mesh, Mode::Raycast] {
+                    for selection in [VegetationSelection::Quadtree, VegetationSelection::List] {
+                        configs.push((
+                            format!("{mode} + vegetation {selection}"),
+                            Settings {
+                                mode,
+                                vegetation: selection,
+                                ..Default::default()
+                            },
+                        ));
+                    }
+                }
+            }
+            // Table 8.1: with objects, the raycast's depth is uploaded too
+            // (the bundle's vegetation is drawn with them).
             if let Some(placement) = objects {
                 scene
                     .load_objects(placement)
@@ -148,7 +165,7 @@ pub fn view(
                 }
             }
             for (label, mut settings) in configs {
-                settings.objects = label.ends_with("objects");
+                settings.objects = label.ends_with("objects") || label.contains("vegetation");
                 let (frame_ms, stats) = frame_time(
                     &device,
                     &queue,
@@ -163,7 +180,8 @@ pub fn view(
                     json_lines,
                     json!({"bench": "view", "bundle": name, "size": size, "config": label, "mode": settings.mode,
                            "frame_ms": frame_ms, "fps": 1e3 / frame_ms, "triangles": stats.triangles,
-                           "object_triangles": stats.object_triangles, "refine_ms": stats.refine_ms,
+                           "object_triangles": stats.object_triangles, "impostors": stats.impostors,
+                           "impostor_views": stats.impostor_views, "cut_ms": stats.cut_ms, "refine_ms": stats.refine_ms,
                            "mesh_upload_ms": stats.mesh_upload_ms, "raycast_ms": stats.raycast_ms,
                            "colour_upload_ms": stats.colour_upload_ms, "depth_upload_ms": stats.depth_upload_ms,
                            "runs": runs}),
