@@ -413,3 +413,67 @@ fn composited_objects_are_hidden_exactly_where_the_terrain_covers_them() {
         );
     }
 }
+
+/// The samples tab's work without the window: rectangles marked on the
+/// sample region's drape, detection in the background, accepting writes
+/// the samples and the database into the bundle and re-bakes its clusters
+/// atomically; the reopened scene draws the new vegetation.
+#[test]
+fn samples_marked_on_the_drape_detect_accept_and_recluster() {
+    use relevo_view::samples::SamplesTab;
+    let d = tempfile::tempdir().unwrap();
+    let bundle = prep_region(
+        &repo("data/olinda/REGION.toml"),
+        &d.path().join("olinda.relevo"),
+    );
+    let mut tab = SamplesTab::new(&bundle);
+    let before = tab.detections.len();
+    // The region's own samples (the drape is the Landsat image on the DEM's
+    // grid, within a pixel of it): three forest, four counter-examples.
+    for (class, r) in [
+        ("forest", [60.0, 60.0, 120.0, 110.0]),
+        ("forest", [200.0, 190.0, 220.0, 205.0]),
+        ("forest", [285.0, 8.0, 315.0, 28.0]),
+        ("other", [50.0, 280.0, 100.0, 320.0]),
+        ("other", [280.0, 250.0, 320.0, 300.0]),
+        ("other", [250.0, 80.0, 290.0, 120.0]),
+        ("other", [150.0, 230.0, 200.0, 260.0]),
+    ] {
+        tab.samples.push((class.to_string(), r));
+    }
+    tab.detect();
+    let start = std::time::Instant::now();
+    while tab.running() {
+        assert!(start.elapsed().as_secs() < 120, "detection did not finish");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        tab.poll();
+    }
+    assert!(tab.fresh, "{}", tab.status);
+    let detected = tab.detections.len();
+    assert!(
+        detected > before / 2 && detected < before * 2,
+        "{detected} against {before}"
+    );
+    tab.accept().unwrap();
+
+    let reopened = relevo_core::bundle::Bundle::open(&bundle).unwrap();
+    assert_eq!(
+        relevo_core::bundle::validate(&reopened),
+        Vec::<String>::new()
+    );
+    assert_eq!(reopened.vegetation().unwrap().unwrap().len(), detected);
+    assert!(reopened
+        .manifest
+        .artifacts
+        .contains_key("vegetation_samples"));
+    assert!(
+        !reopened
+            .manifest
+            .exports
+            .contains_key("vegetation_geopackage"),
+        "stale export kept"
+    );
+    let scene = Scene::open(&bundle).unwrap();
+    let vegetation = scene.vegetation.as_ref().unwrap();
+    assert_eq!(vegetation.clusters.tree.objects.len(), detected);
+}

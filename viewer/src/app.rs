@@ -6,6 +6,7 @@
 use crate::flight::{Controls, Flight};
 use crate::gpu::{self, FrameStats, Mode, Settings};
 use crate::hud;
+use crate::samples::SamplesTab;
 use crate::scene::Scene;
 use eframe::egui;
 use eframe::egui_wgpu::{self, wgpu};
@@ -94,6 +95,18 @@ pub struct ViewerApp {
     /// World (east, north, height) of the ground under the pointer.
     pub ground_under_pointer: Option<[f64; 3]>,
     tour: Option<Tour>,
+    /// The samples tab, when shown (it keeps its marks while hidden).
+    samples: Option<SamplesTab>,
+    pub tab: Tab,
+}
+
+/// The window's tabs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Tab {
+    /// The 3D view.
+    View,
+    /// Marking samples on the drape and detecting vegetation.
+    Samples,
 }
 
 impl ViewerApp {
@@ -114,6 +127,8 @@ impl ViewerApp {
             pending_pose: None,
             ground_under_pointer: None,
             tour: None,
+            samples: None,
+            tab: Tab::View,
         };
         if let Some(path) = bundle {
             app.open(path);
@@ -126,11 +141,30 @@ impl ViewerApp {
         match Scene::open(path) {
             Ok(scene) => {
                 self.flight = Some(Flight::home(&scene));
+                self.samples = Some(SamplesTab::new(path));
                 self.scene = Some(scene);
                 self.renderer = None;
                 self.error = None;
             }
             Err(e) => self.error = Some(format!("{e:#}")),
+        }
+    }
+
+    /// Open the current bundle again (after its vegetation was rewritten),
+    /// keeping the camera and the objects.
+    fn reload(&mut self) {
+        let Some(old) = self.scene.take() else { return };
+        match Scene::open(&old.path) {
+            Ok(mut scene) => {
+                scene.objects = old.objects;
+                self.scene = Some(scene);
+                self.renderer = None;
+                self.error = None;
+            }
+            Err(e) => {
+                self.error = Some(format!("{e:#}"));
+                self.scene = Some(old);
+            }
         }
     }
 
@@ -567,6 +601,30 @@ impl eframe::App for ViewerApp {
         }
         let keys = self.keys(&ctx);
         let controls = self.tour_step(&ctx).unwrap_or(keys);
+        egui::Panel::top("tabs").show(ui, |ui| {
+            ui.horizontal(|ui| {
+                ui.selectable_value(&mut self.tab, Tab::View, "3D view");
+                ui.selectable_value(&mut self.tab, Tab::Samples, "samples");
+            });
+        });
+        if self.tab == Tab::Samples {
+            let accepted = egui::CentralPanel::default()
+                .show(ui, |ui| match &mut self.samples {
+                    Some(tab) => tab.ui(ui),
+                    None => {
+                        ui.label("Open a bundle first.");
+                        None
+                    }
+                })
+                .inner;
+            match accepted {
+                Some(Ok(())) => self.reload(),
+                Some(Err(e)) => self.error = Some(format!("{e:#}")),
+                None => {}
+            }
+            self.help(&ctx);
+            return;
+        }
         egui::Panel::right("settings").show(ui, |ui| self.side_panel(ui));
         egui::CentralPanel::no_frame().show(ui, |ui| {
             if let Some(error) = &self.error {

@@ -11,6 +11,7 @@
 //! - [`gpu`]: offscreen targets, the mesh and raycast passes.
 //! - [`headless`]: `relevo-view render` and the GPU device without a window.
 //! - [`hud`]: the HUD's readings, painted in the window and headless.
+//! - [`samples`]: the samples tab — marking samples, detecting, accepting.
 //! - [`app`]: the window, side panel and keys.
 
 pub mod app;
@@ -18,6 +19,7 @@ pub mod flight;
 pub mod gpu;
 pub mod headless;
 pub mod hud;
+pub mod samples;
 pub mod scene;
 
 /// Mesa's software Vulkan driver (lavapipe): tests and CI draw with it so

@@ -145,3 +145,27 @@ fn problems_are_shown_in_the_window() {
         "the terrain is still drawn"
     );
 }
+
+/// The samples tab opens from the tab bar and says plainly when the bundle
+/// has no drape to mark samples on; the 3D view comes back as it was.
+#[test]
+fn the_samples_tab_opens_and_explains_a_bundle_without_a_drape() {
+    if std::env::var_os("VK_ICD_FILENAMES").is_none() {
+        std::env::set_var("VK_ICD_FILENAMES", relevo_view::LAVAPIPE_ICD);
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let bundle = common::grenoble_bundle(dir.path());
+    let mut harness = Harness::builder()
+        .with_size([1000.0, 640.0])
+        .wgpu()
+        .build_eframe(|_| ViewerApp::new(Some(&bundle)));
+    harness.run_steps(2);
+    harness.get_by_label("samples").click();
+    harness.run_steps(2);
+    assert_eq!(harness.state().tab, relevo_view::app::Tab::Samples);
+    harness.get_by_label("This bundle has no drape image to mark samples on.");
+    harness.get_by_label("3D view").click();
+    harness.run_steps(2);
+    assert_eq!(harness.state().tab, relevo_view::app::Tab::View);
+    assert!(harness.state().stats.triangles > 100);
+}

@@ -5,10 +5,11 @@
 use crate::progress;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use relevo_core::bundle::{Bundle, BundleWriter};
+use relevo_core::bundle::Bundle;
 use relevo_core::cluster::bake::{BakeOptions, BakeReport};
 use relevo_core::cluster::cut::{Band, CutOptions};
-use relevo_core::cluster::{bake_database, store, Clusters};
+use relevo_core::cluster::store::{self, NewVegetation};
+use relevo_core::cluster::{bake_database, Clusters};
 use relevo_core::geo::TerrainFrame;
 use relevo_core::veg::db::VegObject;
 use serde::Serialize;
@@ -98,12 +99,12 @@ pub fn bake_with_progress(
 
 pub fn run(a: BakeArgs) -> Result<()> {
     let bundle = Bundle::open(&a.bundle)?;
-    let Some(database) = bundle.vegetation()? else {
+    if bundle.vegetation()?.is_none() {
         bail!(
             "{}: the bundle has no vegetation database to cluster (run `relevo veg detect` or prep with samples)",
             a.bundle.display()
         );
-    };
+    }
     // Start from what the bundle was baked with, then apply the flags.
     let previous = store::read_index(&bundle)?;
     let mut options = previous
@@ -135,23 +136,19 @@ pub fn run(a: BakeArgs) -> Result<()> {
     if let Some(px) = a.max_frame {
         options.max_frame_px = px;
     }
-    let (heights, mask) = (bundle.heights()?, bundle.mask()?);
-    let (clusters, off_terrain) = bake_with_progress(
-        &database,
-        &bundle.frame(),
-        &heights,
-        &mask,
+    let bar = progress::bar(0, "clusters");
+    let (path, clusters, off_terrain) = store::rewrite_bundle(
+        &bundle,
+        &NewVegetation::default(),
         &models,
         &options,
+        &|n, total| {
+            bar.set_length(total);
+            bar.inc(n);
+        },
     )
     .with_context(|| a.bundle.display().to_string())?;
-    let (writer, mut manifest) =
-        BundleWriter::rewrite(&bundle, |key| !store::is_cluster_artifact(key))?;
-    manifest
-        .artifacts
-        .extend(store::write(&writer, &clusters, &options, off_terrain)?);
-    drop((heights, mask));
-    let path = writer.commit(&manifest)?;
+    bar.finish_and_clear();
     if a.json {
         println!("{}", serde_json::to_string_pretty(&clusters.report)?);
     } else {

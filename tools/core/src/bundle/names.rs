@@ -36,6 +36,13 @@ pub const VEGETATION: ArtifactName = ArtifactName {
     file: "vegetation.csv",
 };
 
+/// The samples the vegetation was detected from, when marked in the
+/// viewer (`class;xmin;ymin;xmax;ymax`, pixels of the drape).
+pub const VEGETATION_SAMPLES: ArtifactName = ArtifactName {
+    key: "vegetation_samples",
+    file: "vegetation_samples.csv",
+};
+
 /// Folder of the vegetation clusters (see `cluster::store`), and the prefix
 /// of their manifest keys (atlas pages are `clusters_atlas_NNN`).
 pub const CLUSTERS_DIR: &str = "clusters";

@@ -117,6 +117,86 @@ pub fn write(
     Ok(artifacts)
 }
 
+/// What [`rewrite_bundle`] replaces besides the clusters.
+#[derive(Debug, Clone, Default)]
+pub struct NewVegetation<'a> {
+    /// A new vegetation database (its exports, made with GDAL, are dropped
+    /// from the bundle as out of date).
+    pub database: Option<&'a [crate::veg::db::VegObject]>,
+    /// The samples it was detected from, as CSV rectangles on the drape.
+    pub samples_csv: Option<&'a str>,
+}
+
+/// Re-bake `bundle`'s clusters — from `new.database` when given, else from
+/// its own — with `models` and `options`, and replace them (and the
+/// database and samples) in place, atomically: a failure leaves the bundle
+/// as it was. `progress(done, total)` counts clusters composed. Returns the
+/// bundle's path, the clusters and the objects left off the terrain.
+pub fn rewrite_bundle(
+    bundle: &Bundle,
+    new: &NewVegetation,
+    models: &BTreeMap<String, String>,
+    options: &BakeOptions,
+    progress: &(dyn Fn(u64, u64) + Sync),
+) -> Result<(std::path::PathBuf, Clusters, usize)> {
+    let stored;
+    let database = match new.database {
+        Some(d) => d,
+        None => {
+            stored = bundle.vegetation()?.ok_or_else(|| {
+                Error::invalid(
+                    &bundle.dir,
+                    "the bundle has no vegetation database to cluster",
+                )
+            })?;
+            &stored
+        }
+    };
+    let (heights, mask) = (bundle.heights()?, bundle.mask()?);
+    let (clusters, off_terrain) = super::bake_database(
+        database,
+        &bundle.frame(),
+        &heights,
+        &mask,
+        models,
+        options,
+        progress,
+    )?;
+    let replaced = |key: &str| {
+        is_cluster_artifact(key)
+            || (new.database.is_some()
+                && [
+                    names::VEGETATION.key,
+                    names::VEGETATION_GEOPACKAGE.key,
+                    names::VEGETATION_LABELS.key,
+                ]
+                .contains(&key))
+            || (new.samples_csv.is_some() && key == names::VEGETATION_SAMPLES.key)
+    };
+    let (writer, mut manifest) = BundleWriter::rewrite(bundle, |key| !replaced(key))?;
+    if let Some(database) = new.database {
+        let csv = crate::veg::db::to_csv(database);
+        let name = names::VEGETATION;
+        manifest.artifacts.insert(
+            name.key.into(),
+            writer.write_file(name.file, csv.as_bytes())?,
+        );
+    }
+    if let Some(samples) = new.samples_csv {
+        let name = names::VEGETATION_SAMPLES;
+        manifest.artifacts.insert(
+            name.key.into(),
+            writer.write_file(name.file, samples.as_bytes())?,
+        );
+    }
+    manifest
+        .artifacts
+        .extend(write(&writer, &clusters, options, off_terrain)?);
+    drop((heights, mask));
+    let path = writer.commit(&manifest)?;
+    Ok((path, clusters, off_terrain))
+}
+
 /// Is a manifest key one of the clusters' artifacts?
 pub fn is_cluster_artifact(key: &str) -> bool {
     key.starts_with(names::CLUSTERS_PREFIX)

@@ -1,0 +1,354 @@
+//! The samples tab: the seed's buildDB in the window. The bundle's drape in
+//! a pan-and-zoom view (right or middle drag pans, scroll zooms); a person
+//! drags rectangles with the left button and gives each a class; detection
+//! runs relevo-core's vegetation pipeline on the drape in the background;
+//! its objects are overlaid by class; accepting writes the samples and the
+//! database into the bundle and re-bakes its clusters, atomically, and the
+//! 3D view reloads them.
+
+use eframe::egui;
+use relevo_core::bundle::Bundle;
+use relevo_core::cluster::store::{self, NewVegetation};
+use relevo_core::veg::db::VegObject;
+use relevo_core::veg::pipeline::{self, VegImage, VegOptions};
+use relevo_core::veg::samples::Sample;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+
+/// A detection running in the background, and the flag that cancels it
+/// (its result is then dropped).
+struct Job {
+    handle: JoinHandle<Result<Vec<VegObject>, String>>,
+    cancelled: Arc<AtomicBool>,
+}
+
+/// What the tab keeps between frames.
+pub struct SamplesTab {
+    bundle: PathBuf,
+    texture: Option<egui::TextureHandle>,
+    size: [usize; 2],
+    scene_rect: egui::Rect,
+    /// Marked rectangles, drape pixels `[x0, y0, x1, y1]`, with their class.
+    pub samples: Vec<(String, [f32; 4])>,
+    /// The class a new rectangle gets.
+    pub class: String,
+    /// Where the rectangle being drawn started (drape pixels).
+    drag_from: Option<egui::Pos2>,
+    /// The extraction's options: those the bundle was made with (its
+    /// REGION.toml's `[vegetation.options]`), else the defaults; the slider
+    /// sets the segmentation's brightness threshold.
+    pub options: VegOptions,
+    job: Option<Job>,
+    /// Objects of the last detection, or of the bundle when none ran.
+    pub detections: Vec<VegObject>,
+    /// Whether `detections` are new (not yet accepted).
+    pub fresh: bool,
+    pub status: String,
+}
+
+impl SamplesTab {
+    pub fn new(bundle: &Path) -> Self {
+        let opened = Bundle::open(bundle).ok();
+        let detections = opened
+            .as_ref()
+            .and_then(|b| b.vegetation().ok().flatten())
+            .unwrap_or_default();
+        let options = opened
+            .as_ref()
+            .and_then(|b| b.manifest.parameters.get("vegetation"))
+            .and_then(|v| v.get("options"))
+            .and_then(|o| serde_json::from_value(o.clone()).ok())
+            .unwrap_or_default();
+        SamplesTab {
+            bundle: bundle.to_path_buf(),
+            texture: None,
+            size: [0, 0],
+            scene_rect: egui::Rect::ZERO,
+            samples: Vec::new(),
+            class: "forest".into(),
+            drag_from: None,
+            options,
+            job: None,
+            detections,
+            fresh: false,
+            status: String::new(),
+        }
+    }
+
+    /// The samples as the CSV `samples::parse_csv` reads.
+    pub fn samples_csv(&self) -> String {
+        let mut csv = String::from("class;xmin;ymin;xmax;ymax\n");
+        for (class, [x0, y0, x1, y1]) in &self.samples {
+            csv.push_str(&format!("{class};{x0:.0};{y0:.0};{x1:.0};{y1:.0}\n"));
+        }
+        csv
+    }
+
+    /// Start detection on the drape with the marked samples.
+    pub fn detect(&mut self) {
+        let bundle = self.bundle.clone();
+        let csv = self.samples_csv();
+        let options = self.options.clone();
+        let cancelled = Arc::new(AtomicBool::new(false));
+        let flag = cancelled.clone();
+        let handle = std::thread::spawn(move || {
+            let objects = detect(&bundle, &csv, &options).map_err(|e| format!("{e:#}"))?;
+            if flag.load(Ordering::Relaxed) {
+                return Err("cancelled".into());
+            }
+            Ok(objects)
+        });
+        self.job = Some(Job { handle, cancelled });
+        self.status = "detecting…".into();
+    }
+
+    pub fn running(&self) -> bool {
+        self.job.is_some()
+    }
+
+    /// Pick up a finished detection.
+    pub fn poll(&mut self) {
+        if !self.job.as_ref().is_some_and(|j| j.handle.is_finished()) {
+            return;
+        }
+        let Some(job) = self.job.take() else { return };
+        match job.handle.join() {
+            Ok(Ok(objects)) => {
+                self.status = format!("{} objects detected; accept to write them", objects.len());
+                self.detections = objects;
+                self.fresh = true;
+            }
+            Ok(Err(e)) => self.status = e,
+            Err(_) => self.status = "the detection failed".into(),
+        }
+    }
+
+    /// Write the samples and the detections into the bundle and re-bake its
+    /// clusters with the options they were baked with.
+    pub fn accept(&mut self) -> anyhow::Result<()> {
+        let bundle = Bundle::open(&self.bundle)?;
+        let (options, models) = match store::read_index(&bundle)? {
+            Some(index) => {
+                let models: BTreeMap<String, String> = index
+                    .classes
+                    .iter()
+                    .map(|c| {
+                        let model = c.model.strip_prefix("procedural:").unwrap_or(&c.model);
+                        (c.name.clone(), model.to_string())
+                    })
+                    .collect();
+                (index.options, models)
+            }
+            None => Default::default(),
+        };
+        let csv = self.samples_csv();
+        let new = NewVegetation {
+            database: Some(&self.detections),
+            samples_csv: Some(&csv),
+        };
+        store::rewrite_bundle(&bundle, &new, &models, &options, &|_, _| {})?;
+        self.fresh = false;
+        self.status = format!("{} objects written and clustered", self.detections.len());
+        Ok(())
+    }
+
+    /// The tab: controls on the left, the drape on the right.
+    pub fn ui(&mut self, ui: &mut egui::Ui) -> Option<anyhow::Result<()>> {
+        self.poll();
+        let mut accepted = None;
+        egui::Panel::left("sample controls").show(ui, |ui| {
+            ui.heading("Samples");
+            ui.label("Left-drag on the image marks a rectangle; right-drag pans; scroll zooms.");
+            ui.horizontal(|ui| {
+                let label = ui.label("class");
+                ui.text_edit_singleline(&mut self.class)
+                    .labelled_by(label.id);
+            });
+            let mut remove = None;
+            for (i, (class, r)) in self.samples.iter_mut().enumerate() {
+                ui.horizontal(|ui| {
+                    ui.text_edit_singleline(class);
+                    ui.label(format!("{:.0},{:.0}–{:.0},{:.0}", r[0], r[1], r[2], r[3]));
+                    if ui.button("delete").clicked() {
+                        remove = Some(i);
+                    }
+                });
+            }
+            if let Some(i) = remove {
+                self.samples.remove(i);
+            }
+            ui.add(
+                egui::Slider::new(&mut self.options.brightness_std, 4.0..=64.0)
+                    .text("segmentation threshold"),
+            );
+            ui.horizontal(|ui| {
+                if self.running() {
+                    ui.spinner();
+                    if ui.button("cancel").clicked() {
+                        if let Some(job) = self.job.take() {
+                            job.cancelled.store(true, Ordering::Relaxed);
+                        }
+                        self.status = "cancelled".into();
+                    }
+                } else if ui
+                    .add_enabled(!self.samples.is_empty(), egui::Button::new("detect"))
+                    .clicked()
+                {
+                    self.detect();
+                }
+                if ui
+                    .add_enabled(self.fresh && !self.running(), egui::Button::new("accept"))
+                    .clicked()
+                {
+                    accepted = Some(self.accept());
+                }
+            });
+            ui.label(&self.status);
+        });
+        egui::CentralPanel::default().show(ui, |ui| self.image(ui));
+        if self.running() {
+            ui.ctx().request_repaint();
+        }
+        accepted
+    }
+
+    /// The drape with samples and detections, panned and zoomed.
+    fn image(&mut self, ui: &mut egui::Ui) {
+        if self.texture.is_none() {
+            match drape_image(&self.bundle) {
+                Ok(Some((image, size))) => {
+                    self.size = size;
+                    self.texture = Some(ui.ctx().load_texture(
+                        "drape",
+                        image,
+                        egui::TextureOptions::LINEAR,
+                    ));
+                }
+                Ok(None) => {
+                    ui.label("This bundle has no drape image to mark samples on.");
+                    return;
+                }
+                Err(e) => {
+                    ui.colored_label(egui::Color32::from_rgb(230, 90, 80), format!("{e:#}"));
+                    return;
+                }
+            }
+        }
+        let Some(texture) = &self.texture else { return };
+        let [w, h] = self.size.map(|v| v as f32);
+        let bundle = Bundle::open(&self.bundle).ok();
+        let to_pixel = bundle
+            .as_ref()
+            .and_then(|b| b.manifest.color.as_ref().map(|c| c.geotransform));
+        egui::Scene::new()
+            .drag_pan_buttons(egui::DragPanButtons::SECONDARY | egui::DragPanButtons::MIDDLE)
+            .zoom_range(0.1..=32.0)
+            .show(ui, &mut self.scene_rect, |ui| {
+                let rect = egui::Rect::from_min_size(egui::Pos2::ZERO, egui::vec2(w, h));
+                let response = ui.put(
+                    rect,
+                    egui::Image::new((texture.id(), rect.size())).sense(egui::Sense::drag()),
+                );
+                let painter = ui.painter();
+                if let Some(g) = to_pixel {
+                    let colour = if self.fresh {
+                        egui::Color32::from_rgb(255, 220, 40)
+                    } else {
+                        egui::Color32::from_rgb(60, 230, 90)
+                    };
+                    for o in &self.detections {
+                        if let Some((x, y)) = g.invert(o.x, o.y) {
+                            painter.circle_stroke(
+                                egui::pos2(x as f32, y as f32),
+                                1.5,
+                                (0.6, colour),
+                            );
+                        }
+                    }
+                }
+                for (class, [x0, y0, x1, y1]) in &self.samples {
+                    let r = egui::Rect::from_min_max(egui::pos2(*x0, *y0), egui::pos2(*x1, *y1));
+                    painter.rect_stroke(
+                        r,
+                        0.0,
+                        (1.0, egui::Color32::WHITE),
+                        egui::StrokeKind::Outside,
+                    );
+                    painter.text(
+                        r.left_top(),
+                        egui::Align2::LEFT_BOTTOM,
+                        class,
+                        egui::FontId::proportional(6.0),
+                        egui::Color32::WHITE,
+                    );
+                }
+                // A rectangle follows the pointer while it is dragged (also
+                // while the view pans): pointer positions are taken in the
+                // image's pixels through the scene's transform.
+                let ctx = ui.ctx().clone();
+                let pointer = ctx.pointer_latest_pos().map(|p| {
+                    ctx.layer_transform_from_global(ui.layer_id())
+                        .map_or(p, |t| t * p)
+                });
+                if response.drag_started_by(egui::PointerButton::Primary) {
+                    self.drag_from = pointer;
+                }
+                let clamp = |p: egui::Pos2| egui::pos2(p.x.clamp(0.0, w), p.y.clamp(0.0, h));
+                if let (Some(from), Some(to)) = (self.drag_from, pointer) {
+                    let r = egui::Rect::from_two_pos(clamp(from), clamp(to));
+                    painter.rect_stroke(
+                        r,
+                        0.0,
+                        (1.0, egui::Color32::YELLOW),
+                        egui::StrokeKind::Outside,
+                    );
+                    if response.drag_stopped() {
+                        if r.width() >= 2.0 && r.height() >= 2.0 {
+                            self.samples
+                                .push((self.class.clone(), [r.min.x, r.min.y, r.max.x, r.max.y]));
+                        }
+                        self.drag_from = None;
+                    }
+                }
+            });
+    }
+}
+
+/// The bundle's drape as an egui image.
+fn drape_image(bundle: &Path) -> anyhow::Result<Option<(egui::ColorImage, [usize; 2])>> {
+    let bundle = Bundle::open(bundle)?;
+    let Some(drape) = bundle.drape()? else {
+        return Ok(None);
+    };
+    let size = [drape.info.width, drape.info.height];
+    Ok(Some((
+        egui::ColorImage::from_rgba_unmultiplied(size, &drape.rgba),
+        size,
+    )))
+}
+
+/// relevo-core's extraction on the bundle's drape with samples in drape
+/// pixels (the same pipeline as `relevo prep` and `relevo veg detect`).
+pub fn detect(
+    bundle: &Path,
+    samples_csv: &str,
+    options: &VegOptions,
+) -> anyhow::Result<Vec<VegObject>> {
+    let bundle = Bundle::open(bundle)?;
+    let drape = bundle
+        .drape()?
+        .ok_or_else(|| anyhow::anyhow!("the bundle has no drape image"))?;
+    let (w, h) = (drape.info.width, drape.info.height);
+    let image = VegImage::from_drape(
+        &drape.rgba,
+        w,
+        h,
+        drape.info.geotransform,
+        &bundle.manifest.crs.wkt,
+    )?;
+    let samples: Vec<Sample> = relevo_core::veg::samples::parse_csv(samples_csv, w, h)?;
+    Ok(pipeline::extract(&image, &samples, options)?.objects)
+}
