@@ -477,3 +477,38 @@ fn samples_marked_on_the_drape_detect_accept_and_recluster() {
     let vegetation = scene.vegetation.as_ref().unwrap();
     assert_eq!(vegetation.clusters.tree.objects.len(), detected);
 }
+
+/// `relevo-view render --tab samples`: the samples tab's image — detection
+/// on the drape, relevo-core's overlay and the marked rectangles.
+#[test]
+fn the_samples_tab_renders_its_overlay_for_inspection() {
+    let d = tempfile::tempdir().unwrap();
+    let bundle = prep_region(
+        &repo("data/olinda/REGION.toml"),
+        &d.path().join("olinda.relevo"),
+    );
+    let csv = std::fs::read_to_string(repo("data/olinda/samples.csv")).unwrap();
+    let (rgba, [w, h], objects) = relevo_view::samples::render_tab(&bundle, &csv).unwrap();
+    let color = relevo_core::bundle::Bundle::open(&bundle)
+        .unwrap()
+        .manifest
+        .color
+        .unwrap();
+    assert_eq!([w, h], [color.width, color.height]);
+    assert_eq!(rgba.len(), w * h * 4);
+    // The first sample's outline, white, at (60, 60)–(120, 110).
+    for (x, y) in [(60, 60), (90, 60), (120, 85), (60, 110)] {
+        assert_eq!(
+            rgba[(y * w + x) * 4..(y * w + x) * 4 + 4],
+            [255; 4],
+            "({x}, {y})"
+        );
+    }
+    // The region's own samples, read as drape pixels (within a pixel of the
+    // Landsat image's), find about what prep found.
+    let stored = 11_769;
+    assert!(objects.abs_diff(stored) * 10 < stored, "{objects} objects");
+    let err = relevo_view::samples::render_tab(&bundle, "class;xmin;ymin;xmax;ymax\nforest;1;1\n")
+        .unwrap_err();
+    assert!(format!("{err:#}").contains("line 2"), "{err:#}");
+}

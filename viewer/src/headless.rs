@@ -96,6 +96,14 @@ pub struct RenderArgs {
     /// Paint the window's HUD into the image.
     #[arg(long)]
     pub hud: bool,
+    /// Which tab to render: the 3D view, or the samples tab's image —
+    /// detection on the drape with `--samples` (or the bundle's own
+    /// samples), its overlay and the rectangles.
+    #[arg(long, default_value = "view", value_parser = ["view", "samples"])]
+    pub tab: String,
+    /// Samples for `--tab samples`: class;xmin;ymin;xmax;ymax in drape pixels.
+    #[arg(long)]
+    pub samples: Option<PathBuf>,
     /// Output PNG.
     #[arg(long, short)]
     pub out: PathBuf,
@@ -263,6 +271,9 @@ pub fn run(a: RenderArgs) -> Result<()> {
             a.tau
         );
     }
+    if a.tab == "samples" {
+        return render_samples_tab(&a);
+    }
     let pose = a
         .camera
         .as_deref()
@@ -345,6 +356,36 @@ pub fn run(a: RenderArgs) -> Result<()> {
         a.mode,
         stats.triangles,
         stats.object_triangles
+    );
+    Ok(())
+}
+
+/// `relevo-view render --tab samples`: the samples tab's image written as
+/// a PNG.
+fn render_samples_tab(a: &RenderArgs) -> Result<()> {
+    let csv = match &a.samples {
+        Some(path) => std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read the samples", path.display()))?,
+        None => {
+            let bundle = relevo_core::bundle::Bundle::open(&a.bundle)?;
+            let name = relevo_core::bundle::names::VEGETATION_SAMPLES;
+            let artifact = bundle.manifest.artifacts.get(name.key).with_context(|| {
+                format!(
+                    "{}: the bundle keeps no samples; pass --samples FILE.csv",
+                    a.bundle.display()
+                )
+            })?;
+            std::fs::read_to_string(a.bundle.join(&artifact.file))
+                .with_context(|| format!("{}: cannot read its samples", a.bundle.display()))?
+        }
+    };
+    let (rgba, [w, h], objects) = crate::samples::render_tab(&a.bundle, &csv)?;
+    let png = encode_rgba(&rgba, w, h)?;
+    relevo_core::atomic::write_file(&a.out, &png)?;
+    println!(
+        "{}: {w}×{h} samples tab of {}, {objects} objects detected",
+        a.out.display(),
+        a.bundle.display()
     );
     Ok(())
 }

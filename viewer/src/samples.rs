@@ -21,14 +21,27 @@ use std::thread::JoinHandle;
 /// A detection running in the background, and the flag that cancels it
 /// (its result is then dropped).
 struct Job {
-    handle: JoinHandle<Result<Vec<VegObject>, String>>,
+    handle: JoinHandle<Result<Detection, String>>,
     cancelled: Arc<AtomicBool>,
+}
+
+/// What a detection found: the objects and relevo-core's overlay of the
+/// drape (regions tinted by class, segment borders darkened, objects as
+/// rings), RGBA8 at the drape's size.
+pub struct Detection {
+    pub objects: Vec<VegObject>,
+    pub overlay: Vec<u8>,
 }
 
 /// What the tab keeps between frames.
 pub struct SamplesTab {
     bundle: PathBuf,
     texture: Option<egui::TextureHandle>,
+    /// The last detection's overlay, shown instead of the drape while
+    /// `show_overlay`.
+    overlay: Option<egui::TextureHandle>,
+    pending_overlay: Option<Vec<u8>>,
+    pub show_overlay: bool,
     size: [usize; 2],
     scene_rect: egui::Rect,
     /// Marked rectangles, drape pixels `[x0, y0, x1, y1]`, with their class.
@@ -56,15 +69,13 @@ impl SamplesTab {
             .as_ref()
             .and_then(|b| b.vegetation().ok().flatten())
             .unwrap_or_default();
-        let options = opened
-            .as_ref()
-            .and_then(|b| b.manifest.parameters.get("vegetation"))
-            .and_then(|v| v.get("options"))
-            .and_then(|o| serde_json::from_value(o.clone()).ok())
-            .unwrap_or_default();
+        let options = opened.as_ref().map(bundle_options).unwrap_or_default();
         SamplesTab {
             bundle: bundle.to_path_buf(),
             texture: None,
+            overlay: None,
+            pending_overlay: None,
+            show_overlay: true,
             size: [0, 0],
             scene_rect: egui::Rect::ZERO,
             samples: Vec::new(),
@@ -95,11 +106,11 @@ impl SamplesTab {
         let cancelled = Arc::new(AtomicBool::new(false));
         let flag = cancelled.clone();
         let handle = std::thread::spawn(move || {
-            let objects = detect(&bundle, &csv, &options).map_err(|e| format!("{e:#}"))?;
+            let found = detect(&bundle, &csv, &options).map_err(|e| format!("{e:#}"))?;
             if flag.load(Ordering::Relaxed) {
                 return Err("cancelled".into());
             }
-            Ok(objects)
+            Ok(found)
         });
         self.job = Some(Job { handle, cancelled });
         self.status = "detecting…".into();
@@ -116,9 +127,13 @@ impl SamplesTab {
         }
         let Some(job) = self.job.take() else { return };
         match job.handle.join() {
-            Ok(Ok(objects)) => {
-                self.status = format!("{} objects detected; accept to write them", objects.len());
-                self.detections = objects;
+            Ok(Ok(found)) => {
+                self.status = format!(
+                    "{} objects detected; accept to write them",
+                    found.objects.len()
+                );
+                self.detections = found.objects;
+                self.pending_overlay = Some(found.overlay);
                 self.fresh = true;
             }
             Ok(Err(e)) => self.status = e,
@@ -206,6 +221,10 @@ impl SamplesTab {
                     accepted = Some(self.accept());
                 }
             });
+            ui.checkbox(
+                &mut self.show_overlay,
+                "overlay: classes, segment borders, objects",
+            );
             ui.label(&self.status);
         });
         egui::CentralPanel::default().show(ui, |ui| self.image(ui));
@@ -237,7 +256,22 @@ impl SamplesTab {
                 }
             }
         }
-        let Some(texture) = &self.texture else { return };
+        if let Some(rgba) = self.pending_overlay.take() {
+            let image = egui::ColorImage::from_rgba_unmultiplied(self.size, &rgba);
+            self.overlay = Some(ui.ctx().load_texture(
+                "overlay",
+                image,
+                egui::TextureOptions::NEAREST,
+            ));
+        }
+        let shown = if self.show_overlay {
+            self.overlay.as_ref()
+        } else {
+            None
+        };
+        let Some(texture) = shown.or(self.texture.as_ref()) else {
+            return;
+        };
         let [w, h] = self.size.map(|v| v as f32);
         let bundle = Bundle::open(&self.bundle).ok();
         let to_pixel = bundle
@@ -331,12 +365,9 @@ fn drape_image(bundle: &Path) -> anyhow::Result<Option<(egui::ColorImage, [usize
 }
 
 /// relevo-core's extraction on the bundle's drape with samples in drape
-/// pixels (the same pipeline as `relevo prep` and `relevo veg detect`).
-pub fn detect(
-    bundle: &Path,
-    samples_csv: &str,
-    options: &VegOptions,
-) -> anyhow::Result<Vec<VegObject>> {
+/// pixels (the same pipeline as `relevo prep` and `relevo veg detect`), and
+/// its overlay.
+pub fn detect(bundle: &Path, samples_csv: &str, options: &VegOptions) -> anyhow::Result<Detection> {
     let bundle = Bundle::open(bundle)?;
     let drape = bundle
         .drape()?
@@ -350,5 +381,60 @@ pub fn detect(
         &bundle.manifest.crs.wkt,
     )?;
     let samples: Vec<Sample> = relevo_core::veg::samples::parse_csv(samples_csv, w, h)?;
-    Ok(pipeline::extract(&image, &samples, options)?.objects)
+    let extraction = pipeline::extract(&image, &samples, options)?;
+    let overlay = pipeline::overlay(&image, &extraction, &options.negative_class);
+    Ok(Detection {
+        objects: extraction.objects,
+        overlay,
+    })
+}
+
+/// The options the bundle's vegetation was extracted with (its REGION's
+/// `[vegetation.options]`), else the defaults.
+pub fn bundle_options(bundle: &Bundle) -> VegOptions {
+    bundle
+        .manifest
+        .parameters
+        .get("vegetation")
+        .and_then(|v| v.get("options"))
+        .and_then(|o| serde_json::from_value(o.clone()).ok())
+        .unwrap_or_default()
+}
+
+/// The samples tab as an image for inspection (`relevo-view render --tab
+/// samples`): detection with `samples_csv` on the drape, relevo-core's
+/// overlay, and the sample rectangles outlined in white. RGBA8, its size
+/// and the objects found.
+pub fn render_tab(
+    bundle: &Path,
+    samples_csv: &str,
+) -> anyhow::Result<(Vec<u8>, [usize; 2], usize)> {
+    let opened = Bundle::open(bundle)?;
+    let options = bundle_options(&opened);
+    let drape =
+        opened.manifest.color.as_ref().ok_or_else(|| {
+            anyhow::anyhow!("{}: the bundle has no drape image", bundle.display())
+        })?;
+    let [w, h] = [drape.width, drape.height];
+    let found = detect(bundle, samples_csv, &options)?;
+    let mut rgba = found.overlay;
+    for sample in relevo_core::veg::samples::parse_csv(samples_csv, w, h)? {
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [0f64; 2]);
+        for p in &sample.polygon {
+            for k in 0..2 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        let (x0, x1) = (lo[0].max(0.0) as usize, (hi[0] as usize).min(w - 1));
+        let (y0, y1) = (lo[1].max(0.0) as usize, (hi[1] as usize).min(h - 1));
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                if y == y0 || y == y1 || x == x0 || x == x1 {
+                    rgba[(y * w + x) * 4..(y * w + x) * 4 + 4].copy_from_slice(&[255; 4]);
+                }
+            }
+        }
+    }
+    Ok((rgba, [w, h], found.objects.len()))
 }
