@@ -10,11 +10,10 @@ use eframe::egui;
 use relevo_core::bundle::Bundle;
 use relevo_core::cluster::store::{self, NewVegetation};
 use relevo_core::veg::db::VegObject;
-use relevo_core::veg::pipeline::{self, VegImage, VegOptions};
+use relevo_core::veg::pipeline::{self, VegImage, VegOptions, Watch};
 use relevo_core::veg::samples::Sample;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
@@ -22,7 +21,7 @@ use std::thread::JoinHandle;
 /// (its result is then dropped).
 struct Job {
     handle: JoinHandle<Result<Detection, String>>,
-    cancelled: Arc<AtomicBool>,
+    watch: Arc<Watch>,
 }
 
 /// What a detection found: the objects and relevo-core's overlay of the
@@ -103,16 +102,12 @@ impl SamplesTab {
         let bundle = self.bundle.clone();
         let csv = self.samples_csv();
         let options = self.options.clone();
-        let cancelled = Arc::new(AtomicBool::new(false));
-        let flag = cancelled.clone();
+        let watch = Arc::new(Watch::default());
+        let watched = watch.clone();
         let handle = std::thread::spawn(move || {
-            let found = detect(&bundle, &csv, &options).map_err(|e| format!("{e:#}"))?;
-            if flag.load(Ordering::Relaxed) {
-                return Err("cancelled".into());
-            }
-            Ok(found)
+            detect(&bundle, &csv, &options, &watched).map_err(|e| format!("{e:#}"))
         });
-        self.job = Some(Job { handle, cancelled });
+        self.job = Some(Job { handle, watch });
         self.status = "detecting…".into();
     }
 
@@ -200,13 +195,15 @@ impl SamplesTab {
                     .text("segmentation threshold"),
             );
             ui.horizontal(|ui| {
-                if self.running() {
-                    ui.spinner();
+                if let Some(job) = &self.job {
+                    ui.add(
+                        egui::ProgressBar::new(job.watch.fraction())
+                            .desired_width(120.0)
+                            .show_percentage(),
+                    );
                     if ui.button("cancel").clicked() {
-                        if let Some(job) = self.job.take() {
-                            job.cancelled.store(true, Ordering::Relaxed);
-                        }
-                        self.status = "cancelled".into();
+                        job.watch.cancel();
+                        self.status = "cancelling at the next stage…".into();
                     }
                 } else if ui
                     .add_enabled(!self.samples.is_empty(), egui::Button::new("detect"))
@@ -366,8 +363,13 @@ fn drape_image(bundle: &Path) -> anyhow::Result<Option<(egui::ColorImage, [usize
 
 /// relevo-core's extraction on the bundle's drape with samples in drape
 /// pixels (the same pipeline as `relevo prep` and `relevo veg detect`), and
-/// its overlay.
-pub fn detect(bundle: &Path, samples_csv: &str, options: &VegOptions) -> anyhow::Result<Detection> {
+/// its overlay; `watch` follows and can cancel it.
+pub fn detect(
+    bundle: &Path,
+    samples_csv: &str,
+    options: &VegOptions,
+    watch: &Watch,
+) -> anyhow::Result<Detection> {
     let bundle = Bundle::open(bundle)?;
     let drape = bundle
         .drape()?
@@ -381,7 +383,7 @@ pub fn detect(bundle: &Path, samples_csv: &str, options: &VegOptions) -> anyhow:
         &bundle.manifest.crs.wkt,
     )?;
     let samples: Vec<Sample> = relevo_core::veg::samples::parse_csv(samples_csv, w, h)?;
-    let extraction = pipeline::extract(&image, &samples, options)?;
+    let extraction = pipeline::extract_watched(&image, &samples, options, watch)?;
     let overlay = pipeline::overlay(&image, &extraction, &options.negative_class);
     Ok(Detection {
         objects: extraction.objects,
@@ -416,7 +418,7 @@ pub fn render_tab(
             anyhow::anyhow!("{}: the bundle has no drape image", bundle.display())
         })?;
     let [w, h] = [drape.width, drape.height];
-    let found = detect(bundle, samples_csv, &options)?;
+    let found = detect(bundle, samples_csv, &options, &Watch::default())?;
     let mut rgba = found.overlay;
     for sample in relevo_core::veg::samples::parse_csv(samples_csv, w, h)? {
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [0f64; 2]);

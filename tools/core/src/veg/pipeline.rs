@@ -194,8 +194,54 @@ pub struct ClassReport {
     pub objects: usize,
 }
 
+/// Progress and cancellation of an extraction running elsewhere (a
+/// viewer's background thread): the stages done out of [`Watch::STAGES`]
+/// (split-and-merge, classification, placement), and a flag that stops the
+/// extraction at the next stage boundary.
+#[derive(Debug, Default)]
+pub struct Watch {
+    cancelled: std::sync::atomic::AtomicBool,
+    stages_done: std::sync::atomic::AtomicUsize,
+}
+
+impl Watch {
+    pub const STAGES: usize = 3;
+
+    /// Ask the extraction to stop at the next stage boundary.
+    pub fn cancel(&self) {
+        self.cancelled
+            .store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// Share of the stages done, 0–1.
+    pub fn fraction(&self) -> f32 {
+        self.stages_done.load(std::sync::atomic::Ordering::Relaxed) as f32 / Self::STAGES as f32
+    }
+
+    /// A stage is done: count it, and stop if cancelled.
+    fn stage_done(&self) -> Result<()> {
+        self.stages_done
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        if self.cancelled.load(std::sync::atomic::Ordering::Relaxed) {
+            return Err(Error::Input("the extraction was cancelled".into()));
+        }
+        Ok(())
+    }
+}
+
 /// Segment, learn from the samples, classify every region and place objects.
 pub fn extract(image: &VegImage, samples: &[Sample], options: &VegOptions) -> Result<Extraction> {
+    extract_watched(image, samples, options, &Watch::default())
+}
+
+/// [`extract`], reporting each stage to `watch` and stopping when it is
+/// cancelled.
+pub fn extract_watched(
+    image: &VegImage,
+    samples: &[Sample],
+    options: &VegOptions,
+    watch: &Watch,
+) -> Result<Extraction> {
     let placement = options.placement(image.pixel_m)?;
     let brightness_span = image.image.brightness_span();
     if brightness_span < 128.0 {
@@ -214,6 +260,7 @@ pub fn extract(image: &VegImage, samples: &[Sample], options: &VegOptions) -> Re
         segment_ms,
         "split and merge"
     );
+    watch.stage_done()?;
     let start = Instant::now();
     let classifier = Classifier::train(
         &image.image,
@@ -224,6 +271,7 @@ pub fn extract(image: &VegImage, samples: &[Sample], options: &VegOptions) -> Re
     )?;
     let labels = classifier.classify_regions(&image.image, &segmentation);
     let classify_ms = start.elapsed().as_secs_f64() * 1e3;
+    watch.stage_done()?;
     let vegetation: Vec<bool> = classifier
         .classes
         .iter()
@@ -245,6 +293,7 @@ pub fn extract(image: &VegImage, samples: &[Sample], options: &VegOptions) -> Re
         placement,
     );
     let detect_ms = start.elapsed().as_secs_f64() * 1e3;
+    watch.stage_done()?;
     let objects: Vec<VegObject> = found
         .iter()
         .enumerate()
@@ -428,5 +477,28 @@ mod tests {
         let others: Vec<Sample> = samples.into_iter().filter(|s| s.class == "other").collect();
         let error = extract(&image, &others, &VegOptions::default()).err();
         assert!(error.is_some_and(|e| e.to_string().contains("mark some vegetation")));
+    }
+
+    #[test]
+    fn a_watch_follows_the_stages_and_cancels_at_the_next() {
+        let (image, samples) = soap_061();
+        let watch = Watch::default();
+        let whole = extract_watched(&image, &samples, &VegOptions::default(), &watch).unwrap();
+        assert_eq!(watch.fraction(), 1.0);
+        assert_eq!(
+            whole.objects,
+            extract(&image, &samples, &VegOptions::default())
+                .unwrap()
+                .objects
+        );
+        let cancelled = Watch::default();
+        cancelled.cancel();
+        let e = extract_watched(&image, &samples, &VegOptions::default(), &cancelled).unwrap_err();
+        assert!(e.to_string().contains("cancelled"), "{e}");
+        assert_eq!(
+            cancelled.fraction(),
+            1.0 / Watch::STAGES as f32,
+            "stopped after the first stage"
+        );
     }
 }
