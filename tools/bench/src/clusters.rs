@@ -161,39 +161,11 @@ fn large(
         cell_size_m: cell,
         geotransform: GeoTransform::north_up(-cell / 2.0, extent + cell / 2.0, cell, cell),
     };
-    let source_side = (source.side - 1) as f64 * source.cell_size_m;
-    let relative: Vec<(f64, f64, &VegObject)> = database
-        .iter()
-        .filter_map(|o| {
-            let (x, y) = source.terrain_from_world(o.x, o.y)?;
-            Some((x / source_side, y / source_side, o))
-        })
-        .collect();
     for count in [10_000usize, 100_000, 1_000_000]
         .into_iter()
         .filter(|&n| n <= max_objects)
     {
-        let tiles = count.div_ceil(relative.len());
-        let k = (tiles as f64).sqrt().ceil() as usize;
-        let tile_m = extent / k as f64;
-        let objects: Vec<VegObject> = (0..count)
-            .map(|i| {
-                let (tile, (rx, ry, o)) = (i / relative.len(), relative[i % relative.len()]);
-                let (x, y) = (
-                    ((tile % k) as f64 + rx) * tile_m,
-                    ((tile / k) as f64 + ry) * tile_m,
-                );
-                let (east, north) = frame.world_from_terrain(x, y);
-                VegObject {
-                    id: i as u64 + 1,
-                    x: east,
-                    y: north,
-                    class: o.class.clone(),
-                    size: o.size,
-                    score: o.score,
-                }
-            })
-            .collect();
+        let objects = tiled_detections(database, source, &frame, count);
         let options = BakeOptions {
             budget_bytes: budget_mib << 20,
             ..BakeOptions::default()
@@ -410,4 +382,48 @@ pub fn pictures(repo: &Path, out: &Path) -> Result<()> {
     write("cluster_views.png", strip(&rows, 8))?;
     let _ = std::fs::remove_dir_all(&dir);
     Ok(())
+}
+
+/// `count` objects: the real detections of `database` (on `source`) tiled
+/// k × k over the terrain of `target`, k the smallest that holds them, in
+/// database order tile after tile — density grows with the count.
+pub fn tiled_detections(
+    database: &[VegObject],
+    source: &TerrainFrame,
+    target: &TerrainFrame,
+    count: usize,
+) -> Vec<VegObject> {
+    let source_side = (source.side - 1) as f64 * source.cell_size_m;
+    let extent = (target.side - 1) as f64 * target.cell_size_m;
+    let relative: Vec<(f64, f64, &VegObject)> = database
+        .iter()
+        .filter_map(|o| {
+            let (x, y) = source.terrain_from_world(o.x, o.y)?;
+            Some((x / source_side, y / source_side, o))
+        })
+        .collect();
+    if relative.is_empty() {
+        return Vec::new();
+    }
+    let tiles = count.div_ceil(relative.len());
+    let k = (tiles as f64).sqrt().ceil() as usize;
+    let tile_m = extent / k as f64;
+    (0..count)
+        .map(|i| {
+            let (tile, (rx, ry, o)) = (i / relative.len(), relative[i % relative.len()]);
+            let (x, y) = (
+                ((tile % k) as f64 + rx) * tile_m,
+                ((tile / k) as f64 + ry) * tile_m,
+            );
+            let (east, north) = target.world_from_terrain(x, y);
+            VegObject {
+                id: i as u64 + 1,
+                x: east,
+                y: north,
+                class: o.class.clone(),
+                size: o.size,
+                score: o.score,
+            }
+        })
+        .collect()
 }

@@ -65,6 +65,18 @@ enum BenchCommand {
         #[arg(long, default_value_t = 10000)]
         max_side: usize,
     },
+    /// The viewer with 1k–1M vegetation objects: frame time of the list,
+    /// blobs and quadtree cut on the GPU found (lavapipe without one).
+    #[command(after_help = "Examples:
+  relevo-bench view-vegetation --json --runs 2
+  relevo-bench view-vegetation --max-objects 100000")]
+    ViewVegetation {
+        #[command(flatten)]
+        common: BenchArgs,
+        /// Largest object count (1k, 10k, 100k, 1M).
+        #[arg(long, default_value_t = 1_000_000)]
+        max_objects: usize,
+    },
     /// Vegetation clusters: draws per frame of the list, blobs and quadtree
     /// (the seed's table 4.4, then 10k–1M objects), selection and bake time.
     #[command(after_help = "Examples:
@@ -129,6 +141,10 @@ fn main() -> ExitCode {
             a.max_side,
             a.common.json,
         ),
+        BenchCommand::ViewVegetation {
+            common: a,
+            max_objects,
+        } => view::vegetation(&a.repo, a.runs.max(1), max_objects, a.json),
         BenchCommand::Clusters {
             common: a,
             max_objects,

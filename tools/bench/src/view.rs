@@ -232,3 +232,123 @@ fn frame_time(
     }
     Ok((median(&times), stats))
 }
+
+/// Frame time against the number of vegetation objects (1k to 1M) for the
+/// list, the blobs and the quadtree cut: the sample region's real
+/// detections tiled over a 1025² fractal terrain of 30 m cells (30.7 km),
+/// baked into its bundle, drawn in mesh mode (τ = 2) at 1280×720 from the
+/// home view over eight headings.
+pub fn vegetation(repo: &Path, runs: usize, max_objects: usize, json_lines: bool) -> Result<()> {
+    use relevo_core::cluster::bake::BakeOptions;
+    use relevo_core::cluster::store::{rewrite_bundle, NewVegetation};
+    let scratch = crate::bench::tempfile_dir()?;
+    let (device, queue, adapter) = device()?;
+    emit(
+        json_lines,
+        json!({"bench": "view-adapter", "adapter": adapter}),
+        format!("adapter: {adapter}"),
+    );
+    let olinda = scratch.join("olinda.relevo");
+    prep(
+        &Region::load(&repo.join("data/olinda/REGION.toml"))?,
+        &olinda,
+        true,
+    )?;
+    let source = relevo_core::bundle::Bundle::open(&olinda)?;
+    let database = source
+        .vegetation()?
+        .context("the sample region has no vegetation")?;
+    let side = 1025;
+    let cell = 30.0;
+    let grid = HeightGrid {
+        side,
+        heights: fractal_heights(side, 1),
+        mask: vec![1; side * side],
+        geotransform: GeoTransform::north_up(0.0, side as f64 * cell, cell, cell),
+    };
+    let crs = Crs {
+        wkt: String::new(),
+        epsg: None,
+    };
+    let path = write_terrain_bundle(
+        &scratch.join("forest.relevo"),
+        "forest",
+        &grid,
+        cell,
+        crs,
+        true,
+    )?;
+    let size = [1280u32, 720u32];
+    for count in [1_000usize, 10_000, 100_000, 1_000_000]
+        .into_iter()
+        .filter(|&n| n <= max_objects)
+    {
+        let terrain = relevo_core::bundle::Bundle::open(&path)?;
+        let objects =
+            crate::clusters::tiled_detections(&database, &source.frame(), &terrain.frame(), count);
+        let new = NewVegetation {
+            database: Some(&objects),
+            samples_csv: None,
+        };
+        rewrite_bundle(
+            &terrain,
+            &new,
+            &Default::default(),
+            &BakeOptions::default(),
+            &|_, _| {},
+        )?;
+        drop(terrain);
+        let mut scene = Scene::open(&path)?;
+        let home = Flight::home(&scene);
+        let mut renderer = Renderer::new(&device, &queue, &scene, size);
+        let terrain_only = Settings {
+            mode: Mode::Mesh,
+            objects: false,
+            ..Default::default()
+        };
+        let (terrain_ms, _) = frame_time(
+            &device,
+            &queue,
+            &mut renderer,
+            &mut scene,
+            &home,
+            &terrain_only,
+            size,
+            runs,
+        )?;
+        for selection in [
+            VegetationSelection::Quadtree,
+            VegetationSelection::Blobs { side_m: 3000.0 },
+            VegetationSelection::List,
+        ] {
+            let settings = Settings {
+                mode: Mode::Mesh,
+                vegetation: selection,
+                ..Default::default()
+            };
+            let (ms, stats) = frame_time(
+                &device,
+                &queue,
+                &mut renderer,
+                &mut scene,
+                &home,
+                &settings,
+                size,
+                runs,
+            )?;
+            emit(
+                json_lines,
+                json!({"bench": "view-vegetation", "objects": count, "selection": selection.to_string(),
+                       "frame_ms": ms, "fps": 1e3 / ms, "terrain_ms": terrain_ms, "impostors": stats.impostors,
+                       "impostor_views": stats.impostor_views, "represented": stats.vegetation_represented,
+                       "cut_ms": stats.cut_ms, "runs": runs}),
+                format!(
+                    "{count} objects, {selection}: {ms:.1} ms ({:.0} fps; terrain alone {terrain_ms:.1} ms), {} impostors for {} objects, selection {:.2} ms",
+                    1e3 / ms, stats.impostors, stats.vegetation_represented, stats.cut_ms
+                ),
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&scratch);
+    Ok(())
+}
