@@ -59,15 +59,7 @@ pub struct VegetationPass {
 impl VegetationPass {
     pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, clusters: &Clusters) -> Self {
         let (atlas, atlas_size) = upload_atlas(device, queue, clusters);
-        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("impostor sampler"),
-            address_mode_u: wgpu::AddressMode::ClampToEdge,
-            address_mode_v: wgpu::AddressMode::ClampToEdge,
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            mipmap_filter: wgpu::MipmapFilterMode::Linear,
-            ..Default::default()
-        });
+        let sampler = super::mipmap_sampler(device, "impostor sampler");
         let sharp_sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("impostor sampler, nearest"),
             lod_max_clamp: 0.0,
@@ -79,47 +71,20 @@ impl VegetationPass {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("vegetation bindings"),
-            entries: &[
-                super::uniform_entry(),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                        view_dimension: wgpu::TextureViewDimension::D2Array,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 2,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    count: None,
-                },
-            ],
-        });
+        let layout = super::textured_layout(
+            device,
+            "vegetation bindings",
+            wgpu::TextureViewDimension::D2Array,
+        );
         let bind = |sampler: &wgpu::Sampler| {
-            device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("vegetation bindings"),
-                layout: &layout,
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: uniforms.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: wgpu::BindingResource::TextureView(&atlas),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 2,
-                        resource: wgpu::BindingResource::Sampler(sampler),
-                    },
-                ],
-            })
+            super::textured_bind_group(
+                device,
+                "vegetation bindings",
+                &layout,
+                &uniforms,
+                &atlas,
+                sampler,
+            )
         };
         let (bind_group, sharp_bind_group) = (bind(&sampler), bind(&sharp_sampler));
         let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
