@@ -150,6 +150,11 @@ impl ViewerApp {
         }
     }
 
+    /// The samples tab of the open bundle.
+    pub fn samples_tab(&mut self) -> Option<&mut SamplesTab> {
+        self.samples.as_mut()
+    }
+
     /// Open the current bundle again (after its vegetation was rewritten),
     /// keeping the camera and the objects.
     fn reload(&mut self) {

@@ -169,3 +169,94 @@ fn the_samples_tab_opens_and_explains_a_bundle_without_a_drape() {
     assert_eq!(harness.state().tab, relevo_view::app::Tab::View);
     assert!(harness.state().stats.triangles > 100);
 }
+
+/// The samples tab driven with simulated input: two rectangles dragged on
+/// the drape (the second after switching class), detection run from its
+/// button on the real Grenoble crop, the overlay shown, and accepting
+/// writes a database and clusters that `validate` accepts and the 3D view
+/// draws.
+#[test]
+fn samples_are_dragged_detected_and_accepted_in_the_window() {
+    if std::env::var_os("VK_ICD_FILENAMES").is_none() {
+        std::env::set_var("VK_ICD_FILENAMES", relevo_view::LAVAPIPE_ICD);
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let bundle = common::grenoble_bundle_with_drape(dir.path());
+    let mut harness = Harness::builder()
+        .with_size([1000.0, 640.0])
+        .wgpu()
+        .build_eframe(|_| ViewerApp::new(Some(&bundle)));
+    harness.run_steps(2);
+    harness.get_by_label("samples").click();
+    harness.run_steps(3);
+    let drag = |harness: &mut Harness<ViewerApp>, from: [f32; 2], to: [f32; 2]| {
+        harness.hover_at(from.into());
+        harness.run_steps(1);
+        harness.drag_at(from.into());
+        harness.run_steps(1);
+        for k in 1..=4 {
+            let t = k as f32 / 4.0;
+            harness.hover_at(
+                [
+                    from[0] + t * (to[0] - from[0]),
+                    from[1] + t * (to[1] - from[1]),
+                ]
+                .into(),
+            );
+            harness.run_steps(1);
+        }
+        harness.drop_at(to.into());
+        harness.run_steps(2);
+    };
+    // Low ground (valley) as vegetation, high rock as the counter-example.
+    drag(&mut harness, [560.0, 380.0], [640.0, 450.0]);
+    harness.state_mut().samples_tab().unwrap().class = "other".into();
+    drag(&mut harness, [700.0, 200.0], [780.0, 260.0]);
+    let samples = harness.state_mut().samples_tab().unwrap().samples.clone();
+    assert_eq!(samples.len(), 2, "{samples:?}");
+    assert_eq!(
+        (samples[0].0.as_str(), samples[1].0.as_str()),
+        ("forest", "other")
+    );
+    for (_, r) in &samples {
+        assert!(
+            r[2] - r[0] > 5.0 && r[3] - r[1] > 5.0 && r[2] <= 257.0 && r[3] <= 257.0,
+            "{r:?}"
+        );
+    }
+    // Coarse pixels (150 m): fill mode, one object per 45 ha keeps it small.
+    harness
+        .state_mut()
+        .samples_tab()
+        .unwrap()
+        .options
+        .density_per_ha = 1.0 / 45.0;
+    harness.get_by_label("detect").click();
+    for _ in 0..600 {
+        harness.run_steps(1);
+        if !harness.state_mut().samples_tab().unwrap().running() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let tab = harness.state_mut().samples_tab().unwrap();
+    assert!(tab.fresh, "{}", tab.status);
+    let found = tab.detections.len();
+    assert!(found > 0, "{}", tab.status);
+    harness.get_by_label("accept").click();
+    harness.run_steps(3);
+    assert_eq!(harness.state().error(), None);
+    let reopened = relevo_core::bundle::Bundle::open(&bundle).unwrap();
+    assert_eq!(
+        relevo_core::bundle::validate(&reopened),
+        Vec::<String>::new()
+    );
+    assert_eq!(reopened.vegetation().unwrap().unwrap().len(), found);
+    harness.get_by_label("3D view").click();
+    harness.run_steps(3);
+    assert!(harness
+        .state()
+        .hud_lines()
+        .join("\n")
+        .contains("vegetation (quadtree)"));
+}

@@ -36,3 +36,35 @@ pub fn grenoble_bundle(dir: &Path) -> PathBuf {
     )
     .unwrap()
 }
+
+/// The Grenoble crop with a drape derived from its heights (tint and
+/// hillshade, one pixel per vertex), for the samples tab.
+#[allow(dead_code)] // only the UI tests mark samples
+pub fn grenoble_bundle_with_drape(dir: &Path) -> PathBuf {
+    use relevo_core::bundle::{names, Bundle, BundleWriter, ColorInfo, Dtype};
+    let path = grenoble_bundle(dir);
+    let bundle = Bundle::open(&path).unwrap();
+    let side = bundle.manifest.grid.side;
+    let heights = bundle.heights().unwrap();
+    let mask = bundle.mask().unwrap();
+    let rgba = relevo_core::raster::tint::terrain_drape(
+        &heights,
+        &mask,
+        side,
+        bundle.manifest.grid.cell_size_m,
+        bundle.manifest.grid.height_range_m,
+    );
+    let (writer, mut manifest) = BundleWriter::rewrite(&bundle, |_| true).unwrap();
+    let color = writer
+        .write_array(names::COLOR.file, Dtype::U8, &[side, side, 4], &rgba)
+        .unwrap();
+    manifest.artifacts.insert(names::COLOR.key.into(), color);
+    manifest.color = Some(ColorInfo {
+        width: side,
+        height: side,
+        geotransform: bundle.manifest.grid.geotransform,
+        bands: [0, 0, 0],
+    });
+    drop((heights, mask, bundle));
+    writer.commit(&manifest).unwrap()
+}

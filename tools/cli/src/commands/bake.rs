@@ -184,6 +184,9 @@ pub fn print_report(report: &BakeReport) {
         mib(report.atlas_bytes),
         mib(report.budget_bytes)
     );
+    if report.density_cap == Some(0.0) {
+        println!("  the budget holds no cluster: every object is drawn one by one");
+    }
     if let (Some(cap), Some(from)) = (report.density_cap, report.sharp_from_m) {
         println!(
             "  over budget at full detail: cluster views capped at {cap:.3} texels/m (sharp from {from:.0} m on a 1920-px screen); {} clusters left out, their objects drawn from smaller clusters or one by one",

@@ -109,7 +109,7 @@ pub struct LevelReport {
 pub struct BakeReport {
     pub objects: usize,
     pub levels: Vec<LevelReport>,
-    /// Class impostor texture bytes (estimated like the levels').
+    /// Bytes of the class impostors' pages on their own.
     pub class_bytes: u64,
     /// Bytes of the atlas pages as written, with mip levels.
     pub atlas_bytes: u64,
@@ -192,10 +192,16 @@ pub fn bake(
             })
         })
         .collect();
-    let class_bytes: u64 = class_views
+    // What the class impostors take once packed into pages.
+    let class_sizes: Vec<[usize; 2]> = class_views
         .iter()
         .flatten()
-        .map(|i| frame_bytes([i.width, i.height]))
+        .map(|i| [i.width, i.height])
+        .collect();
+    let class_bytes: u64 = pack(&class_sizes, options.page_px as usize)?
+        .1
+        .iter()
+        .map(|&[w, h]| page_bytes(w, h))
         .sum();
     if class_bytes > options.budget_bytes {
         return Err(Error::Input(format!(
@@ -238,12 +244,13 @@ pub fn bake(
     // if capped too — is drawn instead; so a node whose parent is capped is
     // not baked at all. Bytes grow with the cap: bisect for the largest cap
     // whose atlas fits, then pack (and tighten if shelf waste overflows).
+    // A cap of 0 bakes no cluster at all (the class impostors always fit).
     let plan = |cap: f64| -> Vec<Option<[[usize; 2]; 5]>> {
         tree.nodes
             .iter()
             .enumerate()
             .map(|(i, n)| {
-                let density = need[i]?;
+                let density = need[i].filter(|_| cap > 0.0)?;
                 let parent_capped =
                     parent[i] != NONE && need[parent[i] as usize].is_some_and(|p| p > cap);
                 (!parent_capped)
@@ -273,7 +280,11 @@ pub fn bake(
                 hi = mid;
             }
         }
-        cap = lo;
+        cap = if estimate(&plan(lo)) <= options.budget_bytes {
+            lo
+        } else {
+            0.0
+        };
     }
     let (plans, layout, pages_size) = loop {
         let plans = plan(cap);
@@ -288,11 +299,16 @@ pub fn bake(
         if bytes <= options.budget_bytes {
             break (plans, layout, pages_size);
         }
-        if cap < 1e-5 {
+        if cap == 0.0 {
             return Err(Error::Input(format!(
-                "an atlas budget of {} bytes cannot hold the class impostors and the coarsest clusters ({bytes} bytes)",
+                "an atlas budget of {} bytes is below the {bytes} bytes of the class impostors' pages",
                 options.budget_bytes
             )));
+        }
+        if cap < 1e-5 {
+            // Not even the coarsest clusters at their smallest fit: none.
+            cap = 0.0;
+            continue;
         }
         cap = if cap.is_finite() {
             cap * 0.9
@@ -325,9 +341,8 @@ pub fn bake(
             level.atlas_bytes += sizes.iter().map(|&s| frame_bytes(s)).sum::<u64>();
         }
     }
-    let sharp_from_m = cap
-        .is_finite()
-        .then(|| pixels_per_m_at_1m / (cap * magnification));
+    let sharp_from_m =
+        (cap.is_finite() && cap > 0.0).then(|| pixels_per_m_at_1m / (cap * magnification));
     if let Some(d) = sharp_from_m {
         // The report says it too (`relevo info`, `bake`): not a warning.
         tracing::info!(
@@ -759,5 +774,25 @@ pub(crate) mod tests {
         assert!(r.levels.iter().any(|l| l.reduced > 0));
         assert!(r.left_out() > 0, "{:?}", r.levels);
         assert!(baked(&cut.tree).count() < baked(&full.tree).count());
+
+        // A budget that holds the class impostors and nothing more: no
+        // cluster, said so, and every object is still drawn (one by one).
+        let bare = BakeOptions {
+            budget_bytes: full.report.class_bytes + 1_000,
+            ..small_options()
+        };
+        let none = bake(
+            sources(),
+            scattered(600),
+            [0.0; 2],
+            2048.0,
+            &bare,
+            &|_, _| {},
+        )
+        .unwrap();
+        assert_eq!(none.report.density_cap, Some(0.0));
+        assert_eq!(none.report.sharp_from_m, None);
+        assert_eq!(baked(&none.tree).count(), 0);
+        assert!(none.frames.is_empty());
     }
 }
