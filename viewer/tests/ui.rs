@@ -12,17 +12,24 @@ use egui_kittest::Harness;
 use relevo_view::app::ViewerApp;
 use relevo_view::gpu::Mode;
 
-#[test]
-fn keys_switch_modes_and_the_hud_shows_the_numbers() {
+/// The viewer's window on `bundle`, 1000×640, drawn by the wgpu renderer
+/// on lavapipe unless a driver is pinned.
+fn window(bundle: &std::path::Path) -> Harness<'static, ViewerApp> {
     if std::env::var_os("VK_ICD_FILENAMES").is_none() {
         std::env::set_var("VK_ICD_FILENAMES", relevo_view::LAVAPIPE_ICD);
     }
-    let dir = tempfile::tempdir().unwrap();
-    let bundle = common::grenoble_bundle(dir.path());
-    let mut harness = Harness::builder()
+    let bundle = bundle.to_path_buf();
+    Harness::builder()
         .with_size([1000.0, 640.0])
         .wgpu()
-        .build_eframe(|_| ViewerApp::new(Some(&bundle)));
+        .build_eframe(move |_| ViewerApp::new(Some(&bundle)))
+}
+
+#[test]
+fn keys_switch_modes_and_the_hud_shows_the_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    let bundle = common::grenoble_bundle(dir.path());
+    let mut harness = window(&bundle);
     harness.run_steps(3);
     let app = harness.state();
     assert_eq!(app.error(), None);
@@ -150,15 +157,9 @@ fn problems_are_shown_in_the_window() {
 /// has no drape to mark samples on; the 3D view comes back as it was.
 #[test]
 fn the_samples_tab_opens_and_explains_a_bundle_without_a_drape() {
-    if std::env::var_os("VK_ICD_FILENAMES").is_none() {
-        std::env::set_var("VK_ICD_FILENAMES", relevo_view::LAVAPIPE_ICD);
-    }
     let dir = tempfile::tempdir().unwrap();
     let bundle = common::grenoble_bundle(dir.path());
-    let mut harness = Harness::builder()
-        .with_size([1000.0, 640.0])
-        .wgpu()
-        .build_eframe(|_| ViewerApp::new(Some(&bundle)));
+    let mut harness = window(&bundle);
     harness.run_steps(2);
     harness.get_by_label("samples").click();
     harness.run_steps(2);
@@ -177,15 +178,9 @@ fn the_samples_tab_opens_and_explains_a_bundle_without_a_drape() {
 /// draws.
 #[test]
 fn samples_are_dragged_detected_and_accepted_in_the_window() {
-    if std::env::var_os("VK_ICD_FILENAMES").is_none() {
-        std::env::set_var("VK_ICD_FILENAMES", relevo_view::LAVAPIPE_ICD);
-    }
     let dir = tempfile::tempdir().unwrap();
     let bundle = common::grenoble_bundle_with_drape(dir.path());
-    let mut harness = Harness::builder()
-        .with_size([1000.0, 640.0])
-        .wgpu()
-        .build_eframe(|_| ViewerApp::new(Some(&bundle)));
+    let mut harness = window(&bundle);
     harness.run_steps(2);
     harness.get_by_label("samples").click();
     harness.run_steps(3);
