@@ -735,6 +735,10 @@ fn vegetation_panel(ui: &mut egui::Ui, s: &mut Settings, vegetation: &crate::sce
     ui.checkbox(&mut s.alpha, "alpha (a)");
     ui.checkbox(&mut s.blur, "blur (b)");
     ui.add(egui::Slider::new(&mut s.view_angle_deg, 0.0..=90.0).text("top view above (°)"));
+    ui.checkbox(
+        &mut s.automatic_view_angle,
+        "automatic view angle (per impostor)",
+    );
     let bands: Vec<String> = vegetation
         .cut
         .bands

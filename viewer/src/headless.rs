@@ -93,6 +93,10 @@ pub struct RenderArgs {
     /// view, degrees.
     #[arg(long, default_value_t = 45.0)]
     pub view_angle: f64,
+    /// Each impostor's own view angle: where its top view shows more than
+    /// its side.
+    #[arg(long)]
+    pub auto_view_angle: bool,
     /// Paint the window's HUD into the image.
     #[arg(long)]
     pub hud: bool,
@@ -309,6 +313,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         alpha: !a.no_alpha,
         blur: !a.no_blur,
         view_angle_deg: a.view_angle,
+        automatic_view_angle: a.auto_view_angle,
         ..Default::default()
     };
     if !(0.0..=90.0).contains(&a.view_angle) {

@@ -86,14 +86,18 @@ pub fn lines(r: &Readings) -> Vec<String> {
                 .map(|b| format!("{:.0}m:{}", b.until_m, b.max_cluster))
                 .collect();
             lines.push(format!(
-                "clusters by depth {}   bands {}   top view above {:.0}°",
+                "clusters by depth {}   bands {}   top view {}",
                 if per_depth.is_empty() {
                     "none".to_string()
                 } else {
                     per_depth.join(" ")
                 },
                 bands.join(" "),
-                s.view_angle_deg
+                if s.automatic_view_angle {
+                    "where it shows more".to_string()
+                } else {
+                    format!("above {:.0}°", s.view_angle_deg)
+                }
             ));
         } else {
             lines.push(format!(

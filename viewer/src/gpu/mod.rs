@@ -310,6 +310,9 @@ pub struct Settings {
     /// Elevation of the line of sight above which impostors show their top
     /// view, degrees (the seed's θ).
     pub view_angle_deg: f64,
+    /// Instead, each impostor's own threshold: where its top view shows
+    /// more than its side (relevo-core's automatic choice).
+    pub automatic_view_angle: bool,
 }
 
 /// What chooses the vegetation drawn each frame (relevo-core's
@@ -369,6 +372,7 @@ impl Default for Settings {
             alpha: true,
             blur: true,
             view_angle_deg: 45.0,
+            automatic_view_angle: false,
         }
     }
 }

@@ -39,6 +39,12 @@ pub struct CutOptions {
     /// Width of the cross-fade around the view-angle threshold and around
     /// each 45° boundary between side views, degrees (0: the view flips).
     pub crossfade_deg: f64,
+    /// Choose the threshold per impostor instead: the elevation from which
+    /// its top view shows more than its side view — a box of height h and
+    /// width w seen from elevation e shows w² sin e from above and w h cos e
+    /// from the side, equal at tan e = h / w. Flat clusters switch early,
+    /// tall conifers late (the automatic choice the seed proposes, §4.1.3).
+    pub automatic_view_angle: bool,
     /// Largest ratio of screen pixels to texture texels a cluster may be
     /// drawn at.
     pub magnification: f64,
@@ -62,6 +68,7 @@ impl Default for CutOptions {
             .to_vec(),
             view_angle_deg: 45.0,
             crossfade_deg: 10.0,
+            automatic_view_angle: false,
             magnification: 1.5,
         }
     }
@@ -341,7 +348,13 @@ pub struct ViewChoice {
 
 impl ViewChoice {
     pub fn new(options: &CutOptions) -> Self {
-        let (theta, half) = (options.view_angle_deg, options.crossfade_deg / 2.0);
+        Self::with_angle(options.view_angle_deg, options.crossfade_deg)
+    }
+
+    /// The view switch at threshold `theta` (degrees) with a cross-fade of
+    /// `crossfade_deg`.
+    pub fn with_angle(theta: f64, crossfade_deg: f64) -> Self {
+        let half = crossfade_deg / 2.0;
         let tan = |deg: f64| {
             if deg >= 90.0 {
                 f64::INFINITY
@@ -490,6 +503,9 @@ struct View<'c> {
     /// Screen pixels per metre at 1 m from the eye.
     pixels_per_m_at_1m: f64,
     choice: ViewChoice,
+    /// Per-impostor thresholds ([`CutOptions::automatic_view_angle`]).
+    automatic: bool,
+    crossfade_deg: f64,
 }
 
 impl<'c> View<'c> {
@@ -500,6 +516,8 @@ impl<'c> View<'c> {
             last_squared: options.last_distance().powi(2),
             pixels_per_m_at_1m: camera.plane_distance_px(),
             choice: ViewChoice::new(options),
+            automatic: options.automatic_view_angle,
+            crossfade_deg: options.crossfade_deg,
         }
     }
 
@@ -583,7 +601,19 @@ impl Clusters {
             eye.y - foot[1] as f64,
             eye.z - (foot[2] as f64 + height as f64 / 2.0),
         );
-        let (chosen, n) = view.choice.choose(to_eye);
+        let (chosen, n) = if view.automatic {
+            let width = match drawn {
+                Drawn::Object(i) => self.tree.objects[i as usize].diameter,
+                Drawn::Node(n) => {
+                    let node = &self.tree.nodes[n as usize];
+                    (node.max[0] - node.min[0]).max(node.max[1] - node.min[1])
+                }
+            };
+            let theta = (height as f64).atan2(width.max(1e-3) as f64).to_degrees();
+            ViewChoice::with_angle(theta, view.crossfade_deg).choose(to_eye)
+        } else {
+            view.choice.choose(to_eye)
+        };
         let across = (to_eye.x * to_eye.x + to_eye.y * to_eye.y).sqrt();
         let facing = if across > 0.0 {
             [(to_eye.x / across) as f32, (to_eye.y / across) as f32]
@@ -938,6 +968,18 @@ mod tests {
         assert!((share(42.5) - 0.25).abs() < 1e-6);
         assert!((share(47.5) - 0.75).abs() < 1e-6);
         assert_eq!(share(51.0), 1.0);
+    }
+
+    #[test]
+    fn the_automatic_threshold_is_where_the_top_shows_more_than_the_side() {
+        // A box twice as wide as tall: tan θ = ½, θ = 26.6°.
+        let choice = ViewChoice::with_angle(0.5f64.atan().to_degrees(), 0.0);
+        let seen = |e: f64| {
+            let e = e.to_radians();
+            choice.choose(DVec3::new(0.0, -e.cos(), e.sin())).0[0].0
+        };
+        assert_eq!(seen(26.0), ImpostorView::Front);
+        assert_eq!(seen(27.0), ImpostorView::Top);
     }
 
     #[test]
