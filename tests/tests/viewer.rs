@@ -42,8 +42,10 @@ fn fine_bands() -> Vec<Band> {
 }
 
 /// References: `data/golden/viewer/NAME.png` — mesh, mesh wireframe,
-/// raycast, raycast with bands, Z-buffer baselines [c] and [g], and the
-/// sample placement composited in mesh and raycast modes — made on lavapipe
+/// raycast, raycast with bands, Z-buffer baselines [c] and [g], the sample
+/// placement composited in mesh and raycast modes (with the region's
+/// vegetation), and the forest up close as billboards in both modes and as
+/// sprites — made on lavapipe
 /// and looked at before they were committed. Tolerance: at most 1 % of
 /// pixels with a channel more than 24 levels off, and a mean difference
 /// under 1.5 levels.
@@ -135,7 +137,30 @@ fn headless_frames_of_each_mode_match_their_references() {
             near,
         ),
     ];
-    for (name, settings, flight) in terrain_only.chain(with_objects) {
+    // The sample region's forest from 120 m above the ground: billboards in
+    // both modes, and sprites.
+    let pose = relevo_core::scene::CameraPose::parse("292000,9113000,0,30,135").unwrap();
+    let mut forest = Flight::from_pose(&scene, &pose, SIZE[1]).unwrap();
+    forest.position.z = scene
+        .ground_height(forest.position.x, forest.position.y)
+        .unwrap()
+        + 120.0;
+    let vegetation = |mode, sprites| Settings {
+        mode,
+        tau_px: 1.0,
+        sprites,
+        ..Default::default()
+    };
+    let with_vegetation = [
+        ("mesh_vegetation", vegetation(Mode::Mesh, false), forest),
+        (
+            "raycast_vegetation",
+            vegetation(Mode::Raycast, false),
+            forest,
+        ),
+        ("mesh_sprites", vegetation(Mode::Mesh, true), forest),
+    ];
+    for (name, settings, flight) in terrain_only.chain(with_objects).chain(with_vegetation) {
         let (frame, stats) =
             render_once(&device, &queue, &mut scene, &flight, &settings, SIZE, false).unwrap();
         let reference = repo(&format!("data/golden/viewer/{name}.png"));
