@@ -42,6 +42,10 @@ pub struct SamplesTab {
     pending_overlay: Option<Vec<u8>>,
     pub show_overlay: bool,
     size: [usize; 2],
+    /// World → drape pixel, and why there is no drape to show; both read
+    /// once, with the texture.
+    to_pixel: Option<relevo_core::geo::GeoTransform>,
+    no_drape: Option<String>,
     scene_rect: egui::Rect,
     /// Marked rectangles, drape pixels `[x0, y0, x1, y1]`, with their class.
     pub samples: Vec<(String, [f32; 4])>,
@@ -76,6 +80,8 @@ impl SamplesTab {
             pending_overlay: None,
             show_overlay: true,
             size: [0, 0],
+            to_pixel: None,
+            no_drape: None,
             scene_rect: egui::Rect::ZERO,
             samples: Vec::new(),
             class: "forest".into(),
@@ -233,10 +239,11 @@ impl SamplesTab {
 
     /// The drape with samples and detections, panned and zoomed.
     fn image(&mut self, ui: &mut egui::Ui) {
-        if self.texture.is_none() {
+        if self.texture.is_none() && self.no_drape.is_none() {
             match drape_image(&self.bundle) {
-                Ok(Some((image, size))) => {
+                Ok(Some((image, size, to_pixel))) => {
                     self.size = size;
+                    self.to_pixel = Some(to_pixel);
                     self.texture = Some(ui.ctx().load_texture(
                         "drape",
                         image,
@@ -244,14 +251,15 @@ impl SamplesTab {
                     ));
                 }
                 Ok(None) => {
-                    ui.label("This bundle has no drape image to mark samples on.");
-                    return;
+                    self.no_drape =
+                        Some("This bundle has no drape image to mark samples on.".into());
                 }
-                Err(e) => {
-                    ui.colored_label(egui::Color32::from_rgb(230, 90, 80), format!("{e:#}"));
-                    return;
-                }
+                Err(e) => self.no_drape = Some(format!("{e:#}")),
             }
+        }
+        if let Some(why) = &self.no_drape {
+            ui.label(why);
+            return;
         }
         if let Some(rgba) = self.pending_overlay.take() {
             let image = egui::ColorImage::from_rgba_unmultiplied(self.size, &rgba);
@@ -270,10 +278,7 @@ impl SamplesTab {
             return;
         };
         let [w, h] = self.size.map(|v| v as f32);
-        let bundle = Bundle::open(&self.bundle).ok();
-        let to_pixel = bundle
-            .as_ref()
-            .and_then(|b| b.manifest.color.as_ref().map(|c| c.geotransform));
+        let to_pixel = self.to_pixel;
         egui::Scene::new()
             .drag_pan_buttons(egui::DragPanButtons::SECONDARY | egui::DragPanButtons::MIDDLE)
             .zoom_range(0.1..=32.0)
@@ -348,8 +353,10 @@ impl SamplesTab {
     }
 }
 
-/// The bundle's drape as an egui image.
-fn drape_image(bundle: &Path) -> anyhow::Result<Option<(egui::ColorImage, [usize; 2])>> {
+/// The bundle's drape as an egui image, its size and georeferencing.
+type DrapeImage = (egui::ColorImage, [usize; 2], relevo_core::geo::GeoTransform);
+
+fn drape_image(bundle: &Path) -> anyhow::Result<Option<DrapeImage>> {
     let bundle = Bundle::open(bundle)?;
     let Some(drape) = bundle.drape()? else {
         return Ok(None);
@@ -358,6 +365,7 @@ fn drape_image(bundle: &Path) -> anyhow::Result<Option<(egui::ColorImage, [usize
     Ok(Some((
         egui::ColorImage::from_rgba_unmultiplied(size, &drape.rgba),
         size,
+        drape.info.geotransform,
     )))
 }
 

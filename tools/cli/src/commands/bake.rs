@@ -71,6 +71,14 @@ impl ClustersSummary {
     }
 }
 
+/// A bake's progress callback moving `bar` (clusters composed of all).
+fn count_on(bar: &indicatif::ProgressBar) -> impl Fn(u64, u64) + Sync + '_ {
+    move |n, total| {
+        bar.set_length(total);
+        bar.inc(n);
+    }
+}
+
 /// [`bake_database`] with a progress bar over the clusters composed.
 pub fn bake_with_progress(
     database: &[VegObject],
@@ -88,10 +96,7 @@ pub fn bake_with_progress(
         mask,
         models,
         options,
-        &|n, total| {
-            bar.set_length(total);
-            bar.inc(n);
-        },
+        &count_on(&bar),
     );
     bar.finish_and_clear();
     Ok(result?)
@@ -142,10 +147,7 @@ pub fn run(a: BakeArgs) -> Result<()> {
         &NewVegetation::default(),
         &models,
         &options,
-        &|n, total| {
-            bar.set_length(total);
-            bar.inc(n);
-        },
+        &count_on(&bar),
     )
     .with_context(|| a.bundle.display().to_string())?;
     bar.finish_and_clear();
