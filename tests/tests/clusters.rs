@@ -66,6 +66,7 @@ fn real_atlases_have_no_fringe_and_cuts_draw_each_visible_object_once() {
         blobs.select(&camera, &options, &mut list);
         let drawn: HashSet<u32> = checks::represented_objects(&clusters, &list)
             .into_iter()
+            .map(|(o, _)| o)
             .collect();
         let planes = camera.frustum_planes();
         for blob in blobs.blobs() {

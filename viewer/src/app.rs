@@ -40,9 +40,9 @@ pub const KEYS: &[(&str, &str)] = &[
     ("f", "terrain following"),
     ("F1", "objects and vegetation"),
     ("F12", "vegetation as sprites / billboards"),
-    ("a", "impostors' alpha (off: whole quads)"),
+    ("c", "impostors' alpha (off: whole quads)"),
     ("b", "impostors' filtering (blur)"),
-    ("c", "copy the camera string"),
+    ("p", "copy the camera pose string"),
     ("Home", "home view"),
     ("h", "this help"),
 ];
@@ -298,7 +298,7 @@ impl ViewerApp {
             if i.key_pressed(Key::F12) {
                 s.sprites = !s.sprites;
             }
-            if i.key_pressed(Key::A) {
+            if i.key_pressed(Key::C) {
                 s.alpha = !s.alpha;
             }
             if i.key_pressed(Key::B) {
@@ -324,7 +324,7 @@ impl ViewerApp {
                 self.flight = Some(Flight::home(scene));
             }
         }
-        if !typing && ctx.input(|i| i.key_pressed(Key::C)) {
+        if !typing && ctx.input(|i| i.key_pressed(Key::P)) {
             self.copy_camera(ctx);
         }
         controls
@@ -732,13 +732,14 @@ fn vegetation_panel(ui: &mut egui::Ui, s: &mut Settings, vegetation: &crate::sce
         );
     });
     ui.checkbox(&mut s.sprites, "sprites (F12)");
-    ui.checkbox(&mut s.alpha, "alpha (a)");
+    ui.checkbox(&mut s.alpha, "alpha (c)");
     ui.checkbox(&mut s.blur, "blur (b)");
     ui.add(egui::Slider::new(&mut s.view_angle_deg, 0.0..=90.0).text("top view above (°)"));
     ui.checkbox(
         &mut s.automatic_view_angle,
         "automatic view angle (per impostor)",
     );
+    ui.add(egui::Slider::new(&mut s.level_fade, 0.0..=1.0).text("cluster to children fade"));
     let bands: Vec<String> = vegetation
         .cut
         .bands

@@ -97,6 +97,10 @@ pub struct RenderArgs {
     /// its side.
     #[arg(long)]
     pub auto_view_angle: bool,
+    /// Margin over which a cluster dithers into its children (0–1; 0: the
+    /// cut switches levels).
+    #[arg(long, default_value_t = 0.25)]
+    pub level_fade: f64,
     /// Paint the window's HUD into the image.
     #[arg(long)]
     pub hud: bool,
@@ -314,8 +318,12 @@ pub fn run(a: RenderArgs) -> Result<()> {
         blur: !a.no_blur,
         view_angle_deg: a.view_angle,
         automatic_view_angle: a.auto_view_angle,
+        level_fade: a.level_fade,
         ..Default::default()
     };
+    if !(0.0..=1.0).contains(&a.level_fade) {
+        bail!("--level-fade {}: must lie in 0–1", a.level_fade);
+    }
     if !(0.0..=90.0).contains(&a.view_angle) {
         bail!("--view-angle {}: must lie in 0–90°", a.view_angle);
     }

@@ -65,6 +65,7 @@ impl Vegetation {
     pub fn select(&mut self, camera: &Camera, settings: &Settings) {
         self.cut.view_angle_deg = settings.view_angle_deg;
         self.cut.automatic_view_angle = settings.automatic_view_angle;
+        self.cut.level_fade = settings.level_fade;
         match settings.vegetation {
             VegetationSelection::Quadtree => {
                 QuadtreeCut(&self.clusters).select(camera, &self.cut, &mut self.list);

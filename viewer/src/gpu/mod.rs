@@ -313,6 +313,9 @@ pub struct Settings {
     /// Instead, each impostor's own threshold: where its top view shows
     /// more than its side (relevo-core's automatic choice).
     pub automatic_view_angle: bool,
+    /// Margin over which a cluster dithers into its children instead of
+    /// switching (relevo-core's `CutOptions::level_fade`; 0: it switches).
+    pub level_fade: f64,
 }
 
 /// What chooses the vegetation drawn each frame (relevo-core's
@@ -373,6 +376,7 @@ impl Default for Settings {
             blur: true,
             view_angle_deg: 45.0,
             automatic_view_angle: false,
+            level_fade: relevo_core::cluster::cut::CutOptions::default().level_fade,
         }
     }
 }

@@ -161,22 +161,23 @@ impl VegetationPass {
                     page: f.page as u32,
                 }
             };
-            let mut from = 0.0;
+            // The views split the instance's share by their weights.
+            let [mut from, end] = instance.share;
             let views = instance.views();
             for (k, view) in views.iter().enumerate() {
                 // The last view takes the rounding of the weights.
                 let to = if k + 1 == views.len() {
-                    1.0
+                    end
                 } else {
-                    from + view.weight
+                    from + view.weight * (instance.share[1] - instance.share[0])
                 };
                 if view.view == ImpostorView::Top {
                     self.instances.push(impostor(view, 1, [from, to]));
                 } else if !settings.sprites {
                     self.instances.push(impostor(view, 0, [from, to]));
-                } else if from == 0.0 || views[k - 1].view == ImpostorView::Top {
+                } else if k == 0 || views[k - 1].view == ImpostorView::Top {
                     // Sprites: the side share goes to the two crossed planes.
-                    let share = [from, 1.0];
+                    let share = [from, end];
                     for (kind, plane) in [(2, ImpostorView::Front), (3, ImpostorView::Left)] {
                         let plane_view = clusters.view_of(instance.drawn, plane);
                         self.instances.push(impostor(&plane_view, kind, share));

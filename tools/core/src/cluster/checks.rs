@@ -85,22 +85,29 @@ pub fn fringe_problems(clusters: &Clusters) -> (usize, Vec<String>) {
     (partial, problems)
 }
 
-/// The objects (tree order) each instance of `list` stands for.
-pub fn represented_objects(clusters: &Clusters, list: &DrawList) -> Vec<u32> {
+/// The objects (tree order) each instance of `list` stands for, with the
+/// instance's dither share; an object under a cluster fading into its
+/// children appears once per instance.
+pub fn represented_objects(clusters: &Clusters, list: &DrawList) -> Vec<(u32, [f32; 2])> {
     list.instances()
-        .flat_map(|i| match i.drawn {
-            Drawn::Object(o) => o..o + 1,
-            Drawn::Node(n) => {
-                let r = clusters.tree.nodes[n as usize].members();
-                r.start as u32..r.end as u32
-            }
+        .flat_map(|i| {
+            let objects = match i.drawn {
+                Drawn::Object(o) => o..o + 1,
+                Drawn::Node(n) => {
+                    let r = clusters.tree.nodes[n as usize].members();
+                    r.start as u32..r.end as u32
+                }
+            };
+            objects.map(move |o| (o, i.share))
         })
         .collect()
 }
 
 /// A quadtree cut from `camera`: every object inside the frustum and the
-/// last band represented, none twice, every drawn cluster allowed by its
-/// band, baked, and its weights summing to 1. Returns the problems (at most 5).
+/// last band represented, its instances' dither shares tiling `[0, 1)`
+/// (once, or split between a fading cluster and its children), the count
+/// of objects represented right, every drawn cluster allowed by its band,
+/// baked, and its weights summing to 1. Returns the problems (at most 5).
 pub fn cut_problems(
     clusters: &Clusters,
     list: &DrawList,
@@ -108,26 +115,45 @@ pub fn cut_problems(
     options: &CutOptions,
 ) -> Vec<String> {
     let mut problems = Vec::new();
-    let drawn = represented_objects(clusters, list);
+    let mut drawn = represented_objects(clusters, list);
+    drawn.sort_by(|a, b| a.0.cmp(&b.0).then(a.1[0].total_cmp(&b.1[0])));
+    let planes = camera.frustum_planes();
+    let visible = |i: usize| {
+        let [min, max] = clusters.tree.objects[i].bounds();
+        box_in_frustum(&planes, min, max)
+            && box_distance(camera.position, min, max) <= options.last_distance()
+    };
     let mut seen = vec![false; clusters.tree.objects.len()];
-    for &o in &drawn {
-        if std::mem::replace(&mut seen[o as usize], true) {
-            problems.push(format!("object {o} drawn twice"));
+    for same in drawn.chunk_by(|a, b| a.0 == b.0) {
+        let o = same[0].0;
+        seen[o as usize] = true;
+        // Shares in order must not overlap; a visible object's must tile
+        // [0, 1) (members of a fading cluster outside the view are drawn
+        // by the cluster only).
+        let tile = visible(o as usize);
+        let mut reached = 0.0;
+        for &(_, [from, to]) in same {
+            if from < reached - 1e-6 || (tile && (from - reached).abs() > 1e-6) || to <= from {
+                problems.push(format!(
+                    "object {o}: dither shares {same:?} overlap or leave gaps"
+                ));
+                break;
+            }
+            reached = to;
+        }
+        if tile && (reached - 1.0).abs() > 1e-6 {
+            problems.push(format!("object {o}: dither shares {same:?} do not reach 1"));
         }
     }
-    if drawn.len() != list.represented {
+    let distinct = seen.iter().filter(|&&s| s).count();
+    if distinct != list.represented {
         problems.push(format!(
-            "{} objects drawn, the list says {}",
-            drawn.len(),
+            "{distinct} objects drawn, the list says {}",
             list.represented
         ));
     }
-    let planes = camera.frustum_planes();
-    for (i, o) in clusters.tree.objects.iter().enumerate() {
-        let [min, max] = o.bounds();
-        let visible = box_in_frustum(&planes, min, max)
-            && box_distance(camera.position, min, max) <= options.last_distance();
-        if visible && !seen[i] {
+    for (i, &seen) in seen.iter().enumerate() {
+        if !seen && visible(i) {
             problems.push(format!("visible object {i} omitted"));
         }
     }

@@ -48,6 +48,12 @@ pub struct CutOptions {
     /// Largest ratio of screen pixels to texture texels a cluster may be
     /// drawn at.
     pub magnification: f64,
+    /// Width of the cross-fade between a cluster and its children, as a
+    /// fraction of the margin left before the cluster is refused (by its
+    /// band or its magnification): a cluster within that margin of being
+    /// refused shares the pixels with its children by ordered dither, so
+    /// the cut changes level without popping (0: it switches).
+    pub level_fade: f64,
 }
 
 impl Default for CutOptions {
@@ -70,6 +76,7 @@ impl Default for CutOptions {
             crossfade_deg: 10.0,
             automatic_view_angle: false,
             magnification: 1.5,
+            level_fade: 0.25,
         }
     }
 }
@@ -155,6 +162,9 @@ impl CutOptions {
             || self.crossfade_deg < 0.0
         {
             return Err("the view angle must lie in 0–90° and the cross-fade be ≥ 0".into());
+        }
+        if !(0.0..=1.0).contains(&self.level_fade) {
+            return Err("the level fade must lie in 0–1".into());
         }
         Ok(())
     }
@@ -245,6 +255,12 @@ pub struct Instance {
     /// Views with non-zero weight, `views[..view_count]`; weights sum to 1.
     pub views: [ViewDraw; 3],
     pub view_count: u8,
+    /// The share of the pixels this instance draws, as an interval of
+    /// ordered-dither thresholds `[from, to)`: `[0, 1)` except while a
+    /// cluster fades into its children ([`CutOptions::level_fade`]), when
+    /// the cluster and its children split the interval. The views split
+    /// the instance's share by their weights.
+    pub share: [f32; 2],
 }
 
 impl Instance {
@@ -268,7 +284,7 @@ pub struct DrawList {
     pub clusters_per_depth: Vec<u32>,
     /// The parallel walk's scratch: subtrees left for tasks, each task's
     /// part (`parts[..used]` are in use).
-    frontier: Vec<(u32, u8)>,
+    frontier: Vec<(u32, Branch)>,
     parts: Vec<DrawList>,
     used: usize,
 }
@@ -639,6 +655,7 @@ impl Clusters {
             facing,
             views,
             view_count: n as u8,
+            share: [0.0, 1.0],
         }
     }
 }
@@ -789,6 +806,19 @@ pub struct QuadtreeCut<'a>(pub &'a Clusters);
 /// Depth at which the walk splits into tasks run in parallel.
 const SPLIT_DEPTH: u32 = 5;
 
+/// What a walk carries down to a subtree.
+#[derive(Debug, Clone, Copy)]
+struct Branch {
+    /// Frustum planes the subtree's parent straddles.
+    mask: u8,
+    /// Dither share left to the subtree (less than `[0, 1)` below a cluster
+    /// fading into its children).
+    share: [f32; 2],
+    /// Are the subtree's objects counted as represented here? Not below a
+    /// fading cluster, which counted them already.
+    counted: bool,
+}
+
 impl Selection for QuadtreeCut<'_> {
     fn name(&self) -> &'static str {
         "quadtree"
@@ -806,7 +836,12 @@ impl Selection for QuadtreeCut<'_> {
         let view = View::new(camera, options);
         let mut frontier = std::mem::take(&mut out.frontier);
         frontier.clear();
-        self.walk(0, ALL_PLANES, &view, options, out, Some(&mut frontier));
+        let root = Branch {
+            mask: ALL_PLANES,
+            share: [0.0, 1.0],
+            counted: true,
+        };
+        self.walk(0, root, &view, options, out, Some(&mut frontier));
         let mut parts = std::mem::take(&mut out.parts);
         if parts.len() < frontier.len() {
             parts.resize_with(frontier.len(), DrawList::default);
@@ -814,9 +849,9 @@ impl Selection for QuadtreeCut<'_> {
         parts[..frontier.len()]
             .par_iter_mut()
             .zip(&frontier)
-            .for_each(|(part, &(index, mask))| {
+            .for_each(|(part, &(index, branch))| {
                 part.clear();
-                self.walk(index, mask, &view, options, part, None);
+                self.walk(index, branch, &view, options, part, None);
             });
         for part in &parts[..frontier.len()] {
             out.represented += part.represented;
@@ -831,34 +866,60 @@ impl Selection for QuadtreeCut<'_> {
 }
 
 impl QuadtreeCut<'_> {
-    /// Walk the subtree at `index` (its box straddling the planes in
-    /// `mask`) into `out`. With a `frontier`, nodes at [`SPLIT_DEPTH`] that
-    /// need a walk of their own are left there instead.
+    /// Walk the subtree at `index` into `out`. With a `frontier`, nodes at
+    /// [`SPLIT_DEPTH`] that need a walk of their own are left there instead.
     fn walk(
         &self,
         index: u32,
-        mask: u8,
+        branch: Branch,
         view: &View,
         options: &CutOptions,
         out: &mut DrawList,
-        mut frontier: Option<&mut Vec<(u32, u8)>>,
+        mut frontier: Option<&mut Vec<(u32, Branch)>>,
     ) {
         let clusters = self.0;
         let node = &clusters.tree.nodes[index as usize];
-        let Some((distance, mask)) = view.sees_within(mask, node.min, node.max) else {
+        let Some((distance, mask)) = view.sees_within(branch.mask, node.min, node.max) else {
             return;
         };
-        if node.count > 1 && clusters.may_draw_node(node, distance, view, options) {
-            out.first.push(clusters.instance(Drawn::Node(index), view));
-            out.represented += node.count as usize;
-            out.count_clusters(node.depth as usize, 1);
-        } else if node.is_leaf() {
+        let mut branch = Branch { mask, ..branch };
+        let weight = if node.count > 1 {
+            clusters.node_weight(node, distance, view, options)
+        } else {
+            0.0
+        };
+        if weight > 0.0 {
+            let [from, to] = branch.share;
+            let split = if weight >= 1.0 {
+                to
+            } else {
+                from + (to - from) * weight as f32
+            };
+            let mut instance = clusters.instance(Drawn::Node(index), view);
+            instance.share = [from, split];
+            out.first.push(instance);
+            if branch.counted {
+                out.represented += node.count as usize;
+                out.count_clusters(node.depth as usize, 1);
+            }
+            if split >= to {
+                return;
+            }
+            // Fading: the children take the rest of the share.
+            branch = Branch {
+                share: [split, to],
+                counted: false,
+                ..branch
+            };
+        }
+        if node.is_leaf() {
             for i in node.members() {
                 let [min, max] = clusters.tree.objects[i].bounds();
                 if node.count == 1 || view.sees_within(mask, min, max).is_some() {
-                    out.first
-                        .push(clusters.instance(Drawn::Object(i as u32), view));
-                    out.represented += 1;
+                    let mut instance = clusters.instance(Drawn::Object(i as u32), view);
+                    instance.share = branch.share;
+                    out.first.push(instance);
+                    out.represented += usize::from(branch.counted);
                 }
             }
         } else if let Some(frontier) = frontier
@@ -869,39 +930,51 @@ impl QuadtreeCut<'_> {
                 node.children
                     .iter()
                     .filter(|&&c| c != NONE)
-                    .map(|&c| (c, mask)),
+                    .map(|&c| (c, branch)),
             );
         } else {
             for &child in node.children.iter().filter(|&&c| c != NONE) {
-                self.walk(child, mask, view, options, out, frontier.as_deref_mut());
+                self.walk(child, branch, view, options, out, frontier.as_deref_mut());
             }
         }
     }
 }
 
 impl Clusters {
-    /// May `node`, `distance_m` from the eye at its nearest, be drawn as one
-    /// impostor?
-    fn may_draw_node(
-        &self,
-        node: &Node,
-        distance_m: f64,
-        view: &View,
-        options: &CutOptions,
-    ) -> bool {
+    /// How much of its share `node`, `distance_m` from the eye at its
+    /// nearest, takes as one impostor: 0 where it must be refined (not
+    /// baked, too many objects for its band, or its texture magnified past
+    /// [`CutOptions::magnification`]), 1 where it is clear of both limits
+    /// by the [`CutOptions::level_fade`] margin, linear in between. The
+    /// margins are relative: the distance past the band's inner edge over
+    /// that edge, and the magnification left over the limit.
+    fn node_weight(&self, node: &Node, distance_m: f64, view: &View, options: &CutOptions) -> f64 {
         if node.frames == NONE
             || options
                 .max_cluster_at(distance_m)
                 .is_none_or(|m| node.count > m)
         {
-            return false;
+            return 0.0;
         }
         // Texels per metre of the front view against screen pixels per metre.
         let front = self.frames[node.frames as usize + ImpostorView::Front as usize];
         let width_m = (node.max[0] - node.min[0]).max(1e-3) as f64;
         let texels_per_m = front.width as f64 / width_m;
         let pixels_per_m = view.pixels_per_m_at_1m / distance_m.max(1e-9);
-        pixels_per_m <= texels_per_m * options.magnification
+        let magnification_margin = texels_per_m * options.magnification / pixels_per_m - 1.0;
+        if magnification_margin < 0.0 {
+            return 0.0;
+        }
+        let band_margin = match options.nearest_distance_for(node.count) {
+            Some(edge) if edge > 0.0 => distance_m / edge - 1.0,
+            _ => f64::INFINITY,
+        };
+        let margin = magnification_margin.min(band_margin);
+        if options.level_fade <= 0.0 {
+            1.0
+        } else {
+            (margin / options.level_fade).min(1.0)
+        }
     }
 }
 
@@ -1039,7 +1112,7 @@ mod selection_tests {
             b.until_m = until;
         }
         let mut list = DrawList::default();
-        let (mut clusters_drawn, mut objects_drawn) = (0, 0);
+        let (mut clusters_drawn, mut objects_drawn, mut fading) = (0, 0, 0);
         for camera in cameras(300) {
             QuadtreeCut(&clusters).select(&camera, &options, &mut list);
             assert_eq!(
@@ -1051,11 +1124,99 @@ mod selection_tests {
                     Drawn::Node(_) => clusters_drawn += 1,
                     Drawn::Object(_) => objects_drawn += 1,
                 }
+                fading += usize::from(instance.share != [0.0, 1.0]);
             }
+            // Without the level fade every instance draws all its pixels.
+            let switching = CutOptions {
+                level_fade: 0.0,
+                ..options.clone()
+            };
+            QuadtreeCut(&clusters).select(&camera, &switching, &mut list);
+            assert!(list.instances().all(|i| i.share == [0.0, 1.0]));
+            assert_eq!(
+                checks::cut_problems(&clusters, &list, &camera, &switching),
+                Vec::<String>::new()
+            );
         }
         assert!(
-            clusters_drawn > 100 && objects_drawn > 100,
-            "{clusters_drawn} {objects_drawn}"
+            clusters_drawn > 100 && objects_drawn > 100 && fading > 50,
+            "{clusters_drawn} {objects_drawn} {fading}"
+        );
+    }
+
+    /// Per object inside the view, the dither share drawn as the object
+    /// itself (not by a cluster).
+    fn own_shares(clusters: &Clusters, list: &DrawList, camera: &Camera) -> Vec<Option<f32>> {
+        let planes = camera.frustum_planes();
+        let mut own: Vec<Option<f32>> = clusters
+            .tree
+            .objects
+            .iter()
+            .map(|o| {
+                let [min, max] = o.bounds();
+                box_in_frustum(&planes, min, max).then_some(0.0)
+            })
+            .collect();
+        for instance in list.instances() {
+            if let Drawn::Object(o) = instance.drawn {
+                own[o as usize] = Some(instance.share[1] - instance.share[0]);
+            }
+        }
+        own
+    }
+
+    #[test]
+    fn the_level_fade_changes_the_cut_without_popping() {
+        let clusters = baked_clusters(600);
+        let mut options = CutOptions::default();
+        for (b, until) in options
+            .bands
+            .iter_mut()
+            .zip([100.0, 300.0, 700.0, 1500.0, 2500.0])
+        {
+            b.until_m = until;
+        }
+        // Fly from 2.4 km south-west of the square's centre towards it, in
+        // steps of 0.4 % of the distance left.
+        let largest_jump = |options: &CutOptions| {
+            let (mut list, mut previous) = (DrawList::default(), None::<Vec<Option<f32>>>);
+            let mut largest = 0.0f32;
+            let mut back = 1700.0;
+            while back > 50.0 {
+                let camera = Camera {
+                    position: DVec3::new(1000.0 - back, 1000.0 - back, 300.0),
+                    heading_deg: 45.0,
+                    pitch_deg: -10.0,
+                    incl_px: 240.0,
+                    fov_x_deg: 60.0,
+                    width: 640,
+                    height: 480,
+                    near_m: 1.0,
+                    far_m: 10_000.0,
+                };
+                QuadtreeCut(&clusters).select(&camera, options, &mut list);
+                let own = own_shares(&clusters, &list, &camera);
+                if let Some(previous) = &previous {
+                    for (a, b) in previous.iter().zip(&own) {
+                        if let (Some(a), Some(b)) = (a, b) {
+                            largest = largest.max((a - b).abs());
+                        }
+                    }
+                }
+                previous = Some(own);
+                back *= 0.996;
+            }
+            largest
+        };
+        let switching = largest_jump(&CutOptions {
+            level_fade: 0.0,
+            ..options.clone()
+        });
+        let fading = largest_jump(&options);
+        assert_eq!(switching, 1.0, "without the fade objects pop in");
+        assert!(
+            fading < 0.15,
+            "the largest step of an object's share: {fading}"
         );
     }
 
@@ -1085,6 +1246,7 @@ mod selection_tests {
             blobs.select(&camera, &options, &mut list);
             let drawn: HashSet<u32> = checks::represented_objects(&clusters, &list)
                 .into_iter()
+                .map(|(o, _)| o)
                 .collect();
             assert_eq!(drawn.len(), list.len());
             let planes = camera.frustum_planes();
@@ -1099,6 +1261,7 @@ mod selection_tests {
             ObjectList(&clusters).select(&camera, &options, &mut lists);
             let seen: HashSet<u32> = checks::represented_objects(&clusters, &lists)
                 .into_iter()
+                .map(|(o, _)| o)
                 .collect();
             assert!(seen.is_subset(&drawn));
         }
