@@ -327,6 +327,122 @@ fn vegetation_is_drawn_from_the_cut_and_composited_through_the_depth() {
     }
 }
 
+/// The HUD's "objects represented" is the number of database objects
+/// inside the frustum and the last band, for each selection, mode and
+/// several cameras over the sample region (the draw list's count, printed
+/// in the HUD line); in mesh mode every impostor stands on the refined mesh
+/// drawn (relevo-core's `mesh_height` at its foot), which lies off the grid
+/// the bake placed it on.
+#[test]
+fn the_hud_counts_the_objects_in_view_and_impostors_stand_on_the_mesh_drawn() {
+    use relevo_core::cluster::cut::{box_distance, box_in_frustum};
+    use relevo_view::gpu::VegetationSelection;
+    let d = tempfile::tempdir().unwrap();
+    let mut scene = olinda(d.path());
+    let (device, queue) = lavapipe();
+    let mut lifted = 0;
+    for (k, text) in [
+        "292000,9113000,0,30,135",
+        "290000,9112000,0,70,100",
+        "294500,9116500,0,210,160",
+        "291000,9119000,0,150,135",
+    ]
+    .iter()
+    .enumerate()
+    {
+        let pose = relevo_core::scene::CameraPose::parse(text).unwrap();
+        let mut flight = Flight::from_pose(&scene, &pose, SIZE[1]).unwrap();
+        flight.position.z = scene
+            .ground_height(flight.position.x, flight.position.y)
+            .unwrap()
+            + [120.0, 400.0, 60.0, 1500.0][k];
+        for selection in [
+            VegetationSelection::Quadtree,
+            VegetationSelection::List,
+            VegetationSelection::Blobs { side_m: 1000.0 },
+        ] {
+            for mode in [Mode::Mesh, Mode::Raycast] {
+                let settings = Settings {
+                    mode,
+                    vegetation: selection,
+                    ..Default::default()
+                };
+                let (_, stats) =
+                    render_once(&device, &queue, &mut scene, &flight, &settings, SIZE, false)
+                        .unwrap();
+                let camera = flight.camera_for(&scene, SIZE, &settings);
+                let vegetation = scene.vegetation.as_ref().unwrap();
+                let last = vegetation.cut.last_distance();
+                let planes = camera.frustum_planes();
+                let in_view = vegetation
+                    .clusters
+                    .tree
+                    .objects
+                    .iter()
+                    .filter(|o| {
+                        let [min, max] = o.bounds();
+                        box_in_frustum(&planes, min, max)
+                            && box_distance(camera.position, min, max) <= last
+                    })
+                    .count();
+                let what = format!("camera {text}, {selection}, {mode}");
+                assert!(in_view > 50, "{what}: {in_view} objects in view");
+                assert_eq!(stats.vegetation_represented, in_view, "{what}");
+                let readings = relevo_view::hud::Readings {
+                    fps: 1.0,
+                    frame_ms: 1.0,
+                    settings: &settings,
+                    stats: &stats,
+                    scene: Some(&scene),
+                    flight: Some(&flight),
+                    pointer: None,
+                };
+                let hud = relevo_view::hud::lines(&readings).join("\n");
+                assert!(
+                    hud.contains(&format!("{in_view} objects represented")),
+                    "{what}: {hud}"
+                );
+                if mode == Mode::Mesh {
+                    let hierarchy = scene.lp.hierarchy();
+                    let params = settings.refine_params(&camera);
+                    for instance in scene.vegetation.as_ref().unwrap().list.instances() {
+                        let [x, y, z] = instance.foot.map(f64::from);
+                        let (x, y) = (x as f32 as f64, y as f32 as f64);
+                        // Off the data (a cluster's centre over the
+                        // padding) the impostor is left where it was.
+                        let offset = relevo_core::lp::refine::mesh_height(
+                            &hierarchy,
+                            scene.terrain.heights(),
+                            &params,
+                            x,
+                            y,
+                        )
+                        .zip(scene.ground_height(x, y))
+                        .map_or(0.0, |(mesh, grid)| mesh - grid);
+                        let placed = match instance.drawn {
+                            relevo_core::cluster::cut::Drawn::Object(o) => {
+                                scene.vegetation.as_ref().unwrap().clusters.tree.objects[o as usize]
+                                    .foot[2] as f64
+                            }
+                            relevo_core::cluster::cut::Drawn::Node(n) => {
+                                scene.vegetation.as_ref().unwrap().clusters.tree.nodes[n as usize]
+                                    .min[2] as f64
+                            }
+                        };
+                        // Raised by exactly the mesh's offset from the grid.
+                        assert!(
+                            (z - placed - offset).abs() < 0.01,
+                            "{what}: foot at {z}, placed at {placed}, mesh offset {offset}"
+                        );
+                        lifted += usize::from(offset.abs() > 0.5);
+                    }
+                }
+            }
+        }
+    }
+    assert!(lifted > 100, "{lifted} impostors moved by more than 0.5 m");
+}
+
 /// A building placed behind a ridge of the Alps is hidden exactly where
 /// the terrain is in front of it, in both modes: the pixels where the
 /// composited frame shows the building are those where the building alone

@@ -14,7 +14,7 @@ use relevo_core::cluster::cut::{
 use relevo_core::cluster::{store, Clusters};
 use relevo_core::geo::TerrainFrame;
 use relevo_core::horizon::{self, Terrain};
-use relevo_core::lp::refine::Refiner;
+use relevo_core::lp::refine::{mesh_height, Refiner};
 use relevo_core::objects::{read_placement, ObjectMesh};
 use std::path::{Path, PathBuf};
 
@@ -81,6 +81,25 @@ impl Vegetation {
                 Blobs::from_groups(&self.clusters, blobs).select(camera, &self.cut, &mut self.list);
             }
         }
+    }
+
+    /// Move the selected impostors from the grid's surface, on which the
+    /// bake placed them, onto the mesh refined for `camera`: in mesh mode
+    /// they stand on the surface drawn (relevo-core's `mesh_height`).
+    pub fn stand_on_mesh(
+        &mut self,
+        lp: &LpArray,
+        terrain: &Terrain,
+        camera: &Camera,
+        settings: &Settings,
+    ) {
+        let params = settings.refine_params(camera);
+        let hierarchy = lp.hierarchy();
+        self.list.lift(&|x, y| {
+            mesh_height(&hierarchy, terrain.heights(), &params, x, y)
+                .zip(terrain.surface(x, y))
+                .map_or(0.0, |(mesh, grid)| mesh - grid)
+        });
     }
 }
 

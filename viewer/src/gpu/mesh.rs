@@ -11,12 +11,8 @@ use eframe::egui_wgpu::wgpu;
 use glam::DVec3;
 use relevo_core::camera::Camera;
 use relevo_core::grid::vertex_normal;
-use relevo_core::lp::refine::RefineParams;
 use relevo_core::lp::terrain_position;
 use std::time::Instant;
-
-/// Geomorphing band: a vertex blends in between τ and this multiple of τ.
-const MORPH_BAND: f64 = 3.0;
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -118,12 +114,7 @@ impl MeshPass {
         stats: &mut FrameStats,
     ) {
         let start = Instant::now();
-        let params = RefineParams::for_camera(
-            camera,
-            settings.tau_px,
-            settings.morph.then_some(settings.tau_px * MORPH_BAND),
-            settings.cull,
-        );
+        let params = settings.refine_params(camera);
         let hierarchy = scene.lp.hierarchy();
         let strip = scene
             .refiner

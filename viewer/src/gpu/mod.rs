@@ -17,6 +17,7 @@ use eframe::egui_wgpu::wgpu;
 
 use relevo_core::camera::Camera;
 use relevo_core::horizon::{Band, RenderOptions};
+use relevo_core::lp::refine::RefineParams;
 use relevo_core::zbuffer::Representation;
 use serde::Serialize;
 use std::time::Instant;
@@ -357,6 +358,21 @@ impl std::fmt::Display for VegetationSelection {
     }
 }
 
+/// Geomorphing band: a vertex blends in between τ and this multiple of τ.
+const MORPH_BAND: f64 = 3.0;
+
+impl Settings {
+    /// What mesh mode refines for from `camera`.
+    pub fn refine_params(&self, camera: &Camera) -> RefineParams {
+        RefineParams::for_camera(
+            camera,
+            self.tau_px,
+            self.morph.then_some(self.tau_px * MORPH_BAND),
+            self.cull,
+        )
+    }
+}
+
 impl Default for Settings {
     fn default() -> Self {
         Settings {
@@ -523,6 +539,9 @@ impl Renderer {
         if let Some(vegetation) = scene.vegetation.as_mut().filter(|_| settings.objects) {
             let start = Instant::now();
             vegetation.select(camera, settings);
+            if settings.mode == Mode::Mesh {
+                vegetation.stand_on_mesh(&scene.lp, &scene.terrain, camera, settings);
+            }
             stats.cut_ms = start.elapsed().as_secs_f64() * 1e3;
             let pass = self.vegetation.get_or_insert_with(|| {
                 vegetation::VegetationPass::new(device, queue, &vegetation.clusters)

@@ -106,7 +106,7 @@ pub fn represented_objects(clusters: &Clusters, list: &DrawList) -> Vec<(u32, [f
 /// A quadtree cut from `camera`: every object inside the frustum and the
 /// last band represented, its instances' dither shares tiling `[0, 1)`
 /// (once, or split between a fading cluster and its children), the count
-/// of objects represented right, every drawn cluster allowed by its band,
+/// of objects represented equal to the objects in view, every drawn cluster allowed by its band,
 /// baked, and its weights summing to 1. Returns the problems (at most 5).
 pub fn cut_problems(
     clusters: &Clusters,
@@ -145,10 +145,10 @@ pub fn cut_problems(
             problems.push(format!("object {o}: dither shares {same:?} do not reach 1"));
         }
     }
-    let distinct = seen.iter().filter(|&&s| s).count();
-    if distinct != list.represented {
+    let in_view = (0..seen.len()).filter(|&i| visible(i)).count();
+    if in_view != list.represented {
         problems.push(format!(
-            "{distinct} objects drawn, the list says {}",
+            "{in_view} objects in view, the list says {} represented",
             list.represented
         ));
     }

@@ -277,7 +277,9 @@ impl Instance {
 pub struct DrawList {
     /// The first chunk (all of a plain list or blob selection).
     first: Vec<Instance>,
-    /// Objects the instances stand for.
+    /// Objects inside the frustum and the last band that the instances
+    /// stand for (a cluster partly in view counts only its members in
+    /// view; what a viewer reports as objects represented).
     pub represented: usize,
     /// Clusters drawn per quadtree depth (objects drawn one by one are not
     /// counted here).
@@ -314,6 +316,23 @@ impl DrawList {
 
     pub fn instances(&self) -> impl Iterator<Item = &Instance> {
         self.chunks().flatten()
+    }
+
+    /// Raise (or lower) every instance's foot by `lift(x, y)` metres, taken
+    /// at the foot: the viewer's mesh mode moves impostors from the grid's
+    /// surface, on which they were placed, onto the refined mesh it draws.
+    /// Chunks in parallel.
+    pub fn lift(&mut self, lift: &(dyn Fn(f64, f64) -> f64 + Sync)) {
+        let used = self.used;
+        std::iter::once(&mut self.first)
+            .chain(self.parts[..used].iter_mut().map(|p| &mut p.first))
+            .par_bridge()
+            .for_each(|chunk| {
+                for instance in chunk.iter_mut() {
+                    let [x, y, z] = instance.foot;
+                    instance.foot[2] = z + lift(x as f64, y as f64) as f32;
+                }
+            });
     }
 
     fn count_clusters(&mut self, depth: usize, n: u32) {
@@ -511,6 +530,14 @@ pub fn box_distance_squared(eye: DVec3, min: [f32; 3], max: [f32; 3]) -> f64 {
     x * x + y * y + z * z
 }
 
+/// Distance from `eye` to the furthest point of the box, squared.
+#[inline]
+fn box_farthest_distance_squared(eye: DVec3, min: [f32; 3], max: [f32; 3]) -> f64 {
+    let reach = |k: usize, e: f64| (e - min[k] as f64).abs().max((max[k] as f64 - e).abs());
+    let (x, y, z) = (reach(0, eye.x), reach(1, eye.y), reach(2, eye.z));
+    x * x + y * y + z * z
+}
+
 /// Frustum and distance of one camera, computed once per selection.
 struct View<'c> {
     camera: &'c Camera,
@@ -540,6 +567,23 @@ impl<'c> View<'c> {
     /// Inside the frustum and no further than the last band: the distance.
     fn sees(&self, min: [f32; 3], max: [f32; 3]) -> Option<f64> {
         self.sees_within(ALL_PLANES, min, max).map(|(d, _)| d)
+    }
+
+    /// Members of `node` (its box straddling the planes in `mask`) inside
+    /// the frustum and the last band: all of them when the box lies wholly
+    /// inside both, else counted one by one.
+    fn members_in_view(&self, clusters: &Clusters, node: &Node, mask: u8) -> usize {
+        let far = box_farthest_distance_squared(self.camera.position, node.min, node.max);
+        if mask == 0 && far <= self.last_squared {
+            return node.count as usize;
+        }
+        clusters.tree.objects[node.members()]
+            .iter()
+            .filter(|o| {
+                let [min, max] = o.bounds();
+                self.sees_within(mask, min, max).is_some()
+            })
+            .count()
     }
 
     /// [`View::sees`] testing only the planes in `mask`: the distance and
@@ -788,10 +832,11 @@ impl Selection for Blobs<'_> {
                 for &i in &blob.members {
                     out.first
                         .push(self.clusters.instance(Drawn::Object(i), &view));
+                    let [min, max] = self.clusters.tree.objects[i as usize].bounds();
+                    out.represented += usize::from(view.sees(min, max).is_some());
                 }
             }
         }
-        out.represented = out.first.len();
     }
 }
 
@@ -899,7 +944,7 @@ impl QuadtreeCut<'_> {
             instance.share = [from, split];
             out.first.push(instance);
             if branch.counted {
-                out.represented += node.count as usize;
+                out.represented += view.members_in_view(clusters, node, mask);
                 out.count_clusters(node.depth as usize, 1);
             }
             if split >= to {

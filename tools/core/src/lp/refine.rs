@@ -107,6 +107,85 @@ struct Ctx<'a> {
     planes: Option<[[f64; 4]; 6]>,
 }
 
+impl<'a> Ctx<'a> {
+    fn new(
+        layout: Layout,
+        side: usize,
+        cell_size_m: f64,
+        error_radius: &'a [[f32; 2]],
+        heights: &'a [f32],
+        p: &RefineParams,
+    ) -> Self {
+        Ctx {
+            error_radius,
+            heights,
+            layout,
+            side,
+            cell: cell_size_m,
+            eye: p.eye,
+            nu_max: p.lambda / p.tau_px,
+            nu_min: p.morph_tau_max_px.map(|t| p.lambda / t),
+            planes: p.planes,
+        }
+    }
+
+    /// Height of corner or boundary vertex (c, r) as stored.
+    fn z(&self, (c, r): (i64, i64)) -> f32 {
+        self.heights[self.layout.index(self.side, c as usize, r as usize)]
+    }
+
+    /// Is vertex `i` in the mesh? `None` when it is inactive (ρ ≤ τ, eye
+    /// outside its sphere) or culled (its sphere wholly outside a frustum
+    /// plane not yet known to contain the branch, per `inside`); else the
+    /// planes known to contain its subtree and the height to draw it at,
+    /// morphed towards `za` (the height it replaces) within the band.
+    #[inline]
+    fn vertex(&self, i: (i64, i64), mut inside: u8, za: f32) -> Option<(u8, f32)> {
+        let vi = self.layout.index(self.side, i.0 as usize, i.1 as usize);
+        let zi = self.heights[vi];
+        let p = terrain_position(i.0 as usize, i.1 as usize, self.side, self.cell, zi as f64);
+        let [delta, radius] = self.error_radius[vi];
+        let (delta, radius) = (delta as f64, radius as f64);
+        let d2 = (p[0] - self.eye[0]).powi(2)
+            + (p[1] - self.eye[1]).powi(2)
+            + (p[2] - self.eye[2]).powi(2);
+        let d_max = self.nu_max * delta + radius;
+        if d2 >= d_max * d_max {
+            return None; // inactive (ρ ≤ τ, eye outside the sphere)
+        }
+        if inside != ALL_INSIDE {
+            if let Some(planes) = &self.planes {
+                for (k, plane) in planes.iter().enumerate() {
+                    if inside & (1 << k) != 0 {
+                        continue;
+                    }
+                    let s = plane[0] * p[0] + plane[1] * p[1] + plane[2] * p[2] + plane[3];
+                    if s < -radius {
+                        return None; // sphere wholly outside: keep the coarse triangle
+                    }
+                    if s > radius {
+                        inside |= 1 << k;
+                    }
+                }
+            }
+        }
+        // Seed eq. 8: t from squared distances across [d_min, d_max].
+        let z = match self.nu_min {
+            None => zi,
+            Some(nu_min) => {
+                let d_min = nu_min * delta + radius;
+                let t = if d2 <= d_min * d_min {
+                    1.0
+                } else {
+                    (d_max * d_max - d2) / (d_max * d_max - d_min * d_min)
+                };
+                (t * zi as f64 + (1.0 - t) * za as f64) as f32
+            }
+        };
+        Some((inside, z))
+    }
+}
+
 impl Refiner {
     pub fn new() -> Self {
         Self::default()
@@ -135,20 +214,10 @@ impl Refiner {
         heights: &[f32],
         p: &RefineParams,
     ) -> &Strip {
-        let ctx = Ctx {
-            error_radius,
-            heights,
-            layout,
-            side,
-            cell: cell_size_m,
-            eye: p.eye,
-            nu_max: p.lambda / p.tau_px,
-            nu_min: p.morph_tau_max_px.map(|t| p.lambda / t),
-            planes: p.planes,
-        };
+        let ctx = Ctx::new(layout, side, cell_size_m, error_radius, heights, p);
         let m = (side - 1) as i64;
         let hh = m / 2;
-        let z = |c: i64, r: i64| heights[layout.index(side, c as usize, r as usize)];
+        let z = |c: i64, r: i64| ctx.z((c, r));
         let (sw, se, ne, nw) = ((0, m), (m, m), (m, 0), (0, 0));
         let centre = (hh, hh);
         let inside = if p.planes.is_some() { 0 } else { ALL_INSIDE };
@@ -231,53 +300,16 @@ impl Refiner {
         j: (i64, i64),
         [left, right]: [(i64, i64); 2],
         l: u32,
-        mut inside: u8,
+        inside: u8,
         [zl, za, zr]: [f32; 3],
     ) {
         if l == 0 {
             return;
         }
-        let side = ctx.side;
-        let vi = ctx.layout.index(side, i.0 as usize, i.1 as usize);
-        let zi = ctx.heights[vi];
-        let p = terrain_position(i.0 as usize, i.1 as usize, side, ctx.cell, zi as f64);
-        let [delta, radius] = ctx.error_radius[vi];
-        let (delta, radius) = (delta as f64, radius as f64);
-        let d2 =
-            (p[0] - ctx.eye[0]).powi(2) + (p[1] - ctx.eye[1]).powi(2) + (p[2] - ctx.eye[2]).powi(2);
-        let d_max = ctx.nu_max * delta + radius;
-        if d2 >= d_max * d_max {
-            return; // inactive (ρ ≤ τ, eye outside the sphere)
-        }
-        if inside != ALL_INSIDE {
-            if let Some(planes) = &ctx.planes {
-                for (k, plane) in planes.iter().enumerate() {
-                    if inside & (1 << k) != 0 {
-                        continue;
-                    }
-                    let s = plane[0] * p[0] + plane[1] * p[1] + plane[2] * p[2] + plane[3];
-                    if s < -radius {
-                        return; // sphere wholly outside: keep the coarse triangle
-                    }
-                    if s > radius {
-                        inside |= 1 << k;
-                    }
-                }
-            }
-        }
-        // Seed eq. 8: t from squared distances across [d_min, d_max].
-        let z = match ctx.nu_min {
-            None => zi,
-            Some(nu_min) => {
-                let d_min = nu_min * delta + radius;
-                let t = if d2 <= d_min * d_min {
-                    1.0
-                } else {
-                    (d_max * d_max - d2) / (d_max * d_max - d_min * d_min)
-                };
-                (t * zi as f64 + (1.0 - t) * za as f64) as f32
-            }
+        let Some((inside, z)) = ctx.vertex(i, inside, za) else {
+            return;
         };
+        let vi = ctx.layout.index(ctx.side, i.0 as usize, i.1 as usize);
         let zm = (zl + zr) / 2.0;
         if l > 1 {
             // Splitting at j makes two triangles with right angle j: the
@@ -291,6 +323,123 @@ impl Refiner {
             self.append(vi as u32, (l % 2) as u8, z);
         }
     }
+}
+
+/// Height of the refined mesh for `p` at terrain-frame point (`x_m`,
+/// `y_m`), metres: the same activation, culling and geomorphing as
+/// [`Refiner::refine`], followed down the one branch of the bintree that
+/// holds the point (O(levels), no mesh built), then interpolated linearly
+/// in the leaf triangle. What the viewer stands objects on, so that they
+/// stand on the surface drawn rather than on the full-resolution grid.
+/// `None` outside the grid.
+pub fn mesh_height(
+    h: &Hierarchy,
+    heights: &[f32],
+    p: &RefineParams,
+    x_m: f64,
+    y_m: f64,
+) -> Option<f64> {
+    let side = h.side;
+    let ctx = Ctx::new(
+        Layout::RowMajor,
+        side,
+        h.cell_size_m,
+        &h.error_radius,
+        heights,
+        p,
+    );
+    let m = (side - 1) as i64;
+    // The point in grid units (column, row; row 0 north).
+    let q = [x_m / ctx.cell, m as f64 - y_m / ctx.cell];
+    if !(0.0..=m as f64).contains(&q[0]) || !(0.0..=m as f64).contains(&q[1]) {
+        return None;
+    }
+    let hh = m / 2;
+    let (sw, se, ne, nw) = ((0, m), (m, m), (m, 0), (0, 0));
+    let centre = (hh, hh);
+    let inside = if p.planes.is_some() { 0 } else { ALL_INSIDE };
+    let za = (ctx.z(nw) + ctx.z(se)) / 2.0;
+    // The quadrant (triangle with its right angle at the centre and a side
+    // of the square as hypotenuse) holding the point, as in `refine_in`.
+    let (dc, dr) = (q[0] - hh as f64, q[1] - hh as f64);
+    let (split, left, corner) = if dr.abs() >= dc.abs() {
+        if dr >= 0.0 {
+            ((hh, m), sw, se)
+        } else {
+            ((hh, 0), nw, ne)
+        }
+    } else if dc >= 0.0 {
+        ((m, hh), ne, se)
+    } else {
+        ((0, hh), sw, nw)
+    };
+    let walked = locate(
+        &ctx,
+        q,
+        centre,
+        split,
+        [left, corner],
+        levels(side),
+        inside,
+        [ctx.z(left), za, ctx.z(corner)],
+    );
+    Some(walked.unwrap_or_else(|| {
+        // The centre is not in the mesh: the square's two triangles split
+        // along the north-west to south-east diagonal.
+        let apex = if q[0] - q[1] >= 0.0 { ne } else { sw };
+        interpolate(q, [nw, se, apex], [ctx.z(nw), ctx.z(se), ctx.z(apex)])
+    }) as f64)
+}
+
+/// [`Refiner::submesh`]'s walk down the branch holding `q`: `None` when `i`
+/// is not in the mesh (the caller's triangle is the leaf); else the height
+/// at `q` in the leaf below triangle (left, right, i).
+#[allow(clippy::too_many_arguments)]
+fn locate(
+    ctx: &Ctx,
+    q: [f64; 2],
+    i: (i64, i64),
+    j: (i64, i64),
+    [left, right]: [(i64, i64); 2],
+    l: u32,
+    inside: u8,
+    [zl, za, zr]: [f32; 3],
+) -> Option<f32> {
+    if l == 0 {
+        return None;
+    }
+    let (inside, z) = ctx.vertex(i, inside, za)?;
+    if l > 1 {
+        // The segment from i to j (the hypotenuse's midpoint) halves the
+        // triangle: the point is on the left end's side or the right's.
+        let cross = |a: (i64, i64)| {
+            (j.0 - i.0) as f64 * (a.1 - i.1) as f64 - (j.1 - i.1) as f64 * (a.0 - i.0) as f64
+        };
+        let side_of_q =
+            (j.0 - i.0) as f64 * (q[1] - i.1 as f64) - (j.1 - i.1) as f64 * (q[0] - i.0 as f64);
+        let zm = (zl + zr) / 2.0;
+        let below = if side_of_q * cross(left) >= 0.0 {
+            let child = ((left.0 + i.0) / 2, (left.1 + i.1) / 2);
+            locate(ctx, q, j, child, [left, i], l - 1, inside, [zl, zm, z])
+        } else {
+            let child = ((i.0 + right.0) / 2, (i.1 + right.1) / 2);
+            locate(ctx, q, j, child, [i, right], l - 1, inside, [z, zm, zr])
+        };
+        if below.is_some() {
+            return below;
+        }
+    }
+    Some(interpolate(q, [left, right, i], [zl, zr, z]))
+}
+
+/// Linear interpolation at `q` of heights `z` given at the triangle's
+/// vertices (grid units).
+fn interpolate(q: [f64; 2], v: [(i64, i64); 3], z: [f32; 3]) -> f32 {
+    let p = v.map(|(c, r)| [c as f64, r as f64]);
+    let det = (p[1][1] - p[2][1]) * (p[0][0] - p[2][0]) + (p[2][0] - p[1][0]) * (p[0][1] - p[2][1]);
+    let a = ((p[1][1] - p[2][1]) * (q[0] - p[2][0]) + (p[2][0] - p[1][0]) * (q[1] - p[2][1])) / det;
+    let b = ((p[2][1] - p[0][1]) * (q[0] - p[2][0]) + (p[0][0] - p[2][0]) * (q[1] - p[2][1])) / det;
+    (a * z[0] as f64 + b * z[1] as f64 + (1.0 - a - b) * z[2] as f64) as f32
 }
 
 #[cfg(test)]
@@ -353,6 +502,72 @@ mod tests {
                 }
             })
             .collect()
+    }
+
+    #[test]
+    fn mesh_height_is_the_height_of_the_triangle_drawn_there() {
+        let mut refiner = Refiner::new();
+        let mut rng = Lcg(5);
+        // Points where the coarse mesh is more than 0.5 m off the grid's
+        // own surface: standing on the mesh is not standing on the grid.
+        let mut off_the_grid = 0;
+        for t in terrains() {
+            let side = t.h.side;
+            let extent = (side - 1) as f64 * t.h.cell_size_m;
+            for (k, camera) in cameras(&t, 12, 31).iter().enumerate() {
+                let morph = (k % 2 == 0).then_some(6.0);
+                let p = RefineParams::for_camera(camera, 2.0, morph, k % 3 != 0);
+                let strip = refiner.refine(&t.h, &t.heights, &p).clone();
+                let grid = |v: u32| ((v as usize % side) as i64, (v as usize / side) as i64);
+                for _ in 0..40 {
+                    let (x, y) = (rng.next() * extent, rng.next() * extent);
+                    let q = [x / t.h.cell_size_m, (side - 1) as f64 - y / t.h.cell_size_m];
+                    // The strip's triangle holding the point, by brute force.
+                    let drawn = strip
+                        .triangle_entries()
+                        .find_map(|e| {
+                            let v = e.map(|k| grid(strip.indices[k]));
+                            let z = e.map(|k| match morph {
+                                Some(_) => strip.morphed_z[k],
+                                None => t.heights[strip.indices[k] as usize],
+                            });
+                            let w = barycentric(q, v)?;
+                            Some(w[0] * z[0] as f64 + w[1] * z[1] as f64 + w[2] * z[2] as f64)
+                        })
+                        .expect("the strip covers the grid");
+                    let walked = mesh_height(&t.h, &t.heights, &p, x, y).expect("inside");
+                    let fine = RefineParams {
+                        tau_px: 1e-3,
+                        morph_tau_max_px: None,
+                        ..p
+                    };
+                    let full = mesh_height(&t.h, &t.heights, &fine, x, y).expect("inside");
+                    off_the_grid += usize::from((walked - full).abs() > 0.5);
+                    assert!(
+                        (walked - drawn).abs() < 1e-3,
+                        "{} camera {k} at ({x:.1}, {y:.1}): walked {walked} drawn {drawn}",
+                        t.name
+                    );
+                }
+            }
+            let p = RefineParams::for_camera(&cameras(&t, 1, 1)[0], 2.0, None, false);
+            assert_eq!(mesh_height(&t.h, &t.heights, &p, -1.0, 0.0), None);
+        }
+        assert!(off_the_grid > 100, "{off_the_grid}");
+    }
+
+    /// Barycentric weights of `q` in the triangle `v` (grid units), when it
+    /// lies inside (with a small tolerance for points on an edge).
+    fn barycentric(q: [f64; 2], v: [(i64, i64); 3]) -> Option<[f64; 3]> {
+        let p = v.map(|(c, r)| [c as f64, r as f64]);
+        let det =
+            (p[1][1] - p[2][1]) * (p[0][0] - p[2][0]) + (p[2][0] - p[1][0]) * (p[0][1] - p[2][1]);
+        let a =
+            ((p[1][1] - p[2][1]) * (q[0] - p[2][0]) + (p[2][0] - p[1][0]) * (q[1] - p[2][1])) / det;
+        let b =
+            ((p[2][1] - p[0][1]) * (q[0] - p[2][0]) + (p[0][0] - p[2][0]) * (q[1] - p[2][1])) / det;
+        let w = [a, b, 1.0 - a - b];
+        w.iter().all(|&w| w >= -1e-9).then_some(w)
     }
 
     fn parents(side: usize) -> HashMap<usize, Vec<usize>> {
