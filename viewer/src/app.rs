@@ -624,7 +624,11 @@ impl eframe::App for ViewerApp {
                 .inner;
             match accepted {
                 Some(Ok(())) => self.reload(),
-                Some(Err(e)) => self.error = Some(format!("{e:#}")),
+                Some(Err(e)) => {
+                    if let Some(tab) = &mut self.samples {
+                        tab.problem = Some(format!("{e:#}"));
+                    }
+                }
                 None => {}
             }
             self.help(&ctx);

@@ -63,6 +63,12 @@ pub struct SamplesTab {
     /// Whether `detections` are new (not yet accepted).
     pub fresh: bool,
     pub status: String,
+    /// What went wrong last (a samples file that cannot be read, a bundle
+    /// that cannot be written), shown in red until the next action works.
+    pub problem: Option<String>,
+    /// The samples file the *load* button reads (CSV of drape pixels, or
+    /// GeoJSON polygons in the drape's CRS).
+    pub samples_path: String,
 }
 
 impl SamplesTab {
@@ -73,7 +79,7 @@ impl SamplesTab {
             .and_then(|b| b.vegetation().ok().flatten())
             .unwrap_or_default();
         let options = opened.as_ref().map(bundle_options).unwrap_or_default();
-        SamplesTab {
+        let mut tab = SamplesTab {
             bundle: bundle.to_path_buf(),
             texture: None,
             overlay: None,
@@ -91,6 +97,36 @@ impl SamplesTab {
             detections,
             fresh: false,
             status: String::new(),
+            problem: None,
+            samples_path: String::new(),
+        };
+        // The samples the bundle keeps, to go on from.
+        let kept = opened.as_ref().and_then(|b| {
+            b.manifest
+                .artifacts
+                .get(relevo_core::bundle::names::VEGETATION_SAMPLES.key)
+                .map(|a| b.dir.join(&a.file))
+        });
+        if let Some(path) = kept {
+            tab.samples_path = path.display().to_string();
+            tab.load_samples();
+        }
+        tab
+    }
+
+    /// Replace the rectangles with those of the file at `samples_path`
+    /// (relevo-core's samples reader; a polygon becomes its bounding box).
+    /// On failure the rectangles stay as they were and `problem` says why,
+    /// naming the file.
+    pub fn load_samples(&mut self) {
+        let path = PathBuf::from(self.samples_path.trim());
+        match read_samples(&self.bundle, &path) {
+            Ok(samples) => {
+                self.status = format!("{} samples read from {}", samples.len(), path.display());
+                self.samples = samples;
+                self.problem = None;
+            }
+            Err(e) => self.problem = Some(format!("{e:#}")),
         }
     }
 
@@ -167,6 +203,7 @@ impl SamplesTab {
         };
         store::rewrite_bundle(&bundle, &new, &models, &options, &|_, _| {})?;
         self.fresh = false;
+        self.problem = None;
         self.status = format!("{} objects written and clustered", self.detections.len());
         Ok(())
     }
@@ -177,7 +214,18 @@ impl SamplesTab {
         let mut accepted = None;
         egui::Panel::left("sample controls").show(ui, |ui| {
             ui.heading("Samples");
+            if let Some(problem) = &self.problem {
+                ui.colored_label(egui::Color32::from_rgb(230, 90, 80), problem);
+            }
             ui.label("Left-drag on the image marks a rectangle; right-drag pans; scroll zooms.");
+            ui.horizontal(|ui| {
+                let label = ui.label("samples file");
+                ui.text_edit_singleline(&mut self.samples_path)
+                    .labelled_by(label.id);
+                if ui.button("load").clicked() {
+                    self.load_samples();
+                }
+            });
             ui.horizontal(|ui| {
                 let label = ui.label("class");
                 ui.text_edit_singleline(&mut self.class)
@@ -367,6 +415,33 @@ fn drape_image(bundle: &Path) -> anyhow::Result<Option<DrapeImage>> {
         size,
         drape.info.geotransform,
     )))
+}
+
+/// The samples file at `path` as rectangles in the drape's pixels of
+/// `bundle` (relevo-core's reader: CSV rectangles, or GeoJSON polygons in
+/// the drape's CRS taken as their bounding boxes). Errors name the file.
+fn read_samples(bundle: &Path, path: &Path) -> anyhow::Result<Vec<(String, [f32; 4])>> {
+    let bundle = Bundle::open(bundle)?;
+    let drape = bundle
+        .drape()?
+        .ok_or_else(|| anyhow::anyhow!("the bundle has no drape image to mark samples on"))?;
+    let (w, h) = (drape.info.width, drape.info.height);
+    let samples = relevo_core::veg::samples::read_file(path, Some(drape.info.geotransform), w, h)?;
+    Ok(samples
+        .into_iter()
+        .map(|s| {
+            let mut r = [f32::MAX, f32::MAX, f32::MIN, f32::MIN];
+            for [x, y] in &s.polygon {
+                r = [
+                    r[0].min(*x as f32),
+                    r[1].min(*y as f32),
+                    r[2].max(*x as f32),
+                    r[3].max(*y as f32),
+                ];
+            }
+            (s.class, r)
+        })
+        .collect())
 }
 
 /// relevo-core's extraction on the bundle's drape with samples in drape

@@ -255,3 +255,105 @@ fn samples_are_dragged_detected_and_accepted_in_the_window() {
         .join("\n")
         .contains("vegetation (quadtree)"));
 }
+
+/// A broken samples file and a bundle that cannot be rewritten, in the
+/// samples tab: each is a message in the window naming the file, the
+/// marks stay as they were, and the bundle is left exactly as it was (its
+/// staging path is taken by a plain file here, which the rewrite must not
+/// remove; permissions would not stop a test run as root).
+#[test]
+fn broken_samples_and_an_unwritable_bundle_are_reported_in_the_window() {
+    let dir = tempfile::tempdir().unwrap();
+    let bundle = common::grenoble_bundle_with_drape(dir.path());
+    let mut harness = window(&bundle);
+    harness.run_steps(2);
+    harness.get_by_label("samples").click();
+    harness.run_steps(3);
+
+    let broken = dir.path().join("broken.csv");
+    std::fs::write(
+        &broken,
+        "class;xmin;ymin;xmax;ymax\nforest;10;10;forty;40\n",
+    )
+    .unwrap();
+    let tab = harness.state_mut().samples_tab().unwrap();
+    assert!(tab.samples.is_empty() && tab.problem.is_none());
+    tab.samples_path = broken.display().to_string();
+    harness.get_by_label("load").click();
+    harness.run_steps(2);
+    let problem = harness
+        .state_mut()
+        .samples_tab()
+        .unwrap()
+        .problem
+        .clone()
+        .unwrap();
+    assert!(
+        problem.contains("broken.csv") && problem.contains("line 2"),
+        "{problem}"
+    );
+    harness.get_by_label(&problem);
+    assert!(harness
+        .state_mut()
+        .samples_tab()
+        .unwrap()
+        .samples
+        .is_empty());
+
+    // Good samples load; detection runs; the rewrite cannot stage.
+    let good = dir.path().join("good.csv");
+    std::fs::write(&good, "forest;100;116;140;150\nother;140;60;180;90\n").unwrap();
+    let tab = harness.state_mut().samples_tab().unwrap();
+    tab.samples_path = good.display().to_string();
+    tab.options.density_per_ha = 1.0 / 45.0;
+    harness.get_by_label("load").click();
+    harness.run_steps(2);
+    let tab = harness.state_mut().samples_tab().unwrap();
+    assert_eq!(tab.samples.len(), 2, "{:?}", tab.problem);
+    assert!(tab.problem.is_none());
+    harness.get_by_label("detect").click();
+    for _ in 0..600 {
+        harness.run_steps(1);
+        if !harness.state_mut().samples_tab().unwrap().running() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    assert!(harness.state_mut().samples_tab().unwrap().fresh);
+    let before: Vec<(std::path::PathBuf, Vec<u8>)> = files(&bundle);
+    let mut staging = bundle.clone().into_os_string();
+    staging.push(".tmp");
+    std::fs::write(&staging, "not a directory").unwrap();
+    harness.get_by_label("accept").click();
+    harness.run_steps(2);
+    let problem = harness
+        .state_mut()
+        .samples_tab()
+        .unwrap()
+        .problem
+        .clone()
+        .unwrap();
+    assert!(problem.contains(".relevo.tmp"), "{problem}");
+    harness.get_by_label(&problem);
+    assert!(
+        harness.state_mut().samples_tab().unwrap().fresh,
+        "still to accept"
+    );
+    assert_eq!(files(&bundle), before, "the bundle changed");
+    assert_eq!(std::fs::read(&staging).unwrap(), b"not a directory");
+}
+
+/// Every file under `dir` with its bytes, sorted by path.
+fn files(dir: &std::path::Path) -> Vec<(std::path::PathBuf, Vec<u8>)> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            out.extend(files(&path));
+        } else {
+            out.push((path.clone(), std::fs::read(&path).unwrap()));
+        }
+    }
+    out.sort();
+    out
+}
