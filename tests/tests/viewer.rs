@@ -44,8 +44,8 @@ fn fine_bands() -> Vec<Band> {
 /// References: `data/golden/viewer/NAME.png` — mesh, mesh wireframe,
 /// raycast, raycast with bands, Z-buffer baselines [c] and [g], the sample
 /// placement composited in mesh and raycast modes (with the region's
-/// vegetation), and the forest up close as billboards in both modes and as
-/// sprites — made on lavapipe
+/// vegetation), and the forest up close as billboards in both modes, as
+/// sprites, and from the two baselines (plain list, blobs) — made on lavapipe
 /// and looked at before they were committed. Tolerance: at most 1 % of
 /// pixels with a channel more than 24 levels off, and a mean difference
 /// under 1.5 levels.
@@ -159,6 +159,22 @@ fn headless_frames_of_each_mode_match_their_references() {
             forest,
         ),
         ("mesh_sprites", vegetation(Mode::Mesh, true), forest),
+        (
+            "mesh_vegetation_list",
+            Settings {
+                vegetation: relevo_view::gpu::VegetationSelection::List,
+                ..vegetation(Mode::Mesh, false)
+            },
+            forest,
+        ),
+        (
+            "mesh_vegetation_blobs",
+            Settings {
+                vegetation: relevo_view::gpu::VegetationSelection::Blobs { side_m: 1000.0 },
+                ..vegetation(Mode::Mesh, false)
+            },
+            forest,
+        ),
     ];
     for (name, settings, flight) in terrain_only.chain(with_objects).chain(with_vegetation) {
         let (frame, stats) =
