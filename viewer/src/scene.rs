@@ -66,6 +66,7 @@ impl Vegetation {
         self.cut.view_angle_deg = settings.view_angle_deg;
         self.cut.automatic_view_angle = settings.automatic_view_angle;
         self.cut.level_fade = settings.level_fade;
+        self.cut.cull = settings.vegetation_culling;
         match settings.vegetation {
             VegetationSelection::Quadtree => {
                 QuadtreeCut(&self.clusters).select(camera, &self.cut, &mut self.list);

@@ -410,7 +410,13 @@ pub fn tiled_detections(
     let tile_m = extent / k as f64;
     (0..count)
         .map(|i| {
-            let (tile, (rx, ry, o)) = (i / relative.len(), relative[i % relative.len()]);
+            // Fewer than the detections: spread over them, not the first ones.
+            let source = if count <= relative.len() {
+                i * relative.len() / count
+            } else {
+                i % relative.len()
+            };
+            let (tile, (rx, ry, o)) = (i / relative.len(), relative[source]);
             let (x, y) = (
                 ((tile % k) as f64 + rx) * tile_m,
                 ((tile / k) as f64 + ry) * tile_m,

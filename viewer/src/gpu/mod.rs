@@ -317,6 +317,9 @@ pub struct Settings {
     /// Margin over which a cluster dithers into its children instead of
     /// switching (relevo-core's `CutOptions::level_fade`; 0: it switches).
     pub level_fade: f64,
+    /// Vegetation outside the view frustum left out (off only to measure
+    /// what the culling saves, as the seed's table 4.2).
+    pub vegetation_culling: bool,
 }
 
 /// What chooses the vegetation drawn each frame (relevo-core's
@@ -393,6 +396,7 @@ impl Default for Settings {
             view_angle_deg: 45.0,
             automatic_view_angle: false,
             level_fade: relevo_core::cluster::cut::CutOptions::default().level_fade,
+            vegetation_culling: true,
         }
     }
 }
@@ -463,6 +467,12 @@ impl Renderer {
             vegetation: None,
             drawn: None,
         }
+    }
+
+    /// Draw the next frame even if nothing changed (benchmarks timing the
+    /// same view again).
+    pub fn forget_last_frame(&mut self) {
+        self.drawn = None;
     }
 
     /// Draw `scene` seen by `camera` into the targets (resized to the

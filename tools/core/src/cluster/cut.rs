@@ -54,6 +54,10 @@ pub struct CutOptions {
     /// refused shares the pixels with its children by ordered dither, so
     /// the cut changes level without popping (0: it switches).
     pub level_fade: f64,
+    /// Leave out what lies wholly outside the view frustum (the seed's
+    /// object culling, §4.2.2); off, every object within the last band is
+    /// drawn, as the seed's table 4.2 measured without it.
+    pub cull: bool,
 }
 
 impl Default for CutOptions {
@@ -77,6 +81,7 @@ impl Default for CutOptions {
             automatic_view_angle: false,
             magnification: 1.5,
             level_fade: 0.25,
+            cull: true,
         }
     }
 }
@@ -107,7 +112,8 @@ impl CutOptions {
                     max_cluster: sizes[i],
                 })
                 .collect(),
-            magnification: f64::INFINITY,
+            // The largest finite number: unlimited, and still a JSON number.
+            magnification: f64::MAX,
             ..CutOptions::default()
         })
     }
@@ -162,6 +168,9 @@ impl CutOptions {
             || self.crossfade_deg < 0.0
         {
             return Err("the view angle must lie in 0–90° and the cross-fade be ≥ 0".into());
+        }
+        if !(self.magnification.is_finite() && self.magnification > 0.0) {
+            return Err("the magnification must be a positive number".into());
         }
         if !(0.0..=1.0).contains(&self.level_fade) {
             return Err("the level fade must lie in 0–1".into());
@@ -542,6 +551,9 @@ fn box_farthest_distance_squared(eye: DVec3, min: [f32; 3], max: [f32; 3]) -> f6
 struct View<'c> {
     camera: &'c Camera,
     planes: [[f64; 4]; 6],
+    /// The planes a box is tested against: all of them, or none when
+    /// culling is off ([`CutOptions::cull`]).
+    planes_tested: u8,
     last_squared: f64,
     /// Screen pixels per metre at 1 m from the eye.
     pixels_per_m_at_1m: f64,
@@ -556,6 +568,7 @@ impl<'c> View<'c> {
         View {
             camera,
             planes: camera.frustum_planes(),
+            planes_tested: if options.cull { ALL_PLANES } else { 0 },
             last_squared: options.last_distance().powi(2),
             pixels_per_m_at_1m: camera.plane_distance_px(),
             choice: ViewChoice::new(options),
@@ -566,7 +579,7 @@ impl<'c> View<'c> {
 
     /// Inside the frustum and no further than the last band: the distance.
     fn sees(&self, min: [f32; 3], max: [f32; 3]) -> Option<f64> {
-        self.sees_within(ALL_PLANES, min, max).map(|(d, _)| d)
+        self.sees_within(self.planes_tested, min, max).map(|(d, _)| d)
     }
 
     /// Members of `node` (its box straddling the planes in `mask`) inside
@@ -882,7 +895,7 @@ impl Selection for QuadtreeCut<'_> {
         let mut frontier = std::mem::take(&mut out.frontier);
         frontier.clear();
         let root = Branch {
-            mask: ALL_PLANES,
+            mask: view.planes_tested,
             share: [0.0, 1.0],
             counted: true,
         };
@@ -1113,6 +1126,9 @@ mod tests {
         for n in 1..=3 {
             let c = CutOptions::seed_configuration(n, 10_000.0).unwrap();
             assert!(c.check().is_ok());
+            // As a bundle's cluster index keeps them.
+            let json = serde_json::to_string(&c).unwrap();
+            assert_eq!(serde_json::from_str::<CutOptions>(&json).unwrap(), c);
             assert_eq!(c.last_distance(), 20_000.0);
         }
         assert_eq!(
@@ -1263,6 +1279,35 @@ mod selection_tests {
             fading < 0.15,
             "the largest step of an object's share: {fading}"
         );
+    }
+
+    #[test]
+    fn without_culling_everything_within_the_last_band_is_drawn() {
+        let clusters = baked_clusters(600);
+        let options = CutOptions {
+            cull: false,
+            ..CutOptions::default()
+        };
+        let mut list = DrawList::default();
+        for camera in cameras(20) {
+            let within = clusters
+                .tree
+                .objects
+                .iter()
+                .filter(|o| {
+                    let [min, max] = o.bounds();
+                    box_distance(camera.position, min, max) <= options.last_distance()
+                })
+                .count();
+            ObjectList(&clusters).select(&camera, &options, &mut list);
+            assert_eq!(list.len(), within);
+            QuadtreeCut(&clusters).select(&camera, &options, &mut list);
+            let drawn: HashSet<u32> = checks::represented_objects(&clusters, &list)
+                .into_iter()
+                .map(|(o, _)| o)
+                .collect();
+            assert_eq!(drawn.len(), within);
+        }
     }
 
     #[test]
