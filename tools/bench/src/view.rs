@@ -232,4 +232,3 @@ fn frame_time(
     }
     Ok((median(&times), stats))
 }
-

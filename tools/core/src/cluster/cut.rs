@@ -579,7 +579,8 @@ impl<'c> View<'c> {
 
     /// Inside the frustum and no further than the last band: the distance.
     fn sees(&self, min: [f32; 3], max: [f32; 3]) -> Option<f64> {
-        self.sees_within(self.planes_tested, min, max).map(|(d, _)| d)
+        self.sees_within(self.planes_tested, min, max)
+            .map(|(d, _)| d)
     }
 
     /// Members of `node` (its box straddling the planes in `mask`) inside
