@@ -159,10 +159,7 @@ fn problems_are_shown_in_the_window() {
 fn the_samples_tab_opens_and_explains_a_bundle_without_a_drape() {
     let dir = tempfile::tempdir().unwrap();
     let bundle = common::grenoble_bundle(dir.path());
-    let mut harness = window(&bundle);
-    harness.run_steps(2);
-    harness.get_by_label("samples").click();
-    harness.run_steps(2);
+    let mut harness = samples_tab_of(&bundle);
     assert_eq!(harness.state().tab, relevo_view::app::Tab::Samples);
     harness.get_by_label("This bundle has no drape image to mark samples on.");
     harness.get_by_label("3D view").click();
@@ -180,10 +177,7 @@ fn the_samples_tab_opens_and_explains_a_bundle_without_a_drape() {
 fn samples_are_dragged_detected_and_accepted_in_the_window() {
     let dir = tempfile::tempdir().unwrap();
     let bundle = common::grenoble_bundle_with_drape(dir.path());
-    let mut harness = window(&bundle);
-    harness.run_steps(2);
-    harness.get_by_label("samples").click();
-    harness.run_steps(3);
+    let mut harness = samples_tab_of(&bundle);
     let drag = |harness: &mut Harness<ViewerApp>, from: [f32; 2], to: [f32; 2]| {
         harness.hover_at(from.into());
         harness.run_steps(1);
@@ -226,14 +220,7 @@ fn samples_are_dragged_detected_and_accepted_in_the_window() {
         .unwrap()
         .options
         .density_per_ha = 1.0 / 45.0;
-    harness.get_by_label("detect").click();
-    for _ in 0..600 {
-        harness.run_steps(1);
-        if !harness.state_mut().samples_tab().unwrap().running() {
-            break;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
+    detect(&mut harness);
     let tab = harness.state_mut().samples_tab().unwrap();
     assert!(tab.fresh, "{}", tab.status);
     let found = tab.detections.len();
@@ -265,10 +252,7 @@ fn samples_are_dragged_detected_and_accepted_in_the_window() {
 fn broken_samples_and_an_unwritable_bundle_are_reported_in_the_window() {
     let dir = tempfile::tempdir().unwrap();
     let bundle = common::grenoble_bundle_with_drape(dir.path());
-    let mut harness = window(&bundle);
-    harness.run_steps(2);
-    harness.get_by_label("samples").click();
-    harness.run_steps(3);
+    let mut harness = samples_tab_of(&bundle);
 
     let broken = dir.path().join("broken.csv");
     std::fs::write(
@@ -281,18 +265,11 @@ fn broken_samples_and_an_unwritable_bundle_are_reported_in_the_window() {
     tab.samples_path = broken.display().to_string();
     harness.get_by_label("load").click();
     harness.run_steps(2);
-    let problem = harness
-        .state_mut()
-        .samples_tab()
-        .unwrap()
-        .problem
-        .clone()
-        .unwrap();
+    let problem = problem_shown(&mut harness);
     assert!(
         problem.contains("broken.csv") && problem.contains("line 2"),
         "{problem}"
     );
-    harness.get_by_label(&problem);
     assert!(harness
         .state_mut()
         .samples_tab()
@@ -311,6 +288,35 @@ fn broken_samples_and_an_unwritable_bundle_are_reported_in_the_window() {
     let tab = harness.state_mut().samples_tab().unwrap();
     assert_eq!(tab.samples.len(), 2, "{:?}", tab.problem);
     assert!(tab.problem.is_none());
+    detect(&mut harness);
+    assert!(harness.state_mut().samples_tab().unwrap().fresh);
+    let before: Vec<(std::path::PathBuf, Vec<u8>)> = files(&bundle);
+    let mut staging = bundle.clone().into_os_string();
+    staging.push(".tmp");
+    std::fs::write(&staging, "not a directory").unwrap();
+    harness.get_by_label("accept").click();
+    harness.run_steps(2);
+    let problem = problem_shown(&mut harness);
+    assert!(problem.contains(".relevo.tmp"), "{problem}");
+    assert!(
+        harness.state_mut().samples_tab().unwrap().fresh,
+        "still to accept"
+    );
+    assert_eq!(files(&bundle), before, "the bundle changed");
+    assert_eq!(std::fs::read(&staging).unwrap(), b"not a directory");
+}
+
+/// The window on `bundle` with its samples tab open.
+fn samples_tab_of(bundle: &std::path::Path) -> Harness<'static, ViewerApp> {
+    let mut harness = window(bundle);
+    harness.run_steps(2);
+    harness.get_by_label("samples").click();
+    harness.run_steps(3);
+    harness
+}
+
+/// Click *detect* in the samples tab and wait for the detection to end.
+fn detect(harness: &mut Harness<ViewerApp>) {
     harness.get_by_label("detect").click();
     for _ in 0..600 {
         harness.run_steps(1);
@@ -319,13 +325,10 @@ fn broken_samples_and_an_unwritable_bundle_are_reported_in_the_window() {
         }
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
-    assert!(harness.state_mut().samples_tab().unwrap().fresh);
-    let before: Vec<(std::path::PathBuf, Vec<u8>)> = files(&bundle);
-    let mut staging = bundle.clone().into_os_string();
-    staging.push(".tmp");
-    std::fs::write(&staging, "not a directory").unwrap();
-    harness.get_by_label("accept").click();
-    harness.run_steps(2);
+}
+
+/// The samples tab's problem line, which must be shown in the window.
+fn problem_shown(harness: &mut Harness<ViewerApp>) -> String {
     let problem = harness
         .state_mut()
         .samples_tab()
@@ -333,14 +336,8 @@ fn broken_samples_and_an_unwritable_bundle_are_reported_in_the_window() {
         .problem
         .clone()
         .unwrap();
-    assert!(problem.contains(".relevo.tmp"), "{problem}");
     harness.get_by_label(&problem);
-    assert!(
-        harness.state_mut().samples_tab().unwrap().fresh,
-        "still to accept"
-    );
-    assert_eq!(files(&bundle), before, "the bundle changed");
-    assert_eq!(std::fs::read(&staging).unwrap(), b"not a directory");
+    problem
 }
 
 /// Every file under `dir` with its bytes, sorted by path.

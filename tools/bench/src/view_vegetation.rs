@@ -91,6 +91,23 @@ const SEED_4_5: [(u8, f64, usize, usize); 8] = [
     (3, 10.5, 4690, 7715),
 ];
 
+/// A camera at `position` (terrain frame, metres) looking along
+/// `heading_deg`, `pitch_deg` above the horizon, with a horizontal field of
+/// view of `fov_x_deg`, at the benchmark's size.
+fn camera(position: DVec3, heading_deg: f64, pitch_deg: f64, fov_x_deg: f64) -> Camera {
+    Camera {
+        position,
+        heading_deg,
+        pitch_deg,
+        incl_px: SIZE[1] as f64 / 2.0,
+        fov_x_deg,
+        width: SIZE[0],
+        height: SIZE[1],
+        near_m: 1.0,
+        far_m: 100_000.0,
+    }
+}
+
 /// The GPU, the sample region's bundle (rewritten with each test's
 /// vegetation) and its real detections.
 struct Bench {
@@ -199,17 +216,12 @@ impl Bench {
     fn billboards_sprites_and_structures(&self) -> Result<()> {
         let frame = &self.frame;
         let side_m = (frame.side - 1) as f64 * frame.cell_size_m;
-        let camera = Camera {
-            position: DVec3::new(side_m / 2.0, -3_000.0, 4_000.0),
-            heading_deg: 0.0,
-            pitch_deg: -35.0,
-            incl_px: SIZE[1] as f64 / 2.0,
-            fov_x_deg: 100.0,
-            width: SIZE[0],
-            height: SIZE[1],
-            near_m: 1.0,
-            far_m: 100_000.0,
-        };
+        let camera = camera(
+            DVec3::new(side_m / 2.0, -3_000.0, 4_000.0),
+            0.0,
+            -35.0,
+            100.0,
+        );
         let diagonal = side_m * std::f64::consts::SQRT_2;
         for ((count, seed_billboard, seed_sprite), (_, seed_4_4)) in
             SEED_4_1.into_iter().zip(SEED_4_4)
@@ -301,17 +313,12 @@ impl Bench {
             .copied()
             .fold(f32::MIN, f32::max) as f64;
         for (k, (seed_off, seed_on, seed_discarded)) in SEED_4_2.into_iter().enumerate() {
-            let camera = Camera {
-                position: DVec3::new(side_m / 2.0, side_m * (k as f64 / 9.0 - 0.1), top + 300.0),
-                heading_deg: 0.0,
-                pitch_deg: -15.0,
-                incl_px: SIZE[1] as f64 / 2.0,
-                fov_x_deg: 60.0,
-                width: SIZE[0],
-                height: SIZE[1],
-                near_m: 1.0,
-                far_m: 100_000.0,
-            };
+            let camera = camera(
+                DVec3::new(side_m / 2.0, side_m * (k as f64 / 9.0 - 0.1), top + 300.0),
+                0.0,
+                -15.0,
+                60.0,
+            );
             let list = |culling| Settings {
                 mode: Mode::Mesh,
                 vegetation: VegetationSelection::List,
@@ -382,17 +389,12 @@ impl Bench {
                 };
                 let mut scene = self.scene(&objects, &options)?;
                 let ground = scene.ground_height(eye[0], eye[1]).unwrap_or(0.0);
-                let camera = Camera {
-                    position: DVec3::new(eye[0], eye[1], ground + 150.0),
-                    heading_deg: 30.0,
-                    pitch_deg: -(150f64.atan2(back).to_degrees()),
-                    incl_px: SIZE[1] as f64 / 2.0,
-                    fov_x_deg: 90.0,
-                    width: SIZE[0],
-                    height: SIZE[1],
-                    near_m: 1.0,
-                    far_m: 100_000.0,
-                };
+                let camera = camera(
+                    DVec3::new(eye[0], eye[1], ground + 150.0),
+                    30.0,
+                    -(150f64.atan2(back).to_degrees()),
+                    90.0,
+                );
                 let list = |blur| Settings {
                     mode: Mode::Mesh,
                     vegetation: VegetationSelection::List,
@@ -445,17 +447,7 @@ impl Bench {
             for (view, &(east, north, heading, above)) in views.iter().enumerate() {
                 let [x, y] = self.world_to_terrain(east, north)?;
                 let ground = scene.ground_height(x, y).unwrap_or(0.0);
-                let camera = Camera {
-                    position: DVec3::new(x, y, ground + above),
-                    heading_deg: heading,
-                    pitch_deg: -15.0,
-                    incl_px: SIZE[1] as f64 / 2.0,
-                    fov_x_deg: 60.0,
-                    width: SIZE[0],
-                    height: SIZE[1],
-                    near_m: 1.0,
-                    far_m: 100_000.0,
-                };
+                let camera = camera(DVec3::new(x, y, ground + above), heading, -15.0, 60.0);
                 let settings = Settings {
                     mode: Mode::Mesh,
                     ..Default::default()
