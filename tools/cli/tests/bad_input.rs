@@ -341,3 +341,105 @@ fn broken_bundles_are_reported() {
         );
     }
 }
+
+/// A change made to a manifest.
+type Edit = dyn Fn(&mut serde_json::Value);
+
+/// Hostile values at the edge: cameras and far planes that are not finite
+/// numbers are refused by name; a huge far plane costs no more than the
+/// terrain; a manifest with a zero cell size, a side that is not 2^n + 1
+/// or a file outside the bundle is refused by every command before any
+/// array is read.
+#[test]
+fn hostile_cameras_far_planes_and_manifests_are_refused() {
+    let d = tempfile::tempdir().unwrap();
+    let bundle = sample_bundle(d.path());
+    let b = bundle.to_str().unwrap();
+    let work = d.path().join("work");
+    std::fs::create_dir(&work).unwrap();
+    for camera in [
+        "NaN,9112000,400,45,300",
+        "290000,9112000,inf,45,300",
+        "290000,9112000,400,-inf,300",
+        "290000,9112000,400,45,NaN",
+    ] {
+        let arg = format!("--camera={camera}");
+        fails(
+            &work,
+            &["render", b, &arg, "--out", "x.png"],
+            &["finite"],
+            &[],
+        );
+    }
+    for far in ["inf", "NaN", "1"] {
+        let arg = format!("--far={far}");
+        fails(
+            &work,
+            &[
+                "render",
+                b,
+                "--camera",
+                "290000,9112000,400,45,300",
+                &arg,
+                "--out",
+                "x.png",
+            ],
+            &["--far"],
+            &[],
+        );
+    }
+    // A far plane of 10¹² cells renders what the default does.
+    let near = work.join("near.png");
+    let far = work.join("far.png");
+    let camera = "290000,9112000,400,45,300";
+    relevo_ok([
+        "render",
+        b,
+        "--camera",
+        camera,
+        "--out",
+        near.to_str().unwrap(),
+    ]);
+    relevo_ok([
+        "render",
+        b,
+        "--camera",
+        camera,
+        "--far",
+        "1e12",
+        "--out",
+        far.to_str().unwrap(),
+    ]);
+    assert_eq!(std::fs::read(&near).unwrap(), std::fs::read(&far).unwrap());
+    std::fs::remove_file(&near).unwrap();
+    std::fs::remove_file(&far).unwrap();
+
+    let manifest = bundle.join("manifest.json");
+    let good: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&manifest).unwrap()).unwrap();
+    let edits: [(&Edit, &str); 4] = [
+        (&|m| m["grid"]["cell_size_m"] = 0.0.into(), "cell size 0"),
+        (&|m| m["grid"]["side"] = 128.into(), "grid side 128"),
+        (
+            &|m| m["artifacts"]["height"]["file"] = "../../etc/passwd".into(),
+            "not a relative path",
+        ),
+        (
+            &|m| m["artifacts"]["height"]["file"] = "/etc/passwd".into(),
+            "not a relative path",
+        ),
+    ];
+    for (edit, needle) in edits {
+        let mut m = good.clone();
+        edit(&mut m);
+        std::fs::write(&manifest, serde_json::to_string_pretty(&m).unwrap()).unwrap();
+        for args in [
+            vec!["info", b],
+            vec!["validate", b],
+            vec!["render", b, "--camera", camera, "--out", "x.png"],
+            vec!["mesh", b, "--max-error", "5", "--out", "x.obj"],
+        ] {
+            fails(&work, &args, &["manifest.json", needle], &[]);
+        }
+    }
+}

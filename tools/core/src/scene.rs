@@ -86,6 +86,11 @@ impl CameraPose {
                 values.len()
             ));
         }
+        if let Some(bad) = values.iter().find(|v| !v.is_finite()) {
+            return Err(format!(
+                "--camera takes finite numbers X,Y,Z,HEADING[,INCL], got {bad}"
+            ));
+        }
         Ok(CameraPose {
             eye: [values[0], values[1], values[2]],
             heading_deg: values[3],

@@ -78,8 +78,11 @@ pub fn run(a: RenderArgs) -> Result<()> {
     if !(a.fov > 0.0 && a.fov < 179.0) {
         bail!("--fov must be between 0 and 179 degrees, got {}", a.fov);
     }
-    if a.far.is_nan() || a.far < 2.0 {
-        bail!("--far must be at least 2 cells, got {}", a.far);
+    if !(a.far.is_finite() && a.far >= 2.0) {
+        bail!(
+            "--far must be a finite number of at least 2 cells, got {}",
+            a.far
+        );
     }
     let pose = CameraPose::from_values(&a.camera).map_err(anyhow::Error::msg)?;
     if a.hillshade.as_ref().is_some_and(|h| h.len() != 2) {

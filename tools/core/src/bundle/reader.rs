@@ -75,8 +75,111 @@ impl Drape {
     }
 }
 
+/// Largest grid side a bundle may declare (2^16 + 1 vertices).
+pub const MAX_SIDE: usize = (1 << 16) + 1;
+/// Largest side of a drape image, pixels.
+pub const MAX_IMAGE_SIDE: usize = 1 << 17;
+
+/// A bundle is untrusted input: the manifest's grid and image must be
+/// consistent before any array is mapped — a side of 2^n + 1 (at least 3,
+/// at most [`MAX_SIDE`]), a positive finite cell size and z scale, finite
+/// georeferencing with non-zero cell sizes, an image of sensible size, the
+/// grid's and the image's arrays of the shapes those sizes give —
+/// and every artifact or export must be a relative path of plain names
+/// inside the bundle (no `..`, no root).
+fn check_manifest(m: &Manifest) -> std::result::Result<(), String> {
+    let g = &m.grid;
+    if g.side < 3 || g.side > MAX_SIDE || !(g.side - 1).is_power_of_two() {
+        return Err(format!(
+            "grid side {} is not 2^n + 1 between 3 and {MAX_SIDE}",
+            g.side
+        ));
+    }
+    if !(g.cell_size_m.is_finite() && g.cell_size_m > 0.0) {
+        return Err(format!(
+            "grid cell size {} m is not a positive number",
+            g.cell_size_m
+        ));
+    }
+    if !(g.z_scale.is_finite() && g.z_scale > 0.0) {
+        return Err(format!("z scale {} is not a positive number", g.z_scale));
+    }
+    let georeferencing = |what: &str, t: &crate::geo::GeoTransform| {
+        let [_, w, _, _, _, h] = t.0;
+        if t.0.iter().all(|v| v.is_finite()) && w != 0.0 && h != 0.0 {
+            Ok(())
+        } else {
+            Err(format!("{what} georeferencing {:?} is not usable", t.0))
+        }
+    };
+    georeferencing("grid", &g.geotransform)?;
+    if let Some(c) = &m.color {
+        georeferencing("image", &c.geotransform)?;
+        if c.width == 0 || c.height == 0 || c.width > MAX_IMAGE_SIDE || c.height > MAX_IMAGE_SIDE {
+            return Err(format!(
+                "image size {}×{} is outside 1..={MAX_IMAGE_SIDE}",
+                c.width, c.height
+            ));
+        }
+    }
+    let side = g.side;
+    let mut shapes = vec![
+        (names::HEIGHT.key, vec![side, side]),
+        (names::MASK.key, vec![side, side]),
+        (names::LP.key, vec![side, side, 2]),
+    ];
+    if let Some(c) = &m.color {
+        shapes.push((names::COLOR.key, vec![c.height, c.width, 4]));
+    }
+    for (key, expected) in shapes {
+        if let Some(a) = m.artifacts.get(key) {
+            if a.shape != expected {
+                return Err(format!(
+                    "{key}: shape {:?} disagrees with the grid and image sizes (expected {expected:?})",
+                    a.shape
+                ));
+            }
+        }
+    }
+    for (key, a) in m.artifacts.iter().chain(&m.exports) {
+        let path = Path::new(&a.file);
+        let plain = !a.file.is_empty()
+            && path
+                .components()
+                .all(|c| matches!(c, std::path::Component::Normal(_)));
+        if !plain {
+            return Err(format!(
+                "{key}: file {:?} is not a relative path inside the bundle",
+                a.file
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// No artifact or export may be a link leading out of the bundle (its
+/// canonical path must lie under the bundle's).
+fn check_files_stay_inside(dir: &Path, m: &Manifest) -> Result<()> {
+    let root = dir.canonicalize().map_err(|e| Error::io(dir, e))?;
+    for a in m.artifacts.values().chain(m.exports.values()) {
+        let path = dir.join(&a.file);
+        // A missing file is reported by whoever reads it.
+        if let Ok(real) = path.canonicalize() {
+            if !real.starts_with(&root) {
+                return Err(Error::invalid(
+                    &path,
+                    format!("leads out of the bundle (to {})", real.display()),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
 impl Bundle {
-    /// Read `DIR/manifest.json` and check the format and version.
+    /// Read `DIR/manifest.json`, check the format and version, and check
+    /// that the manifest is consistent and names only files inside the
+    /// bundle ([`check_manifest`]).
     pub fn open(dir: &Path) -> Result<Bundle> {
         let path = dir.join(MANIFEST_FILE);
         let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
@@ -99,6 +202,10 @@ impl Bundle {
                 ),
             ));
         }
+        if let Err(problem) = check_manifest(&manifest) {
+            return Err(Error::invalid(&path, problem));
+        }
+        check_files_stay_inside(dir, &manifest)?;
         Ok(Bundle {
             dir: dir.to_path_buf(),
             manifest,
@@ -307,5 +414,83 @@ mod tests {
             message.contains("height.f32") && message.contains("[257, 257]"),
             "{message}"
         );
+    }
+
+    /// Hostile manifests are refused when the bundle is opened, before
+    /// any array is mapped, with the manifest named and the problem stated.
+    #[test]
+    fn inconsistent_or_escaping_manifests_are_refused_on_opening() {
+        let dem = testdata::dem("fuji_257.f32");
+        let grid = HeightGrid {
+            side: dem.side,
+            heights: dem.heights,
+            mask: vec![1u8; dem.side * dem.side],
+            geotransform: GeoTransform::north_up(0.0, dem.side as f64 * 30.0, 30.0, 30.0),
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("fuji.relevo");
+        let crs = Crs {
+            wkt: String::new(),
+            epsg: None,
+        };
+        write_terrain_bundle(&target, "fuji", &grid, 30.0, crs, false).unwrap();
+        let manifest_path = target.join(MANIFEST_FILE);
+        let good = std::fs::read_to_string(&manifest_path).unwrap();
+        let refused = |edit: &dyn Fn(&mut serde_json::Value), needle: &str| {
+            let mut m: serde_json::Value = serde_json::from_str(&good).unwrap();
+            edit(&mut m);
+            std::fs::write(&manifest_path, serde_json::to_string(&m).unwrap()).unwrap();
+            let message = Bundle::open(&target).err().map(|e| e.to_string());
+            let message = message.unwrap_or_else(|| panic!("accepted: {needle}"));
+            assert!(
+                message.contains("manifest.json") && message.contains(needle),
+                "{message}"
+            );
+        };
+        refused(&|m| m["grid"]["side"] = 256.into(), "grid side 256");
+        refused(
+            &|m| m["grid"]["side"] = 129.into(),
+            "height: shape [257, 257] disagrees",
+        );
+        refused(&|m| m["grid"]["side"] = 0.into(), "grid side 0");
+        refused(
+            &|m| m["grid"]["side"] = (1u64 << 40).into(),
+            "is not 2^n + 1",
+        );
+        refused(&|m| m["grid"]["cell_size_m"] = 0.0.into(), "cell size 0");
+        refused(
+            &|m| m["grid"]["cell_size_m"] = (-30.0).into(),
+            "cell size -30",
+        );
+        refused(&|m| m["grid"]["z_scale"] = 0.0.into(), "z scale 0");
+        refused(
+            &|m| m["grid"]["geotransform"][1] = 0.0.into(),
+            "grid georeferencing",
+        );
+        for hostile in ["../../etc/passwd", "/etc/passwd", "a/../../b", ""] {
+            refused(
+                &|m| m["artifacts"]["height"]["file"] = hostile.into(),
+                "not a relative path inside the bundle",
+            );
+        }
+        // A link leading out of the bundle.
+        std::fs::write(&manifest_path, &good).unwrap();
+        let outside = dir.path().join("outside.f32");
+        std::fs::copy(target.join("height.f32"), &outside).unwrap();
+        std::fs::remove_file(target.join("height.f32")).unwrap();
+        std::os::unix::fs::symlink(&outside, target.join("height.f32")).unwrap();
+        let message = Bundle::open(&target)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            message.contains("height.f32") && message.contains("leads out of the bundle"),
+            "{message}"
+        );
+        // A link inside the bundle is fine.
+        std::fs::remove_file(target.join("height.f32")).unwrap();
+        std::fs::rename(&outside, target.join("heights.bin")).unwrap();
+        std::os::unix::fs::symlink("heights.bin", target.join("height.f32")).unwrap();
+        assert!(Bundle::open(&target).unwrap().heights().is_ok());
     }
 }

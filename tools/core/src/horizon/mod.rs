@@ -148,13 +148,29 @@ impl Slice {
 fn fill_slices(out: &mut Vec<Slice>, terrain: &Terrain, camera: &Camera, opts: &RenderOptions) {
     let d = camera.plane_distance_px();
     out.clear();
+    // Slices off the terrain's square sample nothing: skip (in whole steps)
+    // those nearer than the square and stop past its farthest corner, so the
+    // slice count is bounded by the square's size whatever `far` is.
+    let extent = (terrain.side - 1) as f64 * terrain.cell_m;
+    let gap = |e: f64| (-e).max(e - extent).max(0.0);
+    let reach = |e: f64| e.abs().max((e - extent).abs());
+    let (x, y) = (camera.position.x, camera.position.y);
+    let nearest = gap(x).hypot(gap(y));
+    let end = camera.far_m.min(reach(x).hypot(reach(y)));
     let mut s = camera.near_m;
     let mut band = 0;
-    while s <= camera.far_m {
+    while s <= end {
         while band + 1 < opts.bands.len() && s > opts.bands[band].until_m {
             band += 1;
         }
         let b = opts.bands[band];
+        let step = terrain.cell_m / b.slices_per_cell;
+        if s + step < nearest {
+            // Whole steps up to the square or the band's end.
+            let to = nearest.min(b.until_m);
+            s += ((to - s) / step).floor().max(1.0) * step;
+            continue;
+        }
         let footprint = opts.prefilter.then_some((s / d, s * s / d));
         out.push(Slice {
             distance_m: s,
@@ -163,7 +179,7 @@ fn fill_slices(out: &mut Vec<Slice>, terrain: &Terrain, camera: &Camera, opts: &
             subvoxel: b.subvoxel,
             footprint,
         });
-        s += terrain.cell_m / b.slices_per_cell;
+        s += step;
     }
 }
 
@@ -673,6 +689,45 @@ mod tests {
                 "{}: {disagree} pixels disagree",
                 dem.name
             );
+        }
+    }
+
+    /// A far plane far beyond the terrain, and an eye far outside it, cost
+    /// no more slices than the terrain's square holds, and draw what a far
+    /// plane at the square's farthest corner draws.
+    #[test]
+    fn slices_stay_within_the_terrain_whatever_the_far_plane() {
+        let dem = crate::testdata::dem("srtm_ref_257.f32");
+        let (side, cell) = (dem.side, dem.cell_size_m);
+        let extent = (side - 1) as f64 * cell;
+        let mask = vec![1u8; side * side];
+        let terrain = Terrain::new(side, cell, &dem.heights, &mask, None);
+        let top = dem.heights.iter().copied().fold(f32::MIN, f32::max) as f64;
+        let opts = RenderOptions::default();
+        let most = (2.0 * extent * std::f64::consts::SQRT_2 / cell + 2.0) as usize;
+        for eye in [
+            [0.5 * extent, -0.2 * extent, top + 300.0],
+            [0.5 * extent, -5e8, top + 300.0],
+        ] {
+            let mut renderer = Renderer::default();
+            let mut far = camera(240, 135, eye, 0.0, 100.0, 1e12);
+            far.near_m = cell;
+            renderer.render(&terrain, &far, &opts);
+            assert!(
+                renderer.slices.len() <= most,
+                "{} slices",
+                renderer.slices.len()
+            );
+            let reach = (eye[0].abs().max((eye[0] - extent).abs()))
+                .hypot(eye[1].abs().max((eye[1] - extent).abs()));
+            let mut bounded = camera(240, 135, eye, 0.0, 100.0, reach + cell);
+            bounded.near_m = cell;
+            let mut reference = Renderer::default();
+            reference.render(&terrain, &bounded, &opts);
+            if eye[1] > -1e6 {
+                assert!(renderer.slices.len() > 100);
+                assert_eq!(renderer.frame.rgba, reference.frame.rgba);
+            }
         }
     }
 
