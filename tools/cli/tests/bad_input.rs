@@ -443,3 +443,66 @@ fn hostile_cameras_far_planes_and_manifests_are_refused() {
         }
     }
 }
+
+/// Never clobber: every file a command would write, side files included,
+/// is checked before any work; `--force` replaces a Relevo bundle but
+/// nothing else, and moving the old bundle aside touches nothing of the
+/// user's.
+#[test]
+fn user_files_are_never_clobbered() {
+    let d = tempfile::tempdir().unwrap();
+    let bundle = sample_bundle(d.path());
+    let b = bundle.to_str().unwrap();
+    let work = d.path().join("work");
+    std::fs::create_dir(&work).unwrap();
+    // The mesh's material and texture belong to the user here.
+    std::fs::write(work.join("m.mtl"), "mine").unwrap();
+    std::fs::write(work.join("m.png"), "mine too").unwrap();
+    fails(
+        &work,
+        &["mesh", b, "--max-error", "5", "--out", "m.obj"],
+        &["m.mtl", "already exists"],
+        &["m.mtl", "m.png"],
+    );
+    assert_eq!(std::fs::read_to_string(work.join("m.mtl")).unwrap(), "mine");
+    std::fs::remove_file(work.join("m.mtl")).unwrap();
+    fails(
+        &work,
+        &["mesh", b, "--max-error", "5", "--out", "m.obj"],
+        &["m.png", "already exists"],
+        &["m.png"],
+    );
+    std::fs::remove_file(work.join("m.png")).unwrap();
+
+    // --force on something that is not a bundle: refused, left as it was.
+    let region = repo("data/olinda/REGION.toml");
+    let r = region.to_str().unwrap();
+    std::fs::create_dir(work.join("photos")).unwrap();
+    std::fs::write(work.join("photos/holiday.jpg"), "precious").unwrap();
+    std::fs::write(work.join("notes.txt"), "notes").unwrap();
+    for target in ["photos", "notes.txt"] {
+        fails(
+            &work,
+            &["prep", r, "--out", target, "--force"],
+            &[target, "not a Relevo bundle"],
+            &["notes.txt", "photos"],
+        );
+        assert_eq!(
+            std::fs::read_to_string(work.join("photos/holiday.jpg")).unwrap(),
+            "precious"
+        );
+    }
+    // A bundle is replaced; a user's folder named like the aside path stays.
+    std::fs::create_dir(d.path().join("olinda.relevo.old")).unwrap();
+    std::fs::write(d.path().join("olinda.relevo.old/keep"), "keep").unwrap();
+    relevo_ok(["prep", r, "--out", b, "--force"]);
+    relevo_ok(["validate", b]);
+    assert_eq!(
+        std::fs::read_to_string(d.path().join("olinda.relevo.old/keep")).unwrap(),
+        "keep"
+    );
+    assert_eq!(
+        listing(d.path()),
+        ["olinda.relevo", "olinda.relevo.old", "work"]
+    );
+}

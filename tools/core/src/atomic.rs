@@ -26,6 +26,29 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
     written
 }
 
+/// Write several files that belong together (a mesh, its material and
+/// its texture): all partial files first, then all renamed; when one
+/// cannot be written, none of them is left, partial or whole.
+pub fn write_files(files: &[(&Path, &[u8])]) -> Result<()> {
+    let mut written = Vec::new();
+    for &(path, bytes) in files {
+        let partial = partial_path(path);
+        if let Err(e) = std::fs::write(&partial, bytes) {
+            let _ = std::fs::remove_file(&partial);
+            for p in &written {
+                let _ = std::fs::remove_file(p);
+            }
+            return Err(Error::invalid(path, format!("cannot write ({e})")));
+        }
+        written.push(partial);
+    }
+    for (&(path, _), partial) in files.iter().zip(&written) {
+        std::fs::rename(partial, path)
+            .map_err(|e| Error::invalid(path, format!("cannot write ({e})")))?;
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -45,5 +68,21 @@ mod tests {
         );
         let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
         assert_eq!(names.len(), 1, "only the finished file remains");
+    }
+
+    #[test]
+    fn files_that_belong_together_appear_together_or_not_at_all() {
+        let dir = tempfile::tempdir().unwrap();
+        let (obj, mtl) = (dir.path().join("m.obj"), dir.path().join("m.mtl"));
+        write_files(&[(&obj, b"o"), (&mtl, b"m")]).unwrap();
+        assert_eq!(std::fs::read(&mtl).unwrap(), b"m");
+        let missing = dir.path().join("no/such/m.png");
+        let message = write_files(&[(&obj, b"o2"), (&missing, b"p")])
+            .unwrap_err()
+            .to_string();
+        assert!(message.contains("m.png"), "{message}");
+        // The first file was not replaced, and no partial file is left.
+        assert_eq!(std::fs::read(&obj).unwrap(), b"o");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
     }
 }

@@ -5,7 +5,7 @@ use anyhow::{bail, Result};
 use clap::Args;
 use relevo_core::bundle::Bundle;
 use relevo_core::lp::export;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
 pub struct MeshArgs {
@@ -58,28 +58,37 @@ pub fn run(a: MeshArgs) -> Result<()> {
             a.max_error
         );
     }
-    output::check(&a.out, a.force)?;
     let bundle = Bundle::open(&a.bundle)?;
+    // Every file this writes, side files included, checked before any work.
+    let stem = a
+        .out
+        .file_stem()
+        .map(|s| s.to_string_lossy().to_string())
+        .unwrap_or_else(|| "mesh".into());
+    let side_files = match format {
+        MeshFormat::Obj if bundle.manifest.color.is_some() => vec![
+            a.out.with_file_name(format!("{stem}.mtl")),
+            a.out.with_file_name(format!("{stem}.png")),
+        ],
+        _ => Vec::new(),
+    };
+    for path in std::iter::once(&a.out).chain(&side_files) {
+        output::check(path, a.force)?;
+    }
     let m = export::build(&bundle, a.max_error, a.keep_padding)?;
     match format {
         MeshFormat::Glb => {
             output::write_atomic(&a.out, &export::to_glb(&m, &bundle.manifest.crs.wkt)?)?;
         }
         MeshFormat::Obj => {
-            let stem = a
-                .out
-                .file_stem()
-                .map(|s| s.to_string_lossy().to_string())
-                .unwrap_or_else(|| "mesh".into());
-            if let Some(png) = &m.texture_png {
-                output::write_atomic(&a.out.with_file_name(format!("{stem}.png")), png)?;
-                let mtl = format!("newmtl drape\nKd 1 1 1\nmap_Kd {stem}.png\n");
-                output::write_atomic(&a.out.with_file_name(format!("{stem}.mtl")), mtl.as_bytes())?;
+            let obj = export::to_obj(&m, m.texture_png.as_ref().map(|_| stem.as_str()));
+            let mtl = format!("newmtl drape\nKd 1 1 1\nmap_Kd {stem}.png\n");
+            let mut files: Vec<(&Path, &[u8])> = vec![(&a.out, &obj)];
+            if let (Some(png), [mtl_path, png_path]) = (&m.texture_png, side_files.as_slice()) {
+                files.push((mtl_path, mtl.as_bytes()));
+                files.push((png_path, png));
             }
-            output::write_atomic(
-                &a.out,
-                &export::to_obj(&m, m.texture_png.as_ref().map(|_| stem.as_str())),
-            )?;
+            relevo_core::atomic::write_files(&files)?;
         }
     }
     eprintln!(

@@ -23,13 +23,23 @@ pub struct BundleWriter {
 }
 
 impl BundleWriter {
-    /// Start a bundle at `target`. Fails if `target` exists, unless `force`.
+    /// Start a bundle at `target`. Fails if `target` exists, unless `force`
+    /// and it is a Relevo bundle: `--force` replaces only what Relevo wrote.
     pub fn create(target: &Path, force: bool) -> Result<Self> {
-        if target.exists() && !force {
-            return Err(Error::invalid(
-                target,
-                "already exists (pass --force to replace it)",
-            ));
+        if target.symlink_metadata().is_ok() {
+            if !force {
+                return Err(Error::invalid(
+                    target,
+                    "already exists (pass --force to replace it)",
+                ));
+            }
+            if !is_bundle(target) {
+                return Err(Error::invalid(
+                    target,
+                    "exists and is not a Relevo bundle (no manifest.json of format \
+                     relevo-bundle); refusing to replace it, even with --force",
+                ));
+            }
         }
         let staging = staging_path(target);
         if staging.exists() {
@@ -132,10 +142,7 @@ impl BundleWriter {
         json.push('\n');
         fs::write(&path, json).map_err(|e| Error::io(&path, e))?;
         if self.target.exists() {
-            let old = self.target.with_extension("relevo.old");
-            if old.exists() {
-                fs::remove_dir_all(&old).map_err(|e| Error::io(&old, e))?;
-            }
+            let old = unused_path(&self.target, "old");
             fs::rename(&self.target, &old).map_err(|e| Error::io(&self.target, e))?;
             fs::rename(&self.staging, &self.target).map_err(|e| Error::io(&self.target, e))?;
             fs::remove_dir_all(&old).map_err(|e| Error::io(&old, e))?;
@@ -204,6 +211,29 @@ pub fn write_terrain_bundle(
 }
 
 /// `TARGET.tmp` beside the target.
+/// Is `dir` a Relevo bundle: a folder whose `manifest.json` is JSON of
+/// format `relevo-bundle` (any version)?
+pub fn is_bundle(dir: &Path) -> bool {
+    dir.is_dir()
+        && fs::read_to_string(dir.join(MANIFEST_FILE))
+            .ok()
+            .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
+            .is_some_and(|m| m.get("format").and_then(|f| f.as_str()) == Some(FORMAT))
+}
+
+/// `TARGET.SUFFIX`, or `TARGET.SUFFIX.N` for the first N not taken: a place
+/// to move the replaced bundle to without touching anything of the user's.
+fn unused_path(target: &Path, suffix: &str) -> PathBuf {
+    let name = target.file_name().unwrap_or_default().to_string_lossy();
+    let mut path = target.with_file_name(format!("{name}.{suffix}"));
+    let mut n = 1;
+    while path.symlink_metadata().is_ok() {
+        path = target.with_file_name(format!("{name}.{suffix}.{n}"));
+        n += 1;
+    }
+    path
+}
+
 pub(crate) fn staging_path(target: &Path) -> PathBuf {
     let mut name = target.file_name().unwrap_or_default().to_os_string();
     name.push(".tmp");
