@@ -506,3 +506,43 @@ fn user_files_are_never_clobbered() {
         ["olinda.relevo", "olinda.relevo.old", "work"]
     );
 }
+
+/// Infinite heights, and heights far beyond any on Earth (an undeclared
+/// no-data marker such as 3.4e38), are refused by every command that reads
+/// a DEM, naming the file; declared as no-data they are holes.
+#[test]
+fn infinite_and_absurd_heights() {
+    let d = tempfile::tempdir().unwrap();
+    for (name, bad, needle) in [
+        ("inf.tif", f32::INFINITY, "infinite"),
+        ("minus_inf.tif", f32::NEG_INFINITY, "infinite"),
+        ("max.tif", 3.0e38, "beyond ±100000 m"),
+        ("huge.tif", 1.0e10, "the first, 1e10,"),
+    ] {
+        let mut v = vec![10.0f32; 64];
+        v[27] = bad;
+        write_f32_tif(&d.path().join(name), 8, 8, &v, None);
+        let keep = listing(d.path());
+        let keep: Vec<&str> = keep.iter().map(String::as_str).collect();
+        for args in [
+            vec!["prep", "--dem", name, "--out", "o.relevo"],
+            vec!["stitch", name, "--out", "s.tif"],
+            vec!["fill", name, "--out", "f.tif"],
+            vec!["pad", name, "--out", "p.tif"],
+        ] {
+            fails(d.path(), &args, &[name, needle], &keep);
+        }
+    }
+    // Declared as no-data, the marker is a hole that prep fills.
+    let dem = d.path().join("huge.tif");
+    let out = d.path().join("o.relevo");
+    relevo_ok([
+        "prep",
+        "--dem",
+        dem.to_str().unwrap(),
+        "--src-nodata",
+        "1e10",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+}

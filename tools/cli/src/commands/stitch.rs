@@ -92,6 +92,11 @@ pub fn run(a: StitchArgs) -> Result<()> {
         bands: a.bands,
     };
     let m = stitch(&a.tiles, &opts)?;
+    if m.raster.bands == 1 {
+        // One band: heights (imagery has three or more).
+        let names: Vec<String> = a.tiles.iter().map(|f| f.display().to_string()).collect();
+        gdalio::check_heights(&m.raster, &names.join(", "))?;
+    }
     gdalio::write_geotiff(&a.out, &m.raster, &m.grid, m.band_type, Some(m.nodata))?;
     eprintln!(
         "{}: {}×{} cells, {} band(s), {} of {} cells with data",

@@ -142,6 +142,18 @@ impl Source {
                     )
                 })?;
             let nan_is_nodata = nodata.is_some_and(f64::is_nan);
+            let infinite = buffer
+                .data()
+                .iter()
+                .filter(|&&v| v.is_infinite() && Some(v) != nodata)
+                .count();
+            if infinite > 0 {
+                bail!(
+                    "{}: band {b}: {infinite} value(s) are infinite and not the declared no-data; \
+                     pass --src-nodata VALUE if they mark holes",
+                    self.path.display()
+                );
+            }
             if !nan_is_nodata {
                 let nans = buffer.data().iter().filter(|v| v.is_nan()).count();
                 if nans > 0 {
@@ -350,7 +362,29 @@ pub fn read_single_band(
     if raster.valid_count() == 0 {
         bail!("{}: no valid data (every cell is no-data)", path.display());
     }
+    check_heights(&raster, &path.display().to_string())?;
     Ok((raster, grid, source.band_type, nodata))
+}
+
+/// Largest height magnitude taken as a height, metres: beyond it a value
+/// is an undeclared no-data marker (such as ±3.4e38) or a unit error.
+pub const MAX_ABS_HEIGHT_M: f64 = 100_000.0;
+
+/// Refuse heights beyond ±[`MAX_ABS_HEIGHT_M`] in band 1 of `raster`
+/// (NaN is no-data), naming `source`, how many, and the first one's cell.
+pub fn check_heights(raster: &Raster, source: &str) -> Result<()> {
+    let band = raster.band(0);
+    let beyond = band.iter().filter(|v| v.abs() > MAX_ABS_HEIGHT_M).count();
+    if let Some(first) = band.iter().position(|v| v.abs() > MAX_ABS_HEIGHT_M) {
+        bail!(
+            "{source}: {beyond} height(s) beyond ±{MAX_ABS_HEIGHT_M} m (the first, {:e}, at column {}, \
+             row {}): an undeclared no-data value? pass --src-nodata VALUE",
+            band[first],
+            first % raster.width,
+            first / raster.width
+        );
+    }
+    Ok(())
 }
 
 /// Write `raster` as a tiled, deflate-compressed GeoTIFF of `band_type`,

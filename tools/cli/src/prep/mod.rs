@@ -179,6 +179,13 @@ fn stage_dem(b: &mut Build) -> Result<()> {
         opts.resolution = Some((cx.min(cy), cx.min(cy)));
         dem = stitch(&r.dem.files, &opts)?;
     }
+    let names: Vec<String> = r
+        .dem
+        .files
+        .iter()
+        .map(|f| f.display().to_string())
+        .collect();
+    gdalio::check_heights(&dem.raster, &names.join(", "))?;
     if !georeferenced {
         let cell = r.cell_size_m.unwrap_or(1.0);
         dem.grid.geotransform = GeoTransform::north_up(0.0, 0.0, cell, cell);
