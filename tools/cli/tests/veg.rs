@@ -524,3 +524,42 @@ fn prep_carries_samples_across_crs() {
         "forest agrees on {agreement:.3} of the pixels"
     );
 }
+
+/// A fill denser than one object per square metre, or crowns closer than
+/// a pixel, is refused before any work (the count would be unbounded),
+/// naming the option.
+#[test]
+fn densities_finer_than_a_pixel_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = shared("trees/SOAP_061.png");
+    let samples = repo("data/trees/soap_061_samples.csv");
+    let out = dir.path().join("db.csv");
+    for extra in [
+        ["--pixel-size", "10", "--density", "1e9"],
+        ["--pixel-size", "10", "--density", "inf"],
+        ["--pixel-size", "0.1", "--crown-spacing", "0.01"],
+    ] {
+        let mut args = vec![
+            "--mode",
+            if extra[2] == "--density" {
+                "fill"
+            } else {
+                "crowns"
+            },
+        ];
+        args.extend(extra);
+        let o = veg_detect(&png, &samples, &out, &args);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{extra:?} succeeded");
+        let option = if extra[2] == "--density" {
+            "density_per_ha"
+        } else {
+            "crown_spacing_m"
+        };
+        assert!(
+            stderr.contains(option) && !stderr.contains("panicked"),
+            "{extra:?}: {stderr}"
+        );
+        assert!(!out.exists());
+    }
+}

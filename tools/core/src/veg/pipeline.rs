@@ -96,6 +96,22 @@ impl VegOptions {
             Mode::Crowns => true,
             Mode::Fill => false,
         };
+        // Crowns closer than a pixel cannot be told apart in the image, and
+        // filled objects denser than one per square metre are not
+        // vegetation; either would make the object count grow without bound.
+        if crowns && self.crown_spacing_m < pixel_m {
+            return Err(Error::Input(format!(
+                "crown_spacing_m: crowns {:.3} m apart are closer than one {pixel_m:.3} m pixel",
+                self.crown_spacing_m
+            )));
+        }
+        if !crowns && self.density_per_ha > MAX_DENSITY_PER_HA {
+            return Err(Error::Input(format!(
+                "density_per_ha: {} objects per ha is denser than one per square metre \
+                 (at most {MAX_DENSITY_PER_HA})",
+                self.density_per_ha
+            )));
+        }
         Ok(if crowns {
             Placement::Crowns {
                 spacing_px: (self.crown_spacing_m / pixel_m) as f32,
@@ -110,6 +126,10 @@ impl VegOptions {
         })
     }
 }
+
+/// Densest fill a vegetation class may ask for: one object per square
+/// metre.
+pub const MAX_DENSITY_PER_HA: f64 = 10_000.0;
 
 /// An image ready for analysis, with where its pixels are.
 pub struct VegImage {
