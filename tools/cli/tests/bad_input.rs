@@ -546,3 +546,86 @@ fn infinite_and_absurd_heights() {
         out.to_str().unwrap(),
     ]);
 }
+
+/// Work larger than the memory budget is refused before it allocates,
+/// with the size, the budget and what to change: a 300000×300000 sparse
+/// GeoTIFF (a few KB on disk) in every command that reads a DEM, and a
+/// resampling of a real 30 km DEM to 1 m cells; under a 4 GB address-space
+/// limit nothing reaches the allocator's abort.
+#[test]
+fn work_beyond_the_memory_budget_is_refused_before_it_starts() {
+    let d = tempfile::tempdir().unwrap();
+    let sparse = d.path().join("sparse.tif");
+    gdal_tool(
+        "gdal_create",
+        &[
+            "-of",
+            "GTiff",
+            "-outsize",
+            "300000",
+            "300000",
+            "-ot",
+            "Float32",
+            "-co",
+            "SPARSE_OK=YES",
+            "-co",
+            "TILED=YES",
+            "-a_srs",
+            "EPSG:32632",
+            "-a_ullr",
+            "0",
+            "9000000",
+            "9000000",
+            "0",
+            sparse.to_str().unwrap(),
+        ],
+    );
+    for args in [
+        vec!["prep", "--dem", "sparse.tif", "--out", "o.relevo"],
+        vec!["stitch", "sparse.tif", "--out", "s.tif"],
+        vec!["fill", "sparse.tif", "--out", "f.tif"],
+        vec!["pad", "sparse.tif", "--out", "p.tif"],
+        vec!["hierarchy", "sparse.tif", "--out", "h.f32"],
+    ] {
+        let mut args = args;
+        args.extend(["--max-memory", "2G"]);
+        fails(
+            d.path(),
+            &args,
+            &["needs about", "memory budget is 2.0 GiB", "--max-memory"],
+            &["sparse.tif"],
+        );
+    }
+    // The machine's own budget, under a 4 GB address-space limit.
+    let out = std::process::Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -v 4000000 && exec {} stitch sparse.tif --out s.tif",
+            env!("CARGO_BIN_EXE_relevo")
+        ))
+        .current_dir(d.path())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("needs about"), "{stderr}");
+
+    // A real 30 km DEM resampled to 1 m cells.
+    let dem = shared("dem/luxembourg_elev.tif");
+    fails(
+        d.path(),
+        &[
+            "prep",
+            "--dem",
+            dem.to_str().unwrap(),
+            "--cell-size",
+            "0.1",
+            "--out",
+            "o.relevo",
+            "--max-memory",
+            "2G",
+        ],
+        &["stitched grid", "needs about", "coarser resolution"],
+        &["sparse.tif"],
+    );
+}

@@ -33,6 +33,7 @@ pub mod geo;
 pub mod grid;
 pub mod horizon;
 pub mod lp;
+pub mod memory;
 pub mod objects;
 pub mod raster;
 pub mod scene;

@@ -35,6 +35,11 @@ pub struct Cli {
     /// Only errors.
     #[arg(short, long, global = true)]
     pub quiet: bool,
+    /// Most memory a command may plan to use, e.g. 512M or 8G (default:
+    /// the memory the machine has available). Work estimated larger is
+    /// refused before it starts.
+    #[arg(long, global = true, value_parser = relevo_core::memory::parse_size)]
+    pub max_memory: Option<u64>,
     #[command(subcommand)]
     pub command: Command,
 }
@@ -105,6 +110,9 @@ pub enum Command {
 
 /// Run the parsed command.
 pub fn run(cli: Cli) -> Result<()> {
+    if let Some(bytes) = cli.max_memory {
+        relevo_core::memory::set_budget(bytes);
+    }
     match cli.command {
         Command::Stitch(a) => stitch::run(a),
         Command::Fill(a) => fill::run(a),

@@ -88,6 +88,13 @@ pub fn run(a: RenderArgs) -> Result<()> {
     if a.hillshade.as_ref().is_some_and(|h| h.len() != 2) {
         bail!("--hillshade takes AZIMUTH,ELEVATION");
     }
+    // Colour and depth, by column and as the image, and the PNG.
+    relevo_core::memory::check(
+        &format!("a {}×{} frame", a.size[0], a.size[1]),
+        a.size[0] as u64 * a.size[1] as u64,
+        24,
+        "choose a smaller --size",
+    )?;
     let bundle = Bundle::open(&a.bundle)?;
     let view = View {
         eye: pose.eye,

@@ -124,6 +124,17 @@ impl Source {
     ) -> Result<Raster> {
         let all: Vec<usize> = (1..=self.bands).collect();
         let bands = bands.unwrap_or(&all);
+        // The f64 copy and GDAL's buffer of one band.
+        relevo_core::memory::check(
+            &format!(
+                "{}: reading {width}×{height} cells, {} band(s),",
+                self.path.display(),
+                bands.len()
+            ),
+            (width as u64).saturating_mul(height as u64),
+            8 * bands.len() as u64 + 8,
+            "crop the raster first (gdal_translate -srcwin)",
+        )?;
         let mut data = Vec::with_capacity(width * height * bands.len());
         for &b in bands {
             let band = self.dataset.rasterband(b)?;

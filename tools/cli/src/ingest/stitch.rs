@@ -330,6 +330,15 @@ fn warp_all(
         height,
     };
     tracing::info!(width, height, cell_x = rx, cell_y = ry, "target grid");
+    // The mosaic, its tiles and their warped copies: about three f64 grids
+    // per band.
+    let bands = opts.bands.as_ref().map_or(first.bands, Vec::len) as u64;
+    relevo_core::memory::check(
+        &format!("the stitched grid of {width}×{height} cells"),
+        (width as u64).saturating_mul(height as u64),
+        24 * bands,
+        "choose a coarser resolution or a smaller extent",
+    )?;
 
     let bar = progress::bar(sources.len() as u64, "warping tiles");
     let mut tiles = Vec::new();
