@@ -629,3 +629,38 @@ fn work_beyond_the_memory_budget_is_refused_before_it_starts() {
         &["sparse.tif"],
     );
 }
+
+/// A DEM without georeferencing does not say how large its cells are:
+/// `prep` refuses it unless told, and takes it when told.
+#[test]
+fn ungeoreferenced_dems_need_a_cell_size() {
+    let d = tempfile::tempdir().unwrap();
+    let png = shared("terrain_rgb_martini/fuji.png");
+    let tile = copy_in(d.path(), &png, "tile.png");
+    fails(
+        d.path(),
+        &[
+            "prep",
+            "--dem",
+            "tile.png",
+            "--encoding",
+            "terrain-rgb",
+            "--out",
+            "o.relevo",
+        ],
+        &["tile.png", "not georeferenced", "--cell-size"],
+        &["tile.png"],
+    );
+    let out = d.path().join("o.relevo");
+    relevo_ok([
+        "prep",
+        "--dem",
+        tile.to_str().unwrap(),
+        "--encoding",
+        "terrain-rgb",
+        "--cell-size",
+        "30",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+}

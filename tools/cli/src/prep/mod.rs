@@ -160,8 +160,23 @@ fn stage_dem(b: &mut Build) -> Result<()> {
             bail!("the bundle CRS must be projected (metric), not geographic");
         }
     }
-    // Without georeferencing, cells are pixels: `cell_size_m` only scales them.
+    // Without georeferencing, cells are pixels and `cell_size_m` says how
+    // large: a DEM that does not say where or how large it is is refused
+    // unless told.
     let georeferenced = first.geotransform.is_some();
+    if !georeferenced && r.cell_size_m.is_none() {
+        bail!(
+            "{}: not georeferenced (no geotransform), so its cell size is unknown; \
+             pass --cell-size METRES (cell_size_m in REGION.toml) to place it",
+            first.path.display()
+        );
+    }
+    if first.srs.is_none() && georeferenced {
+        tracing::warn!(
+            "{}: no CRS; its coordinates are taken as metres",
+            first.path.display()
+        );
+    }
     let mut opts = StitchOptions {
         target_crs: target.as_ref().map(crs::to_wkt).transpose()?,
         resolution: r.cell_size_m.filter(|_| georeferenced).map(|c| (c, c)),

@@ -157,6 +157,9 @@ pub fn prep_martini_tile(dir: &Path, file: &str, encoding: &str) -> PathBuf {
         png.as_os_str(),
         "--encoding".as_ref(),
         encoding.as_ref(),
+        // Tiles without georeferencing: one metre per pixel, as martini.
+        "--cell-size".as_ref(),
+        "1".as_ref(),
         "--out".as_ref(),
         out.as_os_str(),
     ]);
