@@ -145,14 +145,24 @@ pub fn write_gpkg(path: &Path, objects: &[VegObject], crs_wkt: &str) -> Result<(
 }
 
 /// Write the labels as a two-band UInt32 GeoTIFF: band 1 the region of each
-/// pixel (from 1), band 2 its class (1-based in the samples' order).
+/// pixel (from 1), band 2 its class (1-based in the samples' order); pixels
+/// without image data (a no-data collar) are no-data (0) in both bands,
+/// belonging to no region and no class.
 pub fn write_labels(path: &Path, image: &VegImage, extraction: &Extraction) -> Result<()> {
     let seg = &extraction.segmentation;
-    let regions = seg.labels.iter().map(|&r| r as f64 + 1.0);
-    let classes = seg
-        .labels
-        .iter()
-        .map(|&r| extraction.labels[r as usize].class as f64 + 1.0);
+    let valid = |i: usize| image.valid.as_ref().is_none_or(|v| v[i]);
+    let regions =
+        seg.labels
+            .iter()
+            .enumerate()
+            .map(|(i, &r)| if valid(i) { r as f64 + 1.0 } else { f64::NAN });
+    let classes = seg.labels.iter().enumerate().map(|(i, &r)| {
+        if valid(i) {
+            extraction.labels[r as usize].class as f64 + 1.0
+        } else {
+            f64::NAN
+        }
+    });
     let data: Vec<f64> = regions.chain(classes).collect();
     let raster = Raster::from_data(seg.width, seg.height, 2, data);
     let grid = GridSpec {
@@ -161,5 +171,5 @@ pub fn write_labels(path: &Path, image: &VegImage, extraction: &Extraction) -> R
         width: seg.width,
         height: seg.height,
     };
-    gdalio::write_geotiff(path, &raster, &grid, GdalDataType::UInt32, None)
+    gdalio::write_geotiff(path, &raster, &grid, GdalDataType::UInt32, Some(0.0))
 }

@@ -563,3 +563,90 @@ fn densities_finer_than_a_pixel_are_refused() {
         assert!(!out.exists());
     }
 }
+
+/// Pixels without image data — here a 20-pixel no-data collar warped
+/// around the Landsat scene — belong to no region and no class in the
+/// label GeoTIFF (no-data 0), while every pixel with data keeps both.
+#[test]
+fn the_labels_leave_a_no_data_collar_without_a_class() {
+    let dir = tempfile::tempdir().unwrap();
+    let source = repo("data/olinda/L7_ETMs.tif");
+    let l7 = read(&source);
+    let g = l7.geotransform;
+    let margin = 20.0;
+    let collar = dir.path().join("collar.tif");
+    let te = [
+        g[0] - margin * g[1],
+        g[3] + (l7.height as f64 + margin) * g[5],
+        g[0] + (l7.width as f64 + margin) * g[1],
+        g[3] - margin * g[5],
+    ]
+    .map(|v| v.to_string());
+    let mut args = vec!["-q", "-te"];
+    args.extend(te.iter().map(String::as_str));
+    args.extend(["-tr", "28.499999999274539", "28.499999999274539"]);
+    args.extend([
+        "-dstnodata",
+        "0",
+        source.to_str().unwrap(),
+        collar.to_str().unwrap(),
+    ]);
+    common::gdal_tool("gdalwarp", &args);
+    // The samples, moved by the collar.
+    let samples = dir.path().join("samples.csv");
+    let text = std::fs::read_to_string(repo("data/olinda/samples.csv")).unwrap();
+    let moved: Vec<String> = text
+        .lines()
+        .map(|line| {
+            let fields: Vec<&str> = line.split(';').collect();
+            match fields[1..]
+                .iter()
+                .map(|f| f.parse::<f64>())
+                .collect::<Result<Vec<_>, _>>()
+            {
+                Ok(v) if fields.len() == 5 => format!(
+                    "{};{};{};{};{}",
+                    fields[0],
+                    v[0] + margin,
+                    v[1] + margin,
+                    v[2] + margin,
+                    v[3] + margin
+                ),
+                _ => line.to_string(),
+            }
+        })
+        .collect();
+    std::fs::write(&samples, moved.join("\n")).unwrap();
+    let labels = dir.path().join("labels.tif");
+    veg_detect_ok(
+        &collar,
+        &samples,
+        &dir.path().join("forest.csv"),
+        &[
+            "--bands",
+            "3,2,1",
+            "--stretch",
+            "1,99",
+            "--labels",
+            labels.to_str().unwrap(),
+        ],
+    );
+    let l = read(&labels);
+    assert_eq!(l.nodata, Some(0.0));
+    let image = read(&collar);
+    let (mut collar_px, mut data_px) = (0, 0);
+    for i in 0..l.width * l.height {
+        let has_data = image.bands.iter().all(|b| b[i] != 0.0);
+        if has_data {
+            data_px += 1;
+            assert!(l.bands[0][i] >= 1.0 && l.bands[1][i] >= 1.0, "pixel {i}");
+        } else {
+            collar_px += 1;
+            assert_eq!((l.bands[0][i], l.bands[1][i]), (0.0, 0.0), "pixel {i}");
+        }
+    }
+    assert!(
+        collar_px > 20_000 && data_px > 100_000,
+        "{collar_px} {data_px}"
+    );
+}
