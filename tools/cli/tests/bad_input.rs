@@ -628,6 +628,27 @@ fn work_beyond_the_memory_budget_is_refused_before_it_starts() {
         &["stitched grid", "needs about", "coarser resolution"],
         &["sparse.tif"],
     );
+    // At 20 m the stitched grid fits in 1 GiB, its (2^n+1)² square does not.
+    fails(
+        d.path(),
+        &[
+            "prep",
+            "--dem",
+            dem.to_str().unwrap(),
+            "--cell-size",
+            "20",
+            "--out",
+            "o.relevo",
+            "--max-memory",
+            "1G",
+        ],
+        &[
+            "stage grid",
+            "8193×8193 grid needs about 1.6 GiB",
+            "coarser cell size",
+        ],
+        &["sparse.tif"],
+    );
 }
 
 /// A DEM without georeferencing does not say how large its cells are:

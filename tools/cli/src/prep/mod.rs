@@ -20,10 +20,11 @@ use relevo_core::bundle::{
     sha256_file, Artifact, BundleWriter, ColorInfo, Crs, Dtype, GridInfo, InputFile, Manifest,
     StageTiming, FORMAT, FORMAT_VERSION,
 };
+use relevo_core::bundle::{MAX_IMAGE_SIDE, MAX_SIDE};
 use relevo_core::cluster::bake::BakeOptions;
 use relevo_core::cluster::{store, Clusters};
 use relevo_core::geo::{GeoTransform, TerrainFrame};
-use relevo_core::grid::HeightGrid;
+use relevo_core::grid::{pow2_plus_1_at_least, pow2_plus_1_nearest, HeightGrid, Squaring};
 use relevo_core::lp::Hierarchy;
 use relevo_core::raster::fill::{fill_holes, FillReport};
 use relevo_core::raster::stretch::{stretch_or_default, to_rgba8};
@@ -233,6 +234,25 @@ fn stage_fill(b: &mut Build) -> Result<()> {
 /// Square the DEM to (2^n+1)² with its mask.
 fn stage_grid(b: &mut Build) -> Result<()> {
     let dem = b.dem.as_ref().context("dem stage did not run")?;
+    let longer = dem.raster.width.max(dem.raster.height);
+    let side = match b.region.grid.squaring {
+        Squaring::Pad => pow2_plus_1_at_least(longer),
+        Squaring::Resample => pow2_plus_1_nearest(longer),
+    };
+    if side > MAX_SIDE {
+        bail!(
+            "the {side}×{side} grid exceeds the largest a bundle holds ({MAX_SIDE}²): \
+             choose a coarser cell size or a smaller extent"
+        );
+    }
+    // Heights, mask, errors and radii, the shaded drape, the hierarchy's
+    // working copy: about 25 bytes per vertex.
+    relevo_core::memory::check(
+        &format!("the {side}×{side} grid"),
+        (side * side) as u64,
+        25,
+        "choose a coarser cell size or a smaller extent",
+    )?;
     let grid = HeightGrid::square(
         dem.raster.band(0),
         dem.raster.width,
@@ -281,6 +301,13 @@ fn stage_drape(b: &mut Build) -> Result<()> {
     };
     // With an extent but no resolution, stitch keeps the imagery's own cell size.
     let mosaic = stitch(&image.files, &opts)?;
+    let (w, h) = (mosaic.grid.width, mosaic.grid.height);
+    if w.max(h) > MAX_IMAGE_SIDE {
+        bail!(
+            "the {w}×{h} drape exceeds the largest a bundle holds ({MAX_IMAGE_SIDE} pixels a side): \
+             resample the imagery coarser first"
+        );
+    }
     b.rgba = to_rgba8(
         &mosaic.raster,
         stretch_or_default(image.stretch, mosaic.band_type == GdalDataType::UInt8),

@@ -18,7 +18,7 @@ pub use manifest::{
     Artifact, ColorInfo, Crs, Dtype, GridInfo, InputFile, Manifest, StageTiming, FORMAT,
     FORMAT_VERSION,
 };
-pub use reader::{Array, Bundle, Drape, LpArray};
+pub use reader::{Array, Bundle, Drape, LpArray, MAX_IMAGE_SIDE, MAX_SIDE};
 pub use validate::validate;
 pub use writer::{write_terrain_bundle, BundleWriter};
 
