@@ -29,6 +29,16 @@ fn fails(dir: &Path, args: &[&str], needles: &[&str], keep: &[&str]) {
     assert_eq!(listing(dir), expected, "{args:?} left files behind");
 }
 
+/// The sample region's bundle in a temporary folder, and an empty
+/// `work` folder beside it to run commands in.
+fn sample_bundle_and_workspace() -> (tempfile::TempDir, PathBuf, PathBuf) {
+    let d = tempfile::tempdir().unwrap();
+    let bundle = sample_bundle(d.path());
+    let work = d.path().join("work");
+    std::fs::create_dir(&work).unwrap();
+    (d, bundle, work)
+}
+
 fn copy_in(dir: &Path, src: &Path, name: &str) -> PathBuf {
     let to = dir.join(name);
     std::fs::copy(src, &to).unwrap();
@@ -352,11 +362,8 @@ type Edit = dyn Fn(&mut serde_json::Value);
 /// array is read.
 #[test]
 fn hostile_cameras_far_planes_and_manifests_are_refused() {
-    let d = tempfile::tempdir().unwrap();
-    let bundle = sample_bundle(d.path());
+    let (d, bundle, work) = sample_bundle_and_workspace();
     let b = bundle.to_str().unwrap();
-    let work = d.path().join("work");
-    std::fs::create_dir(&work).unwrap();
     for camera in [
         "NaN,9112000,400,45,300",
         "290000,9112000,inf,45,300",
@@ -450,11 +457,8 @@ fn hostile_cameras_far_planes_and_manifests_are_refused() {
 /// user's.
 #[test]
 fn user_files_are_never_clobbered() {
-    let d = tempfile::tempdir().unwrap();
-    let bundle = sample_bundle(d.path());
+    let (d, bundle, work) = sample_bundle_and_workspace();
     let b = bundle.to_str().unwrap();
-    let work = d.path().join("work");
-    std::fs::create_dir(&work).unwrap();
     // The mesh's material and texture belong to the user here.
     std::fs::write(work.join("m.mtl"), "mine").unwrap();
     std::fs::write(work.join("m.png"), "mine too").unwrap();

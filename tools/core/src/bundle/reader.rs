@@ -362,20 +362,15 @@ mod tests {
     use crate::grid::HeightGrid;
     use crate::testdata;
 
-    /// A bundle of the Fuji crop written by [`write_terrain_bundle`] and
-    /// read back through the typed accessors: same arrays, no copy of the
-    /// hierarchy, valid, and refused when an array's shape disagrees.
-    #[test]
-    fn bundles_round_trip_through_writer_and_reader() {
+    /// The Fuji crop (30 m cells) written by [`write_terrain_bundle`] into
+    /// a temporary folder: the folder, the bundle's path and the grid.
+    fn fuji_bundle() -> (tempfile::TempDir, PathBuf, HeightGrid) {
         let dem = testdata::dem("fuji_257.f32");
-        let side = dem.side;
-        let hierarchy = Hierarchy::compute(&dem.heights, side, dem.cell_size_m);
-        let mask = vec![1u8; side * side];
         let grid = HeightGrid {
-            side,
-            heights: dem.heights.clone(),
-            mask: mask.clone(),
-            geotransform: GeoTransform::north_up(0.0, side as f64 * 30.0, 30.0, 30.0),
+            side: dem.side,
+            heights: dem.heights,
+            mask: vec![1u8; dem.side * dem.side],
+            geotransform: GeoTransform::north_up(0.0, dem.side as f64 * 30.0, 30.0, 30.0),
         };
         let dir = tempfile::tempdir().unwrap();
         let target = dir.path().join("fuji.relevo");
@@ -384,6 +379,19 @@ mod tests {
             epsg: None,
         };
         write_terrain_bundle(&target, "fuji", &grid, 30.0, crs, false).unwrap();
+        (dir, target, grid)
+    }
+
+    /// A bundle of the Fuji crop written by [`write_terrain_bundle`] and
+    /// read back through the typed accessors: same arrays, no copy of the
+    /// hierarchy, valid, and refused when an array's shape disagrees.
+    #[test]
+    fn bundles_round_trip_through_writer_and_reader() {
+        let (dir, target, grid) = fuji_bundle();
+        let dem = testdata::dem("fuji_257.f32");
+        let side = dem.side;
+        let hierarchy = Hierarchy::compute(&dem.heights, side, dem.cell_size_m);
+        let mask = grid.mask.clone();
         assert!(!dir.path().join("fuji.relevo.tmp").exists());
 
         let bundle = Bundle::open(&target).unwrap();
@@ -420,20 +428,7 @@ mod tests {
     /// any array is mapped, with the manifest named and the problem stated.
     #[test]
     fn inconsistent_or_escaping_manifests_are_refused_on_opening() {
-        let dem = testdata::dem("fuji_257.f32");
-        let grid = HeightGrid {
-            side: dem.side,
-            heights: dem.heights,
-            mask: vec![1u8; dem.side * dem.side],
-            geotransform: GeoTransform::north_up(0.0, dem.side as f64 * 30.0, 30.0, 30.0),
-        };
-        let dir = tempfile::tempdir().unwrap();
-        let target = dir.path().join("fuji.relevo");
-        let crs = Crs {
-            wkt: String::new(),
-            epsg: None,
-        };
-        write_terrain_bundle(&target, "fuji", &grid, 30.0, crs, false).unwrap();
+        let (dir, target, _) = fuji_bundle();
         let manifest_path = target.join(MANIFEST_FILE);
         let good = std::fs::read_to_string(&manifest_path).unwrap();
         let refused = |edit: &dyn Fn(&mut serde_json::Value), needle: &str| {
