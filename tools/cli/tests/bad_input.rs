@@ -362,7 +362,7 @@ type Edit = dyn Fn(&mut serde_json::Value);
 /// array is read.
 #[test]
 fn hostile_cameras_far_planes_and_manifests_are_refused() {
-    let (d, bundle, work) = sample_bundle_and_workspace();
+    let (_d, bundle, work) = sample_bundle_and_workspace();
     let b = bundle.to_str().unwrap();
     for camera in [
         "NaN,9112000,400,45,300",
