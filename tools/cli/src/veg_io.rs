@@ -48,6 +48,20 @@ pub fn read_image(
             source.bands
         );
     }
+    // The bands as f64 and 8-bit, the opponent colours, the segmentation's
+    // labels and quadtree, the Haar signatures' working rows: about 64
+    // bytes per pixel.
+    relevo_core::memory::check(
+        &format!(
+            "{}: vegetation extraction on {}×{} pixels",
+            path.display(),
+            source.width,
+            source.height
+        ),
+        (source.width as u64).saturating_mul(source.height as u64),
+        64,
+        "crop the image first (gdal_translate -srcwin)",
+    )?;
     let selected = source.read_window(
         0,
         0,

@@ -590,6 +590,15 @@ fn work_beyond_the_memory_budget_is_refused_before_it_starts() {
         vec!["fill", "sparse.tif", "--out", "f.tif"],
         vec!["pad", "sparse.tif", "--out", "p.tif"],
         vec!["hierarchy", "sparse.tif", "--out", "h.f32"],
+        vec![
+            "veg",
+            "detect",
+            "sparse.tif",
+            "--samples",
+            "s.csv",
+            "--out",
+            "v.csv",
+        ],
     ] {
         let mut args = args;
         args.extend(["--max-memory", "2G"]);
