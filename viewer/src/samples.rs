@@ -422,11 +422,18 @@ fn drape_image(bundle: &Path) -> anyhow::Result<Option<DrapeImage>> {
 /// the drape's CRS taken as their bounding boxes). Errors name the file.
 fn read_samples(bundle: &Path, path: &Path) -> anyhow::Result<Vec<(String, [f32; 4])>> {
     let bundle = Bundle::open(bundle)?;
-    let drape = bundle
-        .drape()?
+    // The drape's size and georeferencing, from the manifest.
+    let info = bundle
+        .manifest
+        .color
+        .as_ref()
         .ok_or_else(|| anyhow::anyhow!("the bundle has no drape image to mark samples on"))?;
-    let (w, h) = (drape.info.width, drape.info.height);
-    let samples = relevo_core::veg::samples::read_file(path, Some(drape.info.geotransform), w, h)?;
+    let samples = relevo_core::veg::samples::read_file(
+        path,
+        Some(info.geotransform),
+        info.width,
+        info.height,
+    )?;
     Ok(samples
         .into_iter()
         .map(|s| {

@@ -1161,11 +1161,10 @@ mod selection_tests {
         checks::random_cameras(count, 7, [-500.0, -500.0, 120.0], [2500.0, 2500.0, 720.0])
     }
 
-    #[test]
-    fn the_cut_represents_every_visible_object_exactly_once() {
-        let clusters = baked_clusters(600);
+    /// The default cut with its bands scaled to the 2 km test square, so
+    /// that every band is used.
+    fn square_options() -> CutOptions {
         let mut options = CutOptions::default();
-        // Bands scaled to the 2 km square so that every band is used.
         for (b, until) in options
             .bands
             .iter_mut()
@@ -1173,6 +1172,13 @@ mod selection_tests {
         {
             b.until_m = until;
         }
+        options
+    }
+
+    #[test]
+    fn the_cut_represents_every_visible_object_exactly_once() {
+        let clusters = baked_clusters(600);
+        let options = square_options();
         let mut list = DrawList::default();
         let (mut clusters_drawn, mut objects_drawn, mut fading) = (0, 0, 0);
         for camera in cameras(300) {
@@ -1230,14 +1236,7 @@ mod selection_tests {
     #[test]
     fn the_level_fade_changes_the_cut_without_popping() {
         let clusters = baked_clusters(600);
-        let mut options = CutOptions::default();
-        for (b, until) in options
-            .bands
-            .iter_mut()
-            .zip([100.0, 300.0, 700.0, 1500.0, 2500.0])
-        {
-            b.until_m = until;
-        }
+        let options = square_options();
         // Fly from 2.4 km south-west of the square's centre towards it, in
         // steps of 0.4 % of the distance left.
         let largest_jump = |options: &CutOptions| {
