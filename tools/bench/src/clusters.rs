@@ -226,18 +226,42 @@ fn select_all(
     let selections: [&dyn Selection; 3] = [&list, &blobs, &quadtree];
     let mut out = DrawList::default();
     let one_thread = rayon::ThreadPoolBuilder::new().num_threads(1).build().ok();
-    // The quadtree walk is parallel; measure it on one thread too.
-    let runs_of = selections
+    // The quadtree walk is parallel; measure it on one thread too, and with
+    // narrower level fades (a fading cluster is drawn with its children).
+    let faded = |level_fade: f64| CutOptions {
+        level_fade,
+        ..cut.clone()
+    };
+    let mut runs_of: Vec<(
+        &dyn Selection,
+        String,
+        Option<&rayon::ThreadPool>,
+        CutOptions,
+    )> = selections
         .into_iter()
-        .map(|s| (s, s.name().to_string(), None))
-        .chain(one_thread.as_ref().map(|pool| {
-            (
-                &quadtree as &dyn Selection,
-                "quadtree, 1 thread".to_string(),
-                Some(pool),
-            )
-        }));
-    for (selection, name, pool) in runs_of {
+        .map(|s| (s, s.name().to_string(), None, cut.clone()))
+        .collect();
+    runs_of.extend(one_thread.as_ref().map(|pool| {
+        (
+            &quadtree as &dyn Selection,
+            "quadtree, 1 thread".to_string(),
+            Some(pool),
+            cut.clone(),
+        )
+    }));
+    for level_fade in [0.0, 0.1, 0.25]
+        .into_iter()
+        .filter(|&f| f != cut.level_fade)
+    {
+        runs_of.push((
+            &quadtree,
+            format!("quadtree, fade {level_fade}"),
+            None,
+            faded(level_fade),
+        ));
+    }
+    for (selection, name, pool, cut) in runs_of {
+        let cut = &cut;
         let (mut times, mut draws, mut represented) = (Vec::new(), Vec::new(), Vec::new());
         for heading in (0..8).map(|h| h as f64 * 45.0) {
             let camera = Camera {
@@ -265,7 +289,7 @@ fn select_all(
         let (ms, draws, represented) = (median(&times), median(&draws), median(&represented));
         emit(
             json_lines,
-            json!({"bench": "clusters-select", "objects": count, "selection": name, "budget_mib": budget_mib,
+            json!({"bench": "clusters-select", "objects": count, "selection": name, "budget_mib": budget_mib, "level_fade": cut.level_fade,
                    "ms": ms, "draws": draws, "represented": represented}),
             format!(
                 "select {count} objects, {name:<18}: {ms:.3} ms, {draws:.0} draws for {represented:.0} objects (medians over 8 headings)"
