@@ -177,7 +177,7 @@ pub fn hierarchy(
 ) -> Result<()> {
     use relevo_core::camera::Camera;
     use relevo_core::lp::refine::{RefineParams, Refiner};
-    use relevo_core::lp::{Hierarchy, Layout};
+    use relevo_core::lp::{ErrorMetric, Hierarchy, Layout};
 
     let scratch = tempfile_dir()?;
     let mut grids: Vec<(String, usize, Vec<f32>)> = [257usize, 1025, 4097, 8193]
@@ -191,11 +191,23 @@ pub fn hierarchy(
     let script = repo.join("tools/js/martini-bench.mjs");
     for (name, side, heights) in &grids {
         let cell = 30.0;
+        // martini's metric against martini; then the bound (the default).
         let ours = median_ms(runs, || {
-            std::hint::black_box(Hierarchy::compute(heights, *side, cell));
+            std::hint::black_box(Hierarchy::compute(
+                heights,
+                *side,
+                cell,
+                ErrorMetric::Midpoint,
+            ));
             Ok(())
         })?;
-        let h = Hierarchy::compute(heights, *side, cell);
+        let bound_ms = median_ms(runs, || {
+            std::hint::black_box(Hierarchy::compute(heights, *side, cell, ErrorMetric::Bound));
+            Ok(())
+        })?;
+        let h = Hierarchy::compute(heights, *side, cell, ErrorMetric::Bound);
+        let midpoint = Hierarchy::compute(heights, *side, cell, ErrorMetric::Midpoint);
+        mesh_bound(name, heights, *side, [&midpoint, &h], json_lines);
 
         // martini needs the terrain as raw float32; 8193² exceeds its u16 coordinates.
         let martini = if *side <= 4097 {
@@ -314,19 +326,54 @@ pub fn hierarchy(
         emit(
             json_lines,
             json!({
-                "grid": side, "input": name, "ours_ms": ours, "martini_ms": martini,
+                "grid": side, "input": name, "ours_ms": ours, "bound_ms": bound_ms, "martini_ms": martini,
                 "speedup": martini.map(|m| m / ours), "msamples_per_s": msamples,
                 "refine_ms": refine_ms, "refine_tiled_ms": refine_tiled_ms,
                 "triangles": median_triangles, "mtriangles_per_s": mtris, "prep_ms": prep_ms,
             }),
             format!(
-                "{name:>16}: errors+radii {ours:8.1} ms ({msamples:6.1} Msamples/s), martini createTile {}, refine τ=1px {refine_ms:6.2} ms (tiled {refine_tiled_ms:6.2}) for {median_triangles} triangles ({mtris:.1} M/s), prep {prep_ms:.0} ms",
+                "{name:>16}: errors+radii {ours:8.1} ms ({msamples:6.1} Msamples/s; bound metric {bound_ms:.1} ms), martini createTile {}, refine τ=1px {refine_ms:6.2} ms (tiled {refine_tiled_ms:6.2}) for {median_triangles} triangles ({mtris:.1} M/s), prep {prep_ms:.0} ms",
                 martini.map_or("n/a".to_string(), |m| format!("{m:8.1} ms ({:.0}×)", m / ours))
             ),
         );
     }
     let _ = std::fs::remove_dir_all(&scratch);
     Ok(())
+}
+
+/// Meshes extracted at 1, 5 and 20 m from the midpoint (martini's) and the
+/// bound errors: triangles, extraction time and the largest vertical
+/// distance from a grid point to the mesh.
+fn mesh_bound(
+    name: &str,
+    heights: &[f32],
+    side: usize,
+    [midpoint, bound]: [&relevo_core::lp::Hierarchy; 2],
+    json_lines: bool,
+) {
+    use relevo_core::lp::extract::extract;
+    for max_error in [1.0f32, 5.0, 20.0] {
+        let figures = [midpoint, bound].map(|h| {
+            let start = Instant::now();
+            let mesh = extract(h, max_error, None);
+            let ms = start.elapsed().as_secs_f64() * 1e3;
+            (
+                mesh.triangles.len(),
+                ms,
+                mesh.largest_deviation(heights, side),
+            )
+        });
+        let [(mid_tris, mid_ms, mid_dev), (tris, ms, dev)] = figures;
+        emit(
+            json_lines,
+            json!({"bench": "mesh-bound", "input": name, "max_error_m": max_error,
+                   "midpoint": {"triangles": mid_tris, "extract_ms": mid_ms, "largest_deviation_m": mid_dev},
+                   "bound": {"triangles": tris, "extract_ms": ms, "largest_deviation_m": dev}}),
+            format!(
+                "{name:>16}: mesh at {max_error} m — midpoint {mid_tris} triangles ({mid_ms:.1} ms), {mid_dev:.2} m off; bound {tris} triangles ({ms:.1} ms), {dev:.2} m off"
+            ),
+        );
+    }
 }
 
 /// Raycast figures: ms per frame for each configuration, the step

@@ -7,7 +7,7 @@ mod common;
 use common::*;
 use relevo_core::bundle::{sha256_bytes, Bundle};
 use relevo_core::lp::extract::extract;
-use relevo_core::lp::Hierarchy;
+use relevo_core::lp::{ErrorMetric, Hierarchy};
 
 #[test]
 fn errors_and_meshes_match_martini() {
@@ -18,7 +18,7 @@ fn errors_and_meshes_match_martini() {
         let r = &reference[name];
         let heights = bundle.heights().unwrap();
         let side = bundle.manifest.grid.side;
-        let h = Hierarchy::compute(&heights, side, 1.0);
+        let h = Hierarchy::compute(&heights, side, 1.0, ErrorMetric::Midpoint);
         let errors: Vec<f32> = h.error_radius.iter().map(|e| e[0]).collect();
         assert_eq!(
             sha256_bytes(bytemuck::cast_slice(&errors)),
@@ -121,7 +121,7 @@ fn hierarchy_command_matches_the_bundle_and_refuses_non_square_input() {
     let r = read(&lp);
     assert_eq!((r.width, r.height, r.bands.len()), (129, 129, 2));
     let heights: Vec<f32> = read(&padded).bands[0].iter().map(|&v| v as f32).collect();
-    let h = Hierarchy::compute(&heights, 129, 30.0);
+    let h = Hierarchy::compute(&heights, 129, 30.0, ErrorMetric::default());
     for (i, e) in h.error_radius.iter().enumerate() {
         assert_eq!((r.bands[0][i] as f32, r.bands[1][i] as f32), (e[0], e[1]));
     }

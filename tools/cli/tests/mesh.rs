@@ -177,3 +177,58 @@ fn bad_mesh_requests_fail_cleanly() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("nope.relevo"));
     assert!(!d.path().join("x.glb").exists());
 }
+
+/// `--max-error` is a bound: on srtm_ref (a real DEM, not used to tune
+/// anything) every grid point under the mesh is within the tolerance, as
+/// `mesh` reports it; with martini's midpoint metric the same tolerance
+/// leaves points farther away, and `mesh` says it is no bound.
+#[test]
+fn max_error_bounds_the_distance_of_every_grid_point() {
+    let d = tempfile::tempdir().unwrap();
+    let dem = shared("dem/srtm_ref.tif");
+    let farthest = |metric: &str, max_error: f64| {
+        let bundle = d.path().join(format!("srtm_{metric}.relevo"));
+        if !bundle.exists() {
+            relevo_ok([
+                "prep".as_ref(),
+                "--dem".as_ref(),
+                dem.as_os_str(),
+                "--error-metric".as_ref(),
+                metric.as_ref(),
+                "--out".as_ref(),
+                bundle.as_os_str(),
+            ]);
+        }
+        let glb = d.path().join(format!("srtm_{metric}_{max_error}.glb"));
+        let out = relevo([
+            "mesh".as_ref(),
+            bundle.as_os_str(),
+            "--max-error".as_ref(),
+            max_error.to_string().as_ref(),
+            "--out".as_ref(),
+            glb.as_os_str(),
+        ]);
+        assert!(out.status.success());
+        let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+        let reported = stderr
+            .split("no grid point is more than ")
+            .nth(1)
+            .and_then(|rest| rest.split(' ').next())
+            .and_then(|v| v.parse::<f64>().ok())
+            .unwrap_or_else(|| panic!("no distance reported: {stderr}"));
+        (reported, stderr)
+    };
+    let mut midpoint_worst = 0.0f64;
+    for max_error in [2.0, 5.0, 20.0] {
+        let (bound, stderr) = farthest("bound", max_error);
+        assert!(bound <= max_error, "{bound} m at --max-error {max_error}");
+        assert!(!stderr.contains("not a bound"), "{stderr}");
+        let (midpoint, stderr) = farthest("midpoint", max_error);
+        assert!(stderr.contains("not a bound"), "{stderr}");
+        midpoint_worst = midpoint_worst.max(midpoint / max_error);
+    }
+    assert!(
+        midpoint_worst > 1.2,
+        "midpoint meshes stay within {midpoint_worst}×"
+    );
+}

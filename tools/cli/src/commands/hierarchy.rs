@@ -1,5 +1,6 @@
 //! `relevo hierarchy`: LP errors and radii of a (2^n+1)² heightfield as a GeoTIFF.
 
+use crate::commands::ErrorMetricArg;
 use crate::ingest::gdalio;
 use crate::output;
 use anyhow::{bail, Result};
@@ -18,6 +19,9 @@ pub struct HierarchyArgs {
     /// Vertex spacing in metres; default: the input's cell size.
     #[arg(long)]
     pub cell_size: Option<f64>,
+    /// How vertex errors are measured.
+    #[arg(long, value_enum, default_value_t = ErrorMetricArg::Bound)]
+    pub error_metric: ErrorMetricArg,
     /// Replace existing outputs.
     #[arg(long)]
     pub force: bool,
@@ -52,7 +56,7 @@ pub fn run(a: HierarchyArgs) -> Result<()> {
         ),
     };
     let heights: Vec<f32> = raster.band(0).iter().map(|&v| v as f32).collect();
-    let h = relevo_core::lp::Hierarchy::compute(&heights, side, cell);
+    let h = relevo_core::lp::Hierarchy::compute(&heights, side, cell, a.error_metric.into());
     let data = h
         .error_radius
         .iter()

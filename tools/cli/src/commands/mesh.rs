@@ -4,14 +4,15 @@ use crate::output;
 use anyhow::{bail, Result};
 use clap::Args;
 use relevo_core::bundle::Bundle;
-use relevo_core::lp::export;
+use relevo_core::lp::{export, ErrorMetric};
 use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
 pub struct MeshArgs {
     /// The bundle to mesh.
     pub bundle: PathBuf,
-    /// Largest vertical error left, metres.
+    /// Largest vertical distance left between the mesh and any grid point
+    /// under it, metres (a bound for bundles with the default error metric).
     #[arg(long)]
     pub max_error: f32,
     /// Output format; default: from the output's extension.
@@ -92,11 +93,19 @@ pub fn run(a: MeshArgs) -> Result<()> {
         }
     }
     eprintln!(
-        "{}: {} vertices, {} triangles at {} m",
+        "{}: {} vertices, {} triangles at {} m; no grid point is more than {:.3} m from the mesh",
         a.out.display(),
         m.positions.len(),
         m.triangles.len(),
-        a.max_error
+        a.max_error,
+        m.largest_deviation_m
     );
+    if bundle.manifest.lp_error_metric == ErrorMetric::Midpoint {
+        tracing::warn!(
+            "{}: errors measured at hypotenuse midpoints (martini's metric), so --max-error is not a bound; \
+             prep the bundle again with the default --error-metric bound to make it one",
+            a.bundle.display()
+        );
+    }
     Ok(())
 }

@@ -15,6 +15,7 @@ mod veg;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
+use relevo_core::lp::ErrorMetric;
 use relevo_core::raster::encoding::Encoding;
 
 #[derive(Parser, Debug)]
@@ -142,6 +143,27 @@ impl From<EncodingArg> for Encoding {
             EncodingArg::Plain => Encoding::Plain,
             EncodingArg::TerrainRgb => Encoding::TerrainRgb,
             EncodingArg::Terrarium => Encoding::Terrarium,
+        }
+    }
+}
+
+/// How the hierarchy measures a vertex's own error (relevo-core's
+/// `ErrorMetric`).
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum ErrorMetricArg {
+    /// The largest vertical distance from the grid points a vertex's
+    /// triangles cover: `mesh --max-error` is then a true bound.
+    Bound,
+    /// The vertex's height against its hypotenuse's midpoint, as
+    /// @mapbox/martini (its meshes, vertex for vertex).
+    Midpoint,
+}
+
+impl From<ErrorMetricArg> for ErrorMetric {
+    fn from(m: ErrorMetricArg) -> ErrorMetric {
+        match m {
+            ErrorMetricArg::Bound => ErrorMetric::Bound,
+            ErrorMetricArg::Midpoint => ErrorMetric::Midpoint,
         }
     }
 }

@@ -1,6 +1,6 @@
 //! `relevo prep`: build a bundle from a REGION.toml or straight from rasters.
 
-use super::{parse_percentiles, EncodingArg};
+use super::{parse_percentiles, EncodingArg, ErrorMetricArg};
 use crate::ingest::gdalio::Resampling;
 use crate::output;
 use crate::prep::prep;
@@ -55,6 +55,10 @@ pub struct PrepArgs {
     /// DEM no-data value, a number or nan (quick form).
     #[arg(long, value_parser = parse_nodata, allow_negative_numbers = true)]
     pub src_nodata: Option<f64>,
+    /// How vertex errors are measured (quick form): `bound` makes
+    /// `mesh --max-error` a true bound; `midpoint` gives martini's meshes.
+    #[arg(long, value_enum, default_value_t = ErrorMetricArg::Bound)]
+    pub error_metric: ErrorMetricArg,
     /// Replace an existing bundle.
     #[arg(long)]
     pub force: bool,
@@ -83,7 +87,10 @@ pub fn run(a: PrepArgs) -> Result<()> {
                     resampling: Resampling::Bilinear,
                 },
                 fill: FillSection::default(),
-                grid: GridSection::default(),
+                grid: GridSection {
+                    error_metric: a.error_metric.into(),
+                    ..GridSection::default()
+                },
                 image: (!a.image.is_empty()).then(|| ImageSection {
                     files: a.image,
                     bands: a.bands.map(|b| [b[0], b[1], b[2]]),

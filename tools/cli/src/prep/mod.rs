@@ -267,7 +267,12 @@ fn stage_grid(b: &mut Build) -> Result<()> {
 /// Lindstrom–Pascucci errors and radii of every vertex.
 fn stage_hierarchy(b: &mut Build) -> Result<()> {
     let grid = b.grid.as_ref().context("grid stage did not run")?;
-    b.hierarchy = Some(Hierarchy::compute(&grid.heights, grid.side, b.cell_size_m));
+    b.hierarchy = Some(Hierarchy::compute(
+        &grid.heights,
+        grid.side,
+        b.cell_size_m,
+        b.region.grid.error_metric,
+    ));
     Ok(())
 }
 
@@ -558,6 +563,7 @@ fn finish(b: Build, timings: Vec<StageTiming>) -> Result<Summary> {
         tool_version: env!("CARGO_PKG_VERSION").into(),
         crs,
         grid: grid_info,
+        lp_error_metric: b.region.grid.error_metric,
         color: color.clone(),
         inputs,
         parameters,

@@ -97,6 +97,9 @@ impl Default for FillSection {
 pub struct GridSection {
     #[serde(default)]
     pub squaring: Squaring,
+    /// How the hierarchy measures vertex errors (`bound` or `midpoint`).
+    #[serde(default)]
+    pub error_metric: relevo_core::lp::ErrorMetric,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]

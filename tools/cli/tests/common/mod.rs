@@ -160,6 +160,9 @@ pub fn prep_martini_tile(dir: &Path, file: &str, encoding: &str) -> PathBuf {
         // Tiles without georeferencing: one metre per pixel, as martini.
         "--cell-size".as_ref(),
         "1".as_ref(),
+        // martini's errors, so its meshes can be compared vertex for vertex.
+        "--error-metric".as_ref(),
+        "midpoint".as_ref(),
         "--out".as_ref(),
         out.as_os_str(),
     ]);

@@ -1,4 +1,5 @@
 use crate::geo::GeoTransform;
+use crate::lp::ErrorMetric;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -19,6 +20,10 @@ pub struct Manifest {
     pub tool_version: String,
     pub crs: Crs,
     pub grid: GridInfo,
+    /// How the `lp` array's object-space errors were measured (bundles
+    /// written before this was recorded: `midpoint`).
+    #[serde(default = "ErrorMetric::unrecorded")]
+    pub lp_error_metric: ErrorMetric,
     /// The drape image, when the region has one.
     pub color: Option<ColorInfo>,
     pub inputs: Vec<InputFile>,

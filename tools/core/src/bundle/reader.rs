@@ -360,6 +360,7 @@ mod tests {
     use crate::bundle::{validate, write_terrain_bundle, Crs, GridInfo};
     use crate::geo::GeoTransform;
     use crate::grid::HeightGrid;
+    use crate::lp::ErrorMetric;
     use crate::testdata;
 
     /// The Fuji crop (30 m cells) written by [`write_terrain_bundle`] into
@@ -390,7 +391,8 @@ mod tests {
         let (dir, target, grid) = fuji_bundle();
         let dem = testdata::dem("fuji_257.f32");
         let side = dem.side;
-        let hierarchy = Hierarchy::compute(&dem.heights, side, dem.cell_size_m);
+        let hierarchy =
+            Hierarchy::compute(&dem.heights, side, dem.cell_size_m, ErrorMetric::default());
         let mask = grid.mask.clone();
         assert!(!dir.path().join("fuji.relevo.tmp").exists());
 

@@ -4,7 +4,7 @@ use super::{
     FORMAT_VERSION, MANIFEST_FILE,
 };
 use crate::grid::HeightGrid;
-use crate::lp::Hierarchy;
+use crate::lp::{ErrorMetric, Hierarchy};
 use crate::{Error, Result};
 use std::collections::BTreeMap;
 use std::fs;
@@ -177,7 +177,7 @@ pub fn write_terrain_bundle(
     let info = GridInfo::of(grid, cell_size_m, 1.0)
         .ok_or_else(|| Error::invalid(target, "the grid holds no data"))?;
     let writer = BundleWriter::create(target, force)?;
-    let hierarchy = Hierarchy::compute(&grid.heights, side, cell_size_m);
+    let hierarchy = Hierarchy::compute(&grid.heights, side, cell_size_m, ErrorMetric::default());
     let square = [side, side];
     let mut artifacts = BTreeMap::new();
     artifacts.insert(
@@ -200,6 +200,7 @@ pub fn write_terrain_bundle(
         tool_version: env!("CARGO_PKG_VERSION").into(),
         crs,
         grid: info,
+        lp_error_metric: ErrorMetric::default(),
         color: None,
         inputs: Vec::new(),
         parameters: BTreeMap::new(),

@@ -29,6 +29,9 @@ pub struct ExportMesh {
     pub origin: [f64; 2],
     /// The drape image as PNG bytes.
     pub texture_png: Option<Vec<u8>>,
+    /// The largest vertical distance between a grid point under the mesh
+    /// and the mesh, metres (measured, whatever the bundle's error metric).
+    pub largest_deviation_m: f64,
 }
 
 /// Build the mesh of `bundle` at `max_error` metres.
@@ -116,6 +119,7 @@ pub fn build(bundle: &Bundle, max_error: f32, keep_padding: bool) -> Result<Expo
         triangles,
         origin: [origin_x, origin_y],
         texture_png,
+        largest_deviation_m: grid.largest_deviation(&heights, side),
     })
 }
 

@@ -13,15 +13,57 @@
 //!   even and top-right to bottom-left when odd; its children are the four
 //!   edge midpoints at distance h.
 //!
-//! The object-space error of a vertex is how far its height is from the
-//! average of its hypotenuse's end points (seed's `CalculaErroObj`), maxed
-//! with its children's errors; the radius is the smallest sphere about the
+//! The object-space error of a vertex is its own error maxed with its
+//! children's errors. Its own error is measured by one of two
+//! [`ErrorMetric`]s: by default the largest vertical distance between the
+//! grid points its diamond covers and the two triangles drawn while it is
+//! left out, so that a mesh cut at a tolerance is within that tolerance of
+//! every grid point; or, as martini and the seed (`CalculaErroObj`), how
+//! far its height is from the average of its hypotenuse's end points, which
+//! looks at the vertex alone. Either way the radius is the smallest sphere about the
 //! vertex containing every child's sphere (seed's `PropagaRaiosBloco`). So
 //! δ(parent) ≥ δ(child) and r(parent) ≥ |p(parent) − p(child)| + r(child).
+//!
+//! Why the bound holds: a mesh extracted at tolerance τ is made of leaf
+//! triangles whose hypotenuse midpoint m is left out (δ(m) ≤ τ); each leaf
+//! is one half of m's diamond, so every grid point inside it is within
+//! own(m) ≤ δ(m) ≤ τ of it. Lindstrom and Pascucci (2002, §4) define the
+//! error the same way, over the points a vertex's removal affects.
 
 use super::terrain_position;
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 use std::borrow::Cow;
+
+/// How a vertex's own object-space error is measured.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ErrorMetric {
+    /// The largest vertical distance between the grid points of the
+    /// vertex's diamond and the two triangles drawn without the vertex: a
+    /// true bound on the distance from a mesh extracted at a tolerance to
+    /// every grid point it covers.
+    #[default]
+    Bound,
+    /// The vertex's height against the midpoint of its hypotenuse, as
+    /// @mapbox/martini and the LP seed (`CalculaErroObj`) measure it; kept
+    /// for conformance with martini's meshes.
+    Midpoint,
+}
+
+impl ErrorMetric {
+    /// The metric of bundles written before the manifest recorded one.
+    pub fn unrecorded() -> ErrorMetric {
+        ErrorMetric::Midpoint
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            ErrorMetric::Bound => "bound",
+            ErrorMetric::Midpoint => "midpoint",
+        }
+    }
+}
 
 /// Per-vertex error and radius, row-major, interleaved as `[δ, r]`: owned
 /// when computed, borrowed when read from a bundle's mapped `lp` array (no
@@ -61,22 +103,34 @@ impl<'a> Hierarchy<'a> {
         self.error_radius[i][1]
     }
 
-    /// Compute errors and radii of a `side`×`side` grid of heights (metres).
-    /// Arithmetic is f64; results are stored as f32, radii rounded up so
-    /// that nesting survives the rounding.
-    pub fn compute(heights: &[f32], side: usize, cell_size_m: f64) -> Hierarchy<'static> {
+    /// Compute errors (by `metric`) and radii of a `side`×`side` grid of
+    /// heights (metres). Arithmetic is f64; results are stored as f32, radii
+    /// and bounds rounded up so that nesting and the bound survive the
+    /// rounding (midpoint errors are rounded to nearest, as martini does).
+    pub fn compute(
+        heights: &[f32],
+        side: usize,
+        cell_size_m: f64,
+        metric: ErrorMetric,
+    ) -> Hierarchy<'static> {
         assert!(
             side >= 3 && (side - 1).is_power_of_two(),
             "side must be 2^k+1"
         );
         assert_eq!(heights.len(), side * side);
         let mut out = vec![[0.0f32; 2]; side * side];
-        finest_levels(heights, side, cell_size_m, &mut out);
+        let grid = Grid {
+            heights,
+            side,
+            cell: cell_size_m,
+            metric,
+        };
+        finest_levels(&grid, &mut out);
         let shared = SharedOut::new(&mut out);
         let mut h = 2;
         while h < side - 1 {
-            coarse_level(heights, side, cell_size_m, h, true, shared);
-            coarse_level(heights, side, cell_size_m, h, false, shared);
+            coarse_level(&grid, h, true, shared);
+            coarse_level(&grid, h, false, shared);
             h *= 2;
         }
         Hierarchy {
@@ -167,12 +221,118 @@ pub fn children(side: usize, c: usize, r: usize) -> impl Iterator<Item = (usize,
     })
 }
 
+/// The heights and how errors are measured on them.
+struct Grid<'h> {
+    heights: &'h [f32],
+    side: usize,
+    /// Vertex spacing, metres.
+    cell: f64,
+    metric: ErrorMetric,
+}
+
+impl Grid<'_> {
+    /// Own error of vertex (c, r) of scale `h` by the grid's metric, f32
+    /// as stored.
+    fn own_error(&self, (c, r): (usize, usize), h: usize, edge: bool) -> f32 {
+        let side = self.side;
+        let (a, b) = hypotenuse(side, c, r, h, edge);
+        let m = r * side + c;
+        match self.metric {
+            ErrorMetric::Midpoint => midpoint_error(self.heights, a, b, m) as f32,
+            // At scale 1 a triangle's grid points are its corners, the vertex
+            // and its legs' midpoints (the children), each off the plane by
+            // its midpoint error: nesting adds the children's, so the vertex's
+            // own is its midpoint error.
+            ErrorMetric::Bound if h == 1 => round_up(midpoint_error(self.heights, a, b, m)),
+            ErrorMetric::Bound => {
+                let at = |i: usize| ((i % side) as i64, (i / side) as i64);
+                let deviation = parents(side, (c, r), a)
+                    .into_iter()
+                    .flatten()
+                    .map(|p| triangle_deviation(self.heights, side, [at(a), at(b), at(p)]))
+                    .fold(0.0, f64::max);
+                round_up(deviation)
+            }
+        }
+    }
+}
+
+/// Largest vertical distance between the grid points inside triangle
+/// `corners` (grid columns and rows) of a `side`-wide height grid and the
+/// triangle's plane, metres. The legs must be axis-aligned or diagonal, as
+/// every triangle of the hierarchy's (so rows cross edges at whole columns).
+pub fn triangle_deviation(heights: &[f32], side: usize, corners: [(i64, i64); 3]) -> f64 {
+    let side = side as i64;
+    let z = |(c, r): (i64, i64)| heights[(r * side + c) as usize] as f64;
+    let [p0, p1, p2] = corners;
+    // The plane z = z0 + dz_dc·(c − c0) + dz_dr·(r − r0).
+    let (e1, e2) = ((p1.0 - p0.0, p1.1 - p0.1), (p2.0 - p0.0, p2.1 - p0.1));
+    let (dz1, dz2) = (z(p1) - z(p0), z(p2) - z(p0));
+    let det = (e1.0 * e2.1 - e1.1 * e2.0) as f64;
+    let dz_dc = (dz1 * e2.1 as f64 - dz2 * e1.1 as f64) / det;
+    let dz_dr = (dz2 * e1.0 as f64 - dz1 * e2.0 as f64) / det;
+    let (top, bottom) = (p0.1.min(p1.1).min(p2.1), p0.1.max(p1.1).max(p2.1));
+    let edges = [(p0, p1), (p1, p2), (p2, p0)];
+    let mut largest = 0.0f64;
+    for r in top..=bottom {
+        // The row's span: where it crosses the non-horizontal edges.
+        let (mut first, mut last) = (i64::MAX, i64::MIN);
+        for &(u, v) in &edges {
+            if u.1 != v.1 && (u.1.min(v.1)..=u.1.max(v.1)).contains(&r) {
+                let c = u.0 + (r - u.1) * (v.0 - u.0) / (v.1 - u.1);
+                first = first.min(c);
+                last = last.max(c);
+            }
+        }
+        let span = &heights[(r * side + first) as usize..=(r * side + last) as usize];
+        let start = z(p0) + dz_dr * (r - p0.1) as f64 + dz_dc * (first - p0.0) as f64;
+        largest = largest.max(span_deviation(span, start, dz_dc));
+    }
+    largest
+}
+
+/// Largest |z − (start + slope·i)| over the heights `span[i]`, in four
+/// independent lanes so that the loop vectorises (heights are finite).
+#[inline]
+fn span_deviation(span: &[f32], start: f64, slope: f64) -> f64 {
+    let mut lanes = [0.0f64; 4];
+    let chunks = span.chunks_exact(4);
+    let rest = chunks.remainder();
+    let mut x = 0.0f64;
+    for chunk in chunks {
+        for (j, lane) in lanes.iter_mut().enumerate() {
+            let d = (chunk[j] as f64 - (start + slope * (x + j as f64))).abs();
+            *lane = if d > *lane { d } else { *lane };
+        }
+        x += 4.0;
+    }
+    for (j, &z) in rest.iter().enumerate() {
+        let d = (z as f64 - (start + slope * (x + j as f64))).abs();
+        lanes[j] = if d > lanes[j] { d } else { lanes[j] };
+    }
+    lanes[0].max(lanes[1]).max(lanes[2].max(lanes[3]))
+}
+
 /// Height error of vertex `m` against the midpoint of `a`–`b`, as martini
 /// and the seed compute it: the average in f64, the difference in f64.
 #[inline]
-fn own_error(heights: &[f32], a: usize, b: usize, m: usize) -> f64 {
+fn midpoint_error(heights: &[f32], a: usize, b: usize, m: usize) -> f64 {
     let average = (heights[a] as f64 + heights[b] as f64) / 2.0;
     (average - heights[m] as f64).abs()
+}
+
+/// The right-angle vertices of the (one or two) triangles whose hypotenuse
+/// vertex (c, r) bisects, `a` being one end of that hypotenuse: across the
+/// hypotenuse, as far from the vertex as its end points are, so (a − m)
+/// rotated by ±90°. `None` where one would fall outside the grid.
+fn parents(side: usize, (c, r): (usize, usize), a: usize) -> [Option<usize>; 2] {
+    let (ac, ar) = ((a % side) as i64 - c as i64, (a / side) as i64 - r as i64);
+    let at = |dc: i64, dr: i64| {
+        let (pc, pr) = (c as i64 + dc, r as i64 + dr);
+        (pc >= 0 && pr >= 0 && pc < side as i64 && pr < side as i64)
+            .then(|| pr as usize * side + pc as usize)
+    };
+    [at(-ar, ac), at(ar, -ac)]
 }
 
 /// Distance between two terrain-frame points, metres.
@@ -185,16 +345,15 @@ fn distance(p: [f64; 3], q: [f64; 3]) -> f64 {
 /// children in `out`.
 #[inline]
 fn combine(
-    heights: &[f32],
-    side: usize,
-    cell: f64,
+    grid: &Grid,
     out: SharedOut,
     (c, r): (usize, usize),
-    own: f64,
+    own: f32,
     children: &[(i64, i64)],
 ) -> [f32; 2] {
+    let (heights, side, cell) = (grid.heights, grid.side, grid.cell);
     let p = terrain_position(c, r, side, cell, heights[r * side + c] as f64);
-    let mut error = own as f32;
+    let mut error = own;
     let mut radius = 0.0f64;
     for &(dc, dr) in children {
         let (nc, nr) = (c as i64 + dc, r as i64 + dr);
@@ -267,29 +426,22 @@ impl SharedOut {
 /// vertices around it as children, whose errors are recomputed here from
 /// the heights (the same arithmetic as when they are stored), so each row
 /// depends on the heights alone.
-fn finest_levels(heights: &[f32], side: usize, cell: f64, out: &mut [[f32; 2]]) {
+fn finest_levels(grid: &Grid, out: &mut [[f32; 2]]) {
+    let (heights, side, cell) = (grid.heights, grid.side, grid.cell);
     out.par_chunks_mut(side).enumerate().for_each(|(r, row)| {
         let at = |c: usize, r: usize| r * side + c;
-        let edge_error = |c: usize, r: usize| {
-            let m = at(c, r);
-            if r.is_multiple_of(2) {
-                own_error(heights, m - 1, m + 1, m)
-            } else {
-                own_error(heights, m - side, m + side, m)
-            }
-        };
+        let edge_error = |c: usize, r: usize| grid.own_error((c, r), 1, true);
         if r % 2 == 0 {
             for c in (1..side).step_by(2) {
-                row[c] = [edge_error(c, r) as f32, 0.0];
+                row[c] = [edge_error(c, r), 0.0];
             }
             return;
         }
         for c in (0..side).step_by(2) {
-            row[c] = [edge_error(c, r) as f32, 0.0];
+            row[c] = [edge_error(c, r), 0.0];
         }
         for c in (1..side).step_by(2) {
-            let (a, b) = hypotenuse(side, c, r, 1, false);
-            let mut error = own_error(heights, a, b, at(c, r)) as f32;
+            let mut error = grid.own_error((c, r), 1, false);
             let p = terrain_position(c, r, side, cell, heights[at(c, r)] as f64);
             // The children have radius 0: the largest squared distance gives
             // the radius with one square root (sqrt is monotonic and exact).
@@ -301,7 +453,7 @@ fn finest_levels(heights: &[f32], side: usize, cell: f64, out: &mut [[f32; 2]]) 
                 .enumerate()
             {
                 if k >= 2 {
-                    error = error.max(edge_error(nc, nr) as f32);
+                    error = error.max(edge_error(nc, nr));
                 }
                 let q = terrain_position(nc, nr, side, cell, heights[at(nc, nr)] as f64);
                 farthest = farthest
@@ -313,7 +465,8 @@ fn finest_levels(heights: &[f32], side: usize, cell: f64, out: &mut [[f32; 2]]) 
 }
 
 /// The edge (`edge`) or centre vertices of scale `h` ≥ 2, rows in parallel.
-fn coarse_level(heights: &[f32], side: usize, cell: f64, h: usize, edge: bool, out: SharedOut) {
+fn coarse_level(grid: &Grid, h: usize, edge: bool, out: SharedOut) {
+    let side = grid.side;
     let children = child_offsets(h, edge);
     let (first_row, row_step) = if edge { (0, h) } else { (h, 2 * h) };
     let rows: Vec<usize> = (first_row..side).step_by(row_step).collect();
@@ -324,17 +477,9 @@ fn coarse_level(heights: &[f32], side: usize, cell: f64, h: usize, edge: bool, o
             centre_columns(r, h)
         };
         for c in (start..side).step_by(step) {
-            let (a, b) = hypotenuse(side, c, r, h, edge);
             let m = r * side + c;
-            let value = combine(
-                heights,
-                side,
-                cell,
-                out,
-                (c, r),
-                own_error(heights, a, b, m),
-                &children,
-            );
+            let own = grid.own_error((c, r), h, edge);
+            let value = combine(grid, out, (c, r), own, &children);
             // SAFETY: (c, r) belongs to this level and to this row only.
             unsafe { out.set(m, value) };
         }
@@ -373,19 +518,10 @@ pub fn visit_bottom_up(side: usize, mut f: impl FnMut(&Diamond)) {
                     for (k, (nc, nr)) in kids.iter_mut().zip(children(side, c, r)) {
                         *k = Some(nr * side + nc);
                     }
-                    // Parents sit across the hypotenuse, as far from the vertex
-                    // as its end points are: rotate (a − m) by ±90°.
-                    let m = r * side + c;
-                    let (ac, ar) = ((a % side) as i64 - c as i64, (a / side) as i64 - r as i64);
-                    let at = |dc: i64, dr: i64| {
-                        let (pc, pr) = (c as i64 + dc, r as i64 + dr);
-                        (pc >= 0 && pr >= 0 && pc < side as i64 && pr < side as i64)
-                            .then(|| pr as usize * side + pc as usize)
-                    };
                     f(&Diamond {
-                        vertex: m,
+                        vertex: r * side + c,
                         hypotenuse: [a, b],
-                        parents: [at(-ar, ac), at(ar, -ac)],
+                        parents: parents(side, (c, r), a),
                         children: kids,
                     });
                 }
@@ -443,7 +579,7 @@ mod tests {
     fn nested_on_a_rough_surface() {
         let side = 65;
         let heights = surface(side);
-        let h = Hierarchy::compute(&heights, side, 30.0);
+        let h = Hierarchy::compute(&heights, side, 30.0, ErrorMetric::default());
         assert_eq!(h.nesting_violations(&heights, 10), Vec::<String>::new());
         // Corners never split: zero. The centre carries the largest error.
         assert_eq!(h.error(0), 0.0);
@@ -454,7 +590,12 @@ mod tests {
     #[test]
     fn nested_on_real_dems() {
         for dem in crate::testdata::dems() {
-            let h = Hierarchy::compute(&dem.heights, dem.side, dem.cell_size_m);
+            let h = Hierarchy::compute(
+                &dem.heights,
+                dem.side,
+                dem.cell_size_m,
+                ErrorMetric::default(),
+            );
             assert_eq!(
                 h.nesting_violations(&dem.heights, 10),
                 Vec::<String>::new(),
@@ -471,7 +612,7 @@ mod tests {
         let heights: Vec<f32> = (0..side * side)
             .map(|i| (i % side) as f32 * 2.0 - (i / side) as f32)
             .collect();
-        let h = Hierarchy::compute(&heights, side, 1.0);
+        let h = Hierarchy::compute(&heights, side, 1.0, ErrorMetric::default());
         assert!(h.error_radius.iter().all(|e| e[0] == 0.0));
         // Radii still bound every descendant: the centre's sphere reaches the corners' children.
         assert!(h.radius(8 * side + 8) > 0.0);
@@ -480,7 +621,7 @@ mod tests {
     #[test]
     fn finest_radius_is_one_diagonal_step() {
         // A flat 3×3 grid: the centre's children are the edge midpoints at one cell.
-        let h = Hierarchy::compute(&[0.0; 9], 3, 10.0);
+        let h = Hierarchy::compute(&[0.0; 9], 3, 10.0, ErrorMetric::default());
         assert_eq!(h.radius(4), 10.0);
         assert_eq!(h.radius(1), 0.0);
         let kids: Vec<_> = h.children(1, 1).collect();
@@ -491,7 +632,7 @@ mod tests {
     fn detects_broken_nesting() {
         let side = 9;
         let heights = surface(side);
-        let mut h = Hierarchy::compute(&heights, side, 1.0);
+        let mut h = Hierarchy::compute(&heights, side, 1.0, ErrorMetric::default());
         h.error_radius.to_mut()[4 * side + 4][0] = 0.0;
         assert!(!h.nesting_violations(&heights, 10).is_empty());
     }

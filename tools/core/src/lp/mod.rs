@@ -25,7 +25,7 @@ pub mod extract;
 pub mod hierarchy;
 pub mod refine;
 
-pub use hierarchy::Hierarchy;
+pub use hierarchy::{ErrorMetric, Hierarchy};
 
 /// Where vertex (c, r) of a `side`-wide grid with `cell`-metre spacing and
 /// height `z` lies in the terrain frame.

@@ -451,6 +451,7 @@ mod tests {
     use crate::camera::Camera;
     use crate::lp::hierarchy::visit_bottom_up;
     use crate::lp::terrain_position;
+    use crate::lp::ErrorMetric;
     use crate::testdata::{self, Lcg};
     use glam::DVec3;
     use std::collections::HashMap;
@@ -467,7 +468,7 @@ mod tests {
             .into_iter()
             .map(|d| Terrain {
                 name: d.name,
-                h: Hierarchy::compute(&d.heights, d.side, d.cell_size_m),
+                h: Hierarchy::compute(&d.heights, d.side, d.cell_size_m, ErrorMetric::default()),
                 heights: d.heights,
             })
             .collect()
