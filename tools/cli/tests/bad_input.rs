@@ -664,6 +664,44 @@ fn work_beyond_the_memory_budget_is_refused_before_it_starts() {
     );
 }
 
+/// The cluster bake's atlases are estimated from the atlas budget before
+/// any is drawn: a 4 GiB atlas budget under a 1 GiB memory budget is
+/// refused, and the bundle is left as it was.
+#[test]
+fn a_cluster_bake_beyond_the_memory_budget_is_refused() {
+    let (_d, bundle, work) = sample_bundle_and_workspace();
+    // Every file of the bundle and of its clusters/ folder, with its digest.
+    let digests = || -> Vec<(String, String)> {
+        [bundle.clone(), bundle.join("clusters")]
+            .iter()
+            .flat_map(|dir| listing(dir).into_iter().map(move |f| dir.join(f)))
+            .filter(|p| p.is_file())
+            .map(|p| (p.display().to_string(), sha256(&p)))
+            .collect()
+    };
+    let before = digests();
+    assert!(before.len() > 10, "{before:?}");
+    fails(
+        &work,
+        &[
+            "bake",
+            bundle.to_str().unwrap(),
+            "--budget-mib",
+            "4096",
+            "--max-memory",
+            "1G",
+        ],
+        &[
+            "cluster bake of",
+            "4.0 GiB atlas budget needs about 6.0 GiB",
+            "memory budget is 1.0 GiB",
+            "--budget-mib",
+        ],
+        &[],
+    );
+    assert_eq!(before, digests(), "the bundle changed");
+}
+
 /// A DEM without georeferencing does not say how large its cells are:
 /// `prep` refuses it unless told, and takes it when told.
 #[test]

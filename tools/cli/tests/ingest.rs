@@ -320,6 +320,64 @@ fn landsat_stitch_cli_writes_a_georeferenced_mosaic() {
     assert_eq!(m.nodata, Some(0.0));
 }
 
+/// Tiles in mixed CRSs: the native grid of the tile already in the target
+/// CRS wins (30 m, its cell lines), the other tile is resampled onto it.
+/// Before, the reprojected tile's finer 28.8 m cell set the grid, the
+/// native tile was resampled too and the grid started off its lines.
+#[test]
+fn mixed_crs_tiles_are_stitched_on_the_native_grid() {
+    let dir = tempfile::tempdir().unwrap();
+    let geographic = dir.path().join("224078_wgs84.tif");
+    let source = landsat("224078", "B4");
+    gdal_tool(
+        "gdalwarp",
+        &[
+            "-q",
+            "-t_srs",
+            "EPSG:4326",
+            "-srcnodata",
+            "0",
+            "-dstnodata",
+            "0",
+            source.to_str().unwrap(),
+            geographic.to_str().unwrap(),
+        ],
+    );
+    let out = dir.path().join("mixed.tif");
+    let native = landsat("224077", "B4");
+    relevo_ok([
+        "stitch".as_ref(),
+        native.as_os_str(),
+        geographic.as_os_str(),
+        "--src-nodata".as_ref(),
+        "0".as_ref(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    let m = read(&out);
+    assert_eq!(
+        m.geotransform,
+        [694005.0, 30.0, 0.0, -2766615.0, 0.0, -30.0]
+    );
+    let band = &m.bands[0];
+    let first_column = (0..m.height).filter(|&r| band[r * m.width] != 0.0).count();
+    assert!(
+        first_column > m.height / 2,
+        "first column: {first_column} cells with data"
+    );
+    // North-west of the other scene the native tile is copied cell for cell.
+    let a = read(&native);
+    for r in 0..300 {
+        for c in 0..700 {
+            assert_eq!(
+                band[r * m.width + c],
+                a.bands[0][r * a.width + c],
+                "cell ({c}, {r})"
+            );
+        }
+    }
+}
+
 #[test]
 fn geographic_dem_is_reprojected_to_utm_keeping_detail() {
     let dir = tempfile::tempdir().unwrap();

@@ -241,26 +241,33 @@ fn warp_all(
         _ => true,
     };
 
-    // Resolution: explicit, else the finest tile's in the target CRS.
-    let (rx, ry) = match opts.resolution {
-        Some(r) => r,
-        None => {
-            let mut best = (f64::INFINITY, f64::INFINITY);
+    // The native grid: the finest tile already in the target CRS sets the
+    // cell size and the cell lines; tiles in other CRSs are resampled onto
+    // it. Only when no tile is native does the finest detail-preserving
+    // cell of the reprojected tiles set the size (lines at its multiples).
+    let mut native: Option<GeoTransform> = None;
+    for s in sources.iter().filter(|s| same_crs(s)) {
+        let geo = georeferenced(s)?;
+        let area = |g: &GeoTransform| g.cell_size().0 * g.cell_size().1;
+        if native.as_ref().is_none_or(|n| area(&geo) < area(n)) {
+            native = Some(geo);
+        }
+    }
+    let (rx, ry) = match (opts.resolution, &native) {
+        (Some(r), _) => r,
+        (None, Some(geo)) => geo.cell_size(),
+        (None, None) => {
+            let mut best = f64::INFINITY;
             for s in sources {
                 let geo = georeferenced(s)?;
-                let (cx, cy) = if same_crs(s) {
-                    geo.cell_size()
-                } else {
-                    let (Some(from), Some(to)) = (s.srs.as_ref(), target.as_ref()) else {
-                        bail!("{}: no CRS to reproject from", s.path.display());
-                    };
-                    let cell = crs::detail_preserving_cell(&geo, s.width, s.height, from, to)
-                        .with_context(|| s.path.display().to_string())?;
-                    (cell, cell)
+                let (Some(from), Some(to)) = (s.srs.as_ref(), target.as_ref()) else {
+                    bail!("{}: no CRS to reproject from", s.path.display());
                 };
-                best = (best.0.min(cx), best.1.min(cy));
+                let cell = crs::detail_preserving_cell(&geo, s.width, s.height, from, to)
+                    .with_context(|| s.path.display().to_string())?;
+                best = best.min(cell);
             }
-            best
+            (best, best)
         }
     };
     if !(rx > 0.0 && ry > 0.0) {
@@ -302,16 +309,15 @@ fn warp_all(
                     ]
                 },
             );
-            // Align to the first tile's cell lines when it already lies on the
+            // Align to the native tile's cell lines when it lies on the
             // target grid, so aligned tiles are copied without resampling;
             // otherwise to multiples of the resolution.
-            let geo = georeferenced(first)?;
-            let (anchor_x, anchor_y) =
-                if same_crs(first) && geo.is_north_up() && geo.cell_size() == (rx, ry) {
+            let (anchor_x, anchor_y) = match &native {
+                Some(geo) if geo.is_north_up() && geo.cell_size() == (rx, ry) => {
                     (geo.0[0], geo.0[3])
-                } else {
-                    (0.0, 0.0)
-                };
+                }
+                _ => (0.0, 0.0),
+            };
             let ox = anchor_x + ((union[0] - anchor_x) / rx + 1e-6).floor() * rx;
             let oy = anchor_y + ((union[3] - anchor_y) / ry - 1e-6).ceil() * ry;
             let w = ((union[2] - ox) / rx - 1e-6).ceil().max(1.0) as usize;

@@ -167,9 +167,14 @@ impl Region {
     pub fn load(path: &Path) -> Result<Region> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("{}: cannot read", path.display()))?;
-        let mut region: Region = toml::from_str(&text)
-            .map_err(|e| anyhow!("{}: {}", path.display(), e.to_string().trim_end()))?;
         let base = path.parent().unwrap_or(Path::new("."));
+        Region::parse(&text, base).with_context(|| path.display().to_string())
+    }
+
+    /// [`Region::load`] on text, relative paths resolved against `base`.
+    pub fn parse(text: &str, base: &Path) -> Result<Region> {
+        let mut region: Region =
+            toml::from_str(text).map_err(|e| anyhow!("{}", e.to_string().trim_end()))?;
         let resolve = |p: &mut PathBuf| {
             if p.is_relative() {
                 *p = base.join(&*p);
@@ -189,7 +194,7 @@ impl Region {
                 }
             }
         }
-        region.check().with_context(|| path.display().to_string())?;
+        region.check()?;
         Ok(region)
     }
 

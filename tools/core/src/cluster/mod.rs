@@ -148,6 +148,20 @@ pub fn bake_database(
             "the vegetation database is empty: there is nothing to cluster".into(),
         ));
     }
+    // The atlases with their mip levels and the views composed before
+    // packing (measured: a peak of 1.3× a 256 MiB budget on the sample
+    // region), and per object its record, its share of the quadtree's
+    // nodes (1.6 per object at 1M) and the work lists.
+    crate::memory::check(
+        &format!(
+            "the cluster bake of {} objects with a {} atlas budget",
+            database.len(),
+            crate::memory::human(options.budget_bytes)
+        ),
+        1,
+        (options.budget_bytes / 2 * 3).saturating_add(512 * database.len() as u64),
+        "lower the atlas budget (--budget-mib, or budget_bytes under [clusters])",
+    )?;
     let classes = class_names(database);
     let sources = class_sources(&classes, models)?;
     let aspect: Vec<f32> = sources.iter().map(|c| c.model.aspect()).collect();
