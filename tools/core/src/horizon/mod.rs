@@ -731,6 +731,68 @@ mod tests {
         }
     }
 
+    /// Whatever the padding holds never shows: Gironde's sea (below 0 m)
+    /// masked out as padding, holding either the sea floor or a 600 m wall,
+    /// renders the same image and depth, from four cameras over the coast,
+    /// in both arithmetics, with and without sub-voxel sampling, in both
+    /// modes. (Bilinear samples beside the coast used to blend the padding
+    /// in: a curtain along the data's edge.)
+    #[test]
+    fn padding_heights_never_show() {
+        let dem = crate::testdata::dem("gironde_257.f32");
+        let (side, cell) = (dem.side, dem.cell_size_m);
+        let mask: Vec<u8> = dem.heights.iter().map(|&z| u8::from(z >= 0.0)).collect();
+        assert!(mask.iter().filter(|&&m| m == 0).count() > side * side / 10);
+        let wall: Vec<f32> = dem
+            .heights
+            .iter()
+            .zip(&mask)
+            .map(|(&z, &m)| if m == 1 { z } else { 600.0 })
+            .collect();
+        let floor = Terrain::new(side, cell, &dem.heights, &mask, None);
+        let walled = Terrain::new(side, cell, &wall, &mask, None);
+        let extent = (side - 1) as f64 * cell;
+        let mut compared = 0;
+        for (eye, heading) in [
+            ([0.5 * extent, -0.1 * extent, 400.0], 0.0),
+            ([-0.1 * extent, 0.5 * extent, 250.0], 90.0),
+            ([1.1 * extent, 1.1 * extent, 800.0], 225.0),
+            ([-0.1 * extent, -0.1 * extent, 300.0], 45.0),
+        ] {
+            let cam = camera(240, 135, eye, heading, 90.0, 2.0 * extent);
+            for arithmetic in [Arithmetic::Float, Arithmetic::Fixed] {
+                for subvoxel in [true, false] {
+                    for mode in [Mode::Raycast, Mode::Distorted] {
+                        let options = RenderOptions {
+                            mode,
+                            arithmetic,
+                            bands: vec![Band {
+                                until_m: f64::INFINITY,
+                                slices_per_cell: 2.0,
+                                subvoxel,
+                            }],
+                            ..Default::default()
+                        };
+                        let (a, b) = (
+                            render(&floor, &cam, &options),
+                            render(&walled, &cam, &options),
+                        );
+                        let terrain = a.depth.iter().filter(|&&d| d < 1.0).count();
+                        assert!(
+                            terrain > 240 * 135 / 10,
+                            "{eye:?}: {terrain} terrain pixels"
+                        );
+                        let what = format!("{eye:?} {arithmetic:?} subvoxel {subvoxel} {mode:?}");
+                        assert!(a.depth == b.depth, "{what}: depth differs");
+                        assert!(a.rgba == b.rgba, "{what}: colour differs");
+                        compared += 1;
+                    }
+                }
+            }
+        }
+        assert_eq!(compared, 32);
+    }
+
     #[test]
     fn fixed_point_matches_floating_point() {
         let (heights, mask, rgba, _) = poles();

@@ -4,6 +4,7 @@
 
 use crate::geo::{GeoTransform, TerrainFrame};
 use crate::grid::vertex_normal;
+use rayon::prelude::*;
 use std::borrow::Cow;
 
 /// Sub-voxel divisions per cell side (seed 000, §6.2 uses 8).
@@ -94,12 +95,62 @@ impl ColorSource {
     }
 }
 
+/// `heights` with every masked vertex that has data among its eight
+/// neighbours set to the mean of those neighbours' heights; `None` when
+/// there is no such vertex.
+fn heights_beside_data(heights: &[f32], mask: &[u8], side: usize) -> Option<Vec<f32>> {
+    let beside = |i: usize| -> Option<f32> {
+        let (c, r) = ((i % side) as i64, (i / side) as i64);
+        let (mut sum, mut count) = (0.0f64, 0u32);
+        for (dc, dr) in [
+            (-1, -1),
+            (0, -1),
+            (1, -1),
+            (-1, 0),
+            (1, 0),
+            (-1, 1),
+            (0, 1),
+            (1, 1),
+        ] {
+            let (nc, nr) = (c + dc, r + dr);
+            if nc >= 0 && nr >= 0 && (nc as usize) < side && (nr as usize) < side {
+                let k = nr as usize * side + nc as usize;
+                if mask[k] == 1 {
+                    sum += heights[k] as f64;
+                    count += 1;
+                }
+            }
+        }
+        (count > 0).then(|| (sum / count as f64) as f32)
+    };
+    let changed: Vec<(usize, f32)> = (0..side * side)
+        .into_par_iter()
+        .filter(|&i| mask[i] != 1)
+        .filter_map(|i| beside(i).map(|z| (i, z)))
+        .filter(|&(i, z)| z != heights[i])
+        .collect();
+    if changed.is_empty() {
+        return None;
+    }
+    let mut out = heights.to_vec();
+    for (i, z) in changed {
+        out[i] = z;
+    }
+    Some(out)
+}
+
 /// The terrain the raycaster reads.
 pub struct Terrain<'a> {
     pub side: usize,
     /// Vertex spacing, metres.
     pub cell_m: f64,
     heights: Cow<'a, [f32]>,
+    /// What the bilinear surface reads where it differs from `heights`:
+    /// masked vertices beside data hold the mean of their data neighbours,
+    /// so a sample near the data's edge never blends in whatever the
+    /// padding holds (it would rise or fall as a curtain along the edge).
+    /// `None` when no masked vertex touches data.
+    edge_heights: Option<Vec<f32>>,
     /// Per vertex: the height, NaN where the mask is 0, and the colour used
     /// without imagery (a grey ramp by height, shaded) — one cache line
     /// answers a sample.
@@ -133,10 +184,12 @@ impl<'a> Terrain<'a> {
             .zip(mask.iter())
             .map(|(&h, &m)| (if m == 1 { h } else { f32::NAN }, 0))
             .collect();
+        let edge_heights = heights_beside_data(&heights, &mask, side);
         let mut terrain = Terrain {
             side,
             cell_m,
             heights,
+            edge_heights,
             sampled,
             heights_fixed: std::sync::OnceLock::new(),
             mask,
@@ -153,6 +206,11 @@ impl<'a> Terrain<'a> {
     /// Heights in metres, row-major, `side`×`side`.
     pub fn heights(&self) -> &[f32] {
         &self.heights
+    }
+
+    /// The heights the bilinear surface reads (see `edge_heights`).
+    fn surface_heights(&self) -> &[f32] {
+        self.edge_heights.as_deref().unwrap_or(&self.heights)
     }
 
     /// The data mask (1 data, 0 padding or void), row-major.
@@ -182,7 +240,7 @@ impl<'a> Terrain<'a> {
         let (side, cell) = (self.side, self.cell_m);
         let shade = (0..side * side)
             .map(|i| {
-                let n = vertex_normal(&self.heights, side, cell, i % side, i / side);
+                let n = vertex_normal(self.surface_heights(), side, cell, i % side, i / side);
                 let lambert = (n[0] * sun[0] + n[1] * sun[1] + n[2] * sun[2]).max(0.0);
                 (0.35 + 0.65 * lambert) as f32
             })
@@ -262,7 +320,8 @@ impl<'a> Terrain<'a> {
         }
         let (c, r) = self.grid(x, y);
         let (v, w) = self.bilinear(c, r);
-        Some((0..4).map(|k| w[k] * self.heights[v[k]] as f64).sum())
+        let heights = self.surface_heights();
+        Some((0..4).map(|k| w[k] * heights[v[k]] as f64).sum())
     }
 
     /// The exact bilinear surface through the vertices at (x, y), metres;
@@ -274,7 +333,8 @@ impl<'a> Terrain<'a> {
         let (c0, r0) = (c.floor().clamp(0.0, last), r.floor().clamp(0.0, last));
         let (u, v) = (c - c0, r - r0);
         let i = r0 as usize * self.side + c0 as usize;
-        let z = |k: usize| self.heights[k] as f64;
+        let heights = self.surface_heights();
+        let z = |k: usize| heights[k] as f64;
         let top = z(i) * (1.0 - u) + z(i + 1) * u;
         let bottom = z(i + self.side) * (1.0 - u) + z(i + self.side + 1) * u;
         Some(top * (1.0 - v) + bottom * v)
@@ -283,7 +343,7 @@ impl<'a> Terrain<'a> {
     /// The heights in 16.16 fixed point (|h| < 32768 m fits an i32).
     fn fixed_heights(&self) -> &[i32] {
         self.heights_fixed.get_or_init(|| {
-            self.heights
+            self.surface_heights()
                 .iter()
                 .map(|&h| (h as f64 * 65536.0) as i32)
                 .collect()
