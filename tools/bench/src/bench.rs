@@ -532,7 +532,9 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
         let image = read_image(&data.join(format!("{stem}.png")), None, None, Some(0.1))?;
         let (w, h) = (image.image.width, image.image.height);
         let samples = read_samples(&repo.join(samples), None, w, h)?;
-        let truth = eval::parse_voc(&std::fs::read_to_string(data.join(format!("{stem}.xml")))?)?;
+        let truth = eval::bounds(&eval::parse_voc(&std::fs::read_to_string(
+            data.join(format!("{stem}.xml")),
+        )?)?);
         let result = extract(&image, &samples, &options)?;
         let ours: Vec<(f64, f64, f32)> =
             result.objects.iter().map(|o| (o.x, o.y, o.score)).collect();

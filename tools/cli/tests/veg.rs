@@ -72,7 +72,66 @@ fn detection_reaches_the_recorded_f1_on_annotated_crowns() {
             e["true_positives"].as_u64().unwrap() + e["false_negatives"].as_u64().unwrap(),
             e["truth"].as_u64().unwrap()
         );
+        // Per class: the boxes of each truth class add up to all boxes, the
+        // boxes found to the true positives.
+        let classes = e["classes"].as_array().unwrap();
+        let sum = |key: &str| {
+            classes
+                .iter()
+                .map(|c| c[key].as_u64().unwrap())
+                .sum::<u64>()
+        };
+        assert_eq!(sum("truth"), e["truth"].as_u64().unwrap(), "{e}");
+        assert_eq!(sum("found"), e["true_positives"].as_u64().unwrap(), "{e}");
+        assert_eq!(sum("detections"), e["detections"].as_u64().unwrap(), "{e}");
     }
+}
+
+/// SOAP_061's truth names Alive and Dead trees: `veg eval` reports each
+/// class's recall, the confusion, and writes the matches as GeoJSON.
+#[test]
+fn eval_reports_classes_and_writes_the_matches() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("db.csv");
+    let e = detect_and_score("trees/SOAP_061", "data/trees/soap_061_samples.csv", &db);
+    let classes: Vec<&str> = e["classes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["class"].as_str().unwrap())
+        .collect();
+    assert!(
+        classes.contains(&"Alive") && classes.contains(&"Dead"),
+        "{classes:?}"
+    );
+    let matches = dir.path().join("matches.geojson");
+    let text = relevo_ok([
+        "veg".as_ref(),
+        "eval".as_ref(),
+        "--detections".as_ref(),
+        db.as_os_str(),
+        "--truth".as_ref(),
+        shared("trees/SOAP_061.xml").as_os_str(),
+        "--matches".as_ref(),
+        matches.as_os_str(),
+    ]);
+    assert!(text.contains("Dead") && text.contains("recall"), "{text}");
+    let geojson: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&matches).unwrap()).unwrap();
+    let features = geojson["features"].as_array().unwrap();
+    let kind = |k: &str| {
+        features
+            .iter()
+            .filter(|f| f["properties"]["kind"] == k)
+            .count() as u64
+    };
+    assert_eq!(kind("detection"), e["detections"].as_u64().unwrap());
+    assert_eq!(kind("truth"), e["truth"].as_u64().unwrap());
+    let missed = features
+        .iter()
+        .filter(|f| f["properties"]["found"] == false)
+        .count() as u64;
+    assert_eq!(missed, e["false_negatives"].as_u64().unwrap());
 }
 
 #[test]

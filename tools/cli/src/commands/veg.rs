@@ -35,15 +35,24 @@ yet matched, taking detections from the highest score down.
 
 Examples:
   relevo veg eval --detections trees.csv --truth crop.xml
-  relevo veg eval --detections trees.csv --truth boxes.csv --json"
+  relevo veg eval --detections trees.csv --truth boxes.csv --json
+  relevo veg eval --detections trees.csv --truth crop.xml --matches matches.geojson"
     )]
     Eval {
         /// Database written by `veg detect` (id;x;y;class;size;score).
         #[arg(long)]
         detections: PathBuf,
-        /// Pascal VOC XML, or CSV lines xmin,ymin,xmax,ymax.
+        /// Pascal VOC XML (classes from <name>), or CSV lines
+        /// xmin,ymin,xmax,ymax[,class].
         #[arg(long)]
         truth: PathBuf,
+        /// Also write the matches as GeoJSON: detections (matched or not)
+        /// and truth boxes (found or missed), in the inputs' coordinates.
+        #[arg(long, value_name = "FILE.geojson")]
+        matches: Option<PathBuf>,
+        /// Replace an existing --matches file.
+        #[arg(long)]
+        force: bool,
         /// Print JSON.
         #[arg(long)]
         json: bool,
@@ -165,8 +174,10 @@ pub fn run(command: VegCommand) -> Result<()> {
         VegCommand::Eval {
             detections,
             truth,
+            matches,
+            force,
             json,
-        } => score(&detections, &truth, json),
+        } => score(&detections, &truth, matches.as_deref(), force, json),
     }
 }
 
@@ -228,7 +239,17 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
     Ok(())
 }
 
-fn score(detections: &Path, truth: &Path, json: bool) -> Result<()> {
+/// `veg eval`: overall and per-class figures, and the matches as GeoJSON.
+fn score(
+    detections: &Path,
+    truth: &Path,
+    matches_out: Option<&Path>,
+    force: bool,
+    json: bool,
+) -> Result<()> {
+    if let Some(path) = matches_out {
+        output::check(path, force)?;
+    }
     let read = |p: &Path| {
         std::fs::read_to_string(p).with_context(|| format!("{}: cannot read", p.display()))
     };
@@ -242,15 +263,60 @@ fn score(detections: &Path, truth: &Path, json: bool) -> Result<()> {
     }
     .map_err(|e| anyhow::anyhow!("{}: {e}", truth.display()))?;
     let points: Vec<(f64, f64, f32)> = objects.iter().map(|o| (o.x, o.y, o.score)).collect();
-    let e = eval::evaluate(&points, &boxes);
+    let found = eval::matches(&points, &eval::bounds(&boxes));
+    let e = eval::Evaluation::of(&found, boxes.len());
+    let classes: Vec<&str> = objects.iter().map(|o| o.class.as_str()).collect();
+    let per_class = eval::per_class(&classes, &boxes, &found);
+    if let Some(path) = matches_out {
+        output::write_atomic(
+            path,
+            eval::matches_geojson(&objects, &boxes, &found).as_bytes(),
+        )?;
+    }
     if json {
-        println!("{}", serde_json::to_string_pretty(&e)?);
-    } else {
+        // The overall figures at the top (as before), the classes beside them.
+        let mut report = serde_json::to_value(e)?;
+        report["classes"] = serde_json::to_value(&per_class.classes)?;
+        report["confusion"] = serde_json::to_value(&per_class.confusion)?;
+        println!("{}", serde_json::to_string_pretty(&report)?);
+        return Ok(());
+    }
+    println!(
+        "precision {:.3}  recall {:.3}  F1 {:.3}  (TP {}, FP {}, FN {}; {} detections, {} boxes)",
+        e.precision,
+        e.recall,
+        e.f1,
+        e.true_positives,
+        e.false_positives,
+        e.false_negatives,
+        e.detections,
+        e.truth
+    );
+    println!("  class          detections  matched  precision    boxes  found  recall");
+    for c in &per_class.classes {
         println!(
-            "precision {:.3}  recall {:.3}  F1 {:.3}  (TP {}, FP {}, FN {}; {} detections, {} boxes)",
-            e.precision, e.recall, e.f1, e.true_positives, e.false_positives,
-            e.false_negatives, e.detections, e.truth
+            "  {:<14} {:>10}  {:>7}  {:>9}  {:>7}  {:>5}  {:>6}",
+            c.class,
+            c.detections,
+            c.matched,
+            if c.detections > 0 {
+                format!("{:.3}", c.precision)
+            } else {
+                "—".into()
+            },
+            c.truth,
+            c.found,
+            if c.truth > 0 {
+                format!("{:.3}", c.recall)
+            } else {
+                "—".into()
+            },
         );
+    }
+    println!("  matches (detection class → truth class):");
+    for (from, row) in &per_class.confusion {
+        let cells: Vec<String> = row.iter().map(|(to, n)| format!("{to} {n}")).collect();
+        println!("    {from:<14} → {}", cells.join(", "));
     }
     Ok(())
 }

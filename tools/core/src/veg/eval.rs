@@ -1,8 +1,27 @@
 //! Accuracy of detections against truth boxes: a detection is a true
 //! positive when its centre falls inside a truth box not yet matched, taking
-//! detections greedily from the highest score.
+//! detections greedily from the highest score. Beside the overall figures:
+//! per class (a confusion of detection classes against truth classes, with
+//! each class's precision and recall) and the matches as GeoJSON, so a user
+//! sees where detection fails.
 
+use crate::veg::db::VegObject;
 use crate::{Error, Result};
+use serde_json::json;
+use std::collections::BTreeMap;
+
+/// A truth box `[xmin, ymin, xmax, ymax]` and its class, when the truth
+/// names one (VOC `<name>`, the CSV's fifth column).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TruthBox {
+    pub bounds: [f64; 4],
+    pub class: Option<String>,
+}
+
+/// The bounds of `truth`, for [`evaluate`].
+pub fn bounds(truth: &[TruthBox]) -> Vec<[f64; 4]> {
+    truth.iter().map(|t| t.bounds).collect()
+}
 
 /// Precision, recall and F1 with the counts behind them.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
@@ -17,13 +36,20 @@ pub struct Evaluation {
     pub f1: f64,
 }
 
-/// Match `(x, y, score)` detections to `[xmin, ymin, xmax, ymax]` boxes.
-/// Among the free boxes holding a centre, the one whose middle is nearest wins.
+/// Match `(x, y, score)` detections to `[xmin, ymin, xmax, ymax]` boxes
+/// and score the result ([`matches`], [`Evaluation::of`]).
 pub fn evaluate(detections: &[(f64, f64, f32)], truth: &[[f64; 4]]) -> Evaluation {
+    Evaluation::of(&matches(detections, truth), truth.len())
+}
+
+/// For each detection, the truth box it matches. Detections are taken from
+/// the highest score; among the free boxes holding its centre, the one
+/// whose middle is nearest wins.
+pub fn matches(detections: &[(f64, f64, f32)], truth: &[[f64; 4]]) -> Vec<Option<usize>> {
     let mut order: Vec<usize> = (0..detections.len()).collect();
     order.sort_by(|&a, &b| detections[b].2.total_cmp(&detections[a].2).then(a.cmp(&b)));
     let mut matched = vec![false; truth.len()];
-    let mut tp = 0;
+    let mut found = vec![None; detections.len()];
     for k in order {
         let (x, y, _) = detections[k];
         let best = truth
@@ -38,31 +64,173 @@ pub fn evaluate(detections: &[(f64, f64, f32)], truth: &[[f64; 4]]) -> Evaluatio
             });
         if let Some((t, _)) = best {
             matched[t] = true;
-            tp += 1;
+            found[k] = Some(t);
         }
     }
-    let ratio = |a: usize, b: usize| if b == 0 { 0.0 } else { a as f64 / b as f64 };
-    let precision = ratio(tp, detections.len());
-    let recall = ratio(tp, truth.len());
-    let f1 = if precision + recall == 0.0 {
-        0.0
-    } else {
-        2.0 * precision * recall / (precision + recall)
-    };
-    Evaluation {
-        detections: detections.len(),
-        truth: truth.len(),
-        true_positives: tp,
-        false_positives: detections.len() - tp,
-        false_negatives: truth.len() - tp,
-        precision,
-        recall,
-        f1,
+    found
+}
+
+impl Evaluation {
+    /// The figures of `matches` (one per detection) against `truth` boxes.
+    pub fn of(matches: &[Option<usize>], truth: usize) -> Evaluation {
+        let tp = matches.iter().flatten().count();
+        let detections = matches.len();
+        let ratio = |a: usize, b: usize| if b == 0 { 0.0 } else { a as f64 / b as f64 };
+        let precision = ratio(tp, detections);
+        let recall = ratio(tp, truth);
+        let f1 = if precision + recall == 0.0 {
+            0.0
+        } else {
+            2.0 * precision * recall / (precision + recall)
+        };
+        Evaluation {
+            detections,
+            truth,
+            true_positives: tp,
+            false_positives: detections - tp,
+            false_negatives: truth - tp,
+            precision,
+            recall,
+            f1,
+        }
     }
 }
 
+/// One class's figures: its detections and how many matched a box of any
+/// class (precision), its truth boxes and how many were found (recall).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ClassFigures {
+    pub class: String,
+    pub detections: usize,
+    pub matched: usize,
+    pub precision: f64,
+    pub truth: usize,
+    pub found: usize,
+    pub recall: f64,
+}
+
+/// Per-class figures and the confusion between detection and truth
+/// classes: `confusion[detection class][truth class]` counts matches,
+/// with "(none)" for a detection that matched no box or a box no detection
+/// found. A class named in both is one row (names compared without letter
+/// case). A class's precision counts matches to a box of any class.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct PerClass {
+    pub classes: Vec<ClassFigures>,
+    pub confusion: BTreeMap<String, BTreeMap<String, usize>>,
+}
+
+/// The name used for a truth box without a class, and for "no match".
+pub const NO_CLASS: &str = "(none)";
+
+/// Per-class figures of `matches` between detections of `detection_classes`
+/// and `truth` boxes.
+pub fn per_class(
+    detection_classes: &[&str],
+    truth: &[TruthBox],
+    matches: &[Option<usize>],
+) -> PerClass {
+    let truth_class = |t: usize| truth[t].class.as_deref().unwrap_or(NO_CLASS);
+    let mut confusion: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
+    let mut found = vec![false; truth.len()];
+    for (&class, m) in detection_classes.iter().zip(matches) {
+        let to = match m {
+            Some(t) => {
+                found[*t] = true;
+                truth_class(*t)
+            }
+            None => NO_CLASS,
+        };
+        *confusion
+            .entry(class.into())
+            .or_default()
+            .entry(to.into())
+            .or_default() += 1;
+    }
+    for t in (0..truth.len()).filter(|&t| !found[t]) {
+        *confusion
+            .entry(NO_CLASS.into())
+            .or_default()
+            .entry(truth_class(t).into())
+            .or_default() += 1;
+    }
+    // One row per class name, letter case aside ("alive" samples, "Alive"
+    // truth), spelt as the truth spells it.
+    let mut names: BTreeMap<String, &str> = BTreeMap::new();
+    for name in detection_classes.iter().copied() {
+        names.entry(name.to_lowercase()).or_insert(name);
+    }
+    for name in (0..truth.len()).map(truth_class) {
+        names.insert(name.to_lowercase(), name);
+    }
+    let same = |a: &str, b: &str| a.to_lowercase() == b.to_lowercase();
+    let ratio = |a: usize, b: usize| if b == 0 { 0.0 } else { a as f64 / b as f64 };
+    let classes = names
+        .into_values()
+        .map(|class| {
+            let mine: Vec<&Option<usize>> = detection_classes
+                .iter()
+                .zip(matches)
+                .filter(|(c, _)| same(c, class))
+                .map(|(_, m)| m)
+                .collect();
+            let matched = mine.iter().filter(|m| m.is_some()).count();
+            let boxes: Vec<usize> = (0..truth.len())
+                .filter(|&t| same(truth_class(t), class))
+                .collect();
+            let hit = boxes.iter().filter(|&&t| found[t]).count();
+            ClassFigures {
+                class: class.into(),
+                detections: mine.len(),
+                matched,
+                precision: ratio(matched, mine.len()),
+                truth: boxes.len(),
+                found: hit,
+                recall: ratio(hit, boxes.len()),
+            }
+        })
+        .collect();
+    PerClass { classes, confusion }
+}
+
+/// The matches as a GeoJSON FeatureCollection, in the coordinates of the
+/// inputs (pixels, y down, for VOC truth): each detection a Point with its
+/// class, score and the truth class it matched (null: a false positive);
+/// each truth box a Polygon with its class and whether it was found (false:
+/// a miss).
+pub fn matches_geojson(
+    objects: &[VegObject],
+    truth: &[TruthBox],
+    matches: &[Option<usize>],
+) -> String {
+    let mut found = vec![false; truth.len()];
+    let mut features = Vec::with_capacity(objects.len() + truth.len());
+    for (o, m) in objects.iter().zip(matches) {
+        if let Some(t) = m {
+            found[*t] = true;
+        }
+        features.push(json!({
+            "type": "Feature",
+            "properties": {"kind": "detection", "id": o.id, "class": o.class, "score": o.score,
+                           "matched": m.is_some(),
+                           "truth_class": m.map(|t| truth[t].class.clone().unwrap_or_else(|| NO_CLASS.into()))},
+            "geometry": {"type": "Point", "coordinates": [o.x, o.y]},
+        }));
+    }
+    for (t, b) in truth.iter().enumerate() {
+        let [x0, y0, x1, y1] = b.bounds;
+        features.push(json!({
+            "type": "Feature",
+            "properties": {"kind": "truth", "class": b.class, "found": found[t]},
+            "geometry": {"type": "Polygon",
+                         "coordinates": [[[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]]},
+        }));
+    }
+    json!({"type": "FeatureCollection", "features": features}).to_string()
+}
+
 /// Boxes of a Pascal VOC annotation (`<object><bndbox><xmin>…`).
-pub fn parse_voc(text: &str) -> Result<Vec<[f64; 4]>> {
+pub fn parse_voc(text: &str) -> Result<Vec<TruthBox>> {
     let doc =
         roxmltree::Document::parse(text).map_err(|e| Error::Input(format!("not XML: {e}")))?;
     let mut boxes = Vec::new();
@@ -80,7 +248,14 @@ pub fn parse_voc(text: &str) -> Result<Vec<[f64; 4]>> {
                 .and_then(|t| t.trim().parse::<f64>().ok())
                 .ok_or_else(|| Error::Input(format!("object {}: no numeric <{name}>", k + 1)))?;
         }
-        boxes.push(b);
+        // The class: the <name> of the <object> holding the box.
+        let class = bndbox
+            .parent()
+            .and_then(|o| o.children().find(|n| n.has_tag_name("name")))
+            .and_then(|n| n.text())
+            .map(|t| t.trim().to_string())
+            .filter(|t| !t.is_empty());
+        boxes.push(TruthBox { bounds: b, class });
     }
     if boxes.is_empty() {
         return Err(Error::Input("no <bndbox> in the annotation".into()));
@@ -88,21 +263,30 @@ pub fn parse_voc(text: &str) -> Result<Vec<[f64; 4]>> {
     Ok(boxes)
 }
 
-/// Boxes from `xmin,ymin,xmax,ymax` lines (an optional header is skipped).
-pub fn parse_box_csv(text: &str) -> Result<Vec<[f64; 4]>> {
+/// Boxes from `xmin,ymin,xmax,ymax[,class]` lines (an optional header is
+/// skipped).
+pub fn parse_box_csv(text: &str) -> Result<Vec<TruthBox>> {
     let mut boxes = Vec::new();
     for (number, line) in text.lines().enumerate() {
         let line = line.trim();
         if line.is_empty() || line.starts_with('#') || (number == 0 && line.starts_with("xmin")) {
             continue;
         }
-        let values: Vec<f64> = line
-            .split(',')
-            .map(|v| v.trim().parse::<f64>())
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        let (numbers, class) = match fields.len() {
+            5 if !fields[4].is_empty() => (&fields[..4], Some(fields[4].to_string())),
+            _ => (&fields[..], None),
+        };
+        let values: Vec<f64> = numbers
+            .iter()
+            .map(|v| v.parse::<f64>())
             .collect::<std::result::Result<_, _>>()
             .map_err(|_| Error::Input(format!("line {}: not four numbers", number + 1)))?;
         match values[..] {
-            [a, b, c, d] if a <= c && b <= d => boxes.push([a, b, c, d]),
+            [a, b, c, d] if a <= c && b <= d => boxes.push(TruthBox {
+                bounds: [a, b, c, d],
+                class,
+            }),
             _ => {
                 return Err(Error::Input(format!(
                     "line {}: expected xmin,ymin,xmax,ymax with min ≤ max",
@@ -140,10 +324,72 @@ mod tests {
     }
 
     #[test]
+    fn per_class_figures_and_confusion() {
+        let truth = [
+            ([0.0, 0.0, 10.0, 10.0], "Alive"),
+            ([20.0, 0.0, 30.0, 10.0], "Dead"),
+            ([40.0, 0.0, 50.0, 10.0], "Alive"),
+        ]
+        .map(|(bounds, class)| TruthBox {
+            bounds,
+            class: Some(class.into()),
+        });
+        let detections = [(5.0, 5.0, 0.9), (60.0, 5.0, 0.8), (25.0, 5.0, 0.7)];
+        let m = matches(&detections, &bounds(&truth));
+        assert_eq!(m, vec![Some(0), None, Some(1)]);
+        let p = per_class(&["tree", "tree", "dead"], &truth, &m);
+        let figures = |c: &str| p.classes.iter().find(|f| f.class == c).unwrap().clone();
+        assert_eq!((figures("Alive").truth, figures("Alive").found), (2, 1));
+        assert_eq!((figures("Dead").truth, figures("Dead").found), (1, 1));
+        assert_eq!(
+            (figures("tree").detections, figures("tree").matched),
+            (2, 1)
+        );
+        // "dead" detections and "Dead" boxes are one class.
+        assert_eq!(
+            (figures("Dead").detections, figures("Dead").precision),
+            (1, 1.0)
+        );
+        assert_eq!(p.classes.len(), 3);
+        assert_eq!(p.confusion["tree"]["Alive"], 1);
+        assert_eq!(p.confusion["tree"][NO_CLASS], 1);
+        assert_eq!(p.confusion["dead"]["Dead"], 1);
+        assert_eq!(p.confusion[NO_CLASS]["Alive"], 1);
+        let objects: Vec<VegObject> = detections
+            .iter()
+            .enumerate()
+            .map(|(k, &(x, y, score))| VegObject {
+                id: k as u64,
+                x,
+                y,
+                class: "tree".into(),
+                size: 1.0,
+                score,
+            })
+            .collect();
+        let geojson: serde_json::Value =
+            serde_json::from_str(&matches_geojson(&objects, &truth, &m)).unwrap();
+        let features = geojson["features"].as_array().unwrap();
+        assert_eq!(features.len(), 6);
+        assert_eq!(features[1]["properties"]["matched"], false);
+        assert_eq!(features[5]["properties"]["found"], false);
+    }
+
+    #[test]
     fn truth_formats() {
         let voc = "<annotation><object><name>Tree</name><bndbox><xmin>1</xmin><ymin>2</ymin>\
                    <xmax>3</xmax><ymax>4</ymax></bndbox></object></annotation>";
-        assert_eq!(parse_voc(voc).unwrap(), vec![[1.0, 2.0, 3.0, 4.0]]);
+        assert_eq!(
+            parse_voc(voc).unwrap(),
+            vec![TruthBox {
+                bounds: [1.0, 2.0, 3.0, 4.0],
+                class: Some("Tree".into())
+            }]
+        );
+        assert_eq!(
+            parse_box_csv("1,2,3,4,Dead\n").unwrap()[0].class.as_deref(),
+            Some("Dead")
+        );
         assert!(parse_voc("<a/>").is_err());
         assert!(parse_voc("<a").is_err());
         assert_eq!(

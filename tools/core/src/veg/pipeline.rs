@@ -469,7 +469,7 @@ mod tests {
         let boxes = eval::parse_voc(&truth).unwrap();
         let points: Vec<(f64, f64, f32)> =
             found.objects.iter().map(|o| (o.x, o.y, o.score)).collect();
-        let e = eval::evaluate(&points, &boxes);
+        let e = eval::evaluate(&points, &eval::bounds(&boxes));
         eprintln!(
             "SOAP_061: P {:.3} R {:.3} F1 {:.3}",
             e.precision, e.recall, e.f1
