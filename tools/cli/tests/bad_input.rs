@@ -664,6 +664,67 @@ fn work_beyond_the_memory_budget_is_refused_before_it_starts() {
     );
 }
 
+/// Tiles in far-apart CRSs (a Landsat scene in Paraguay's UTM zone, an
+/// SRTM tile in eastern Turkey) and a world-sized `--te` would make grids
+/// of billions of cells: refused before anything is allocated.
+#[test]
+fn far_apart_tiles_and_world_extents_are_refused() {
+    let d = tempfile::tempdir().unwrap();
+    let landsat = shared("tiles/landsat8_overlap/LC08_L1TP_224077_20200518_20200518_01_RT_B4.TIF");
+    let srtm = shared("dem/srtm_ref.tif");
+    fails(
+        d.path(),
+        &[
+            "stitch",
+            landsat.to_str().unwrap(),
+            srtm.to_str().unwrap(),
+            "--out",
+            "s.tif",
+            "--max-memory",
+            "4G",
+        ],
+        &[
+            "stitched grid of",
+            "needs about",
+            "memory budget is 4.0 GiB",
+        ],
+        &[],
+    );
+    fails(
+        d.path(),
+        &[
+            "prep",
+            "--dem",
+            landsat.to_str().unwrap(),
+            srtm.to_str().unwrap(),
+            "--out",
+            "o.relevo",
+            "--max-memory",
+            "4G",
+        ],
+        &["stitched grid of", "needs about"],
+        &[],
+    );
+    fails(
+        d.path(),
+        &[
+            "stitch",
+            srtm.to_str().unwrap(),
+            "--te",
+            "-180",
+            "-85",
+            "180",
+            "85",
+            "--tr",
+            "0.0001",
+            "--out",
+            "w.tif",
+        ],
+        &["stitched grid of", "needs about", "coarser resolution"],
+        &[],
+    );
+}
+
 /// The cluster bake's atlases are estimated from the atlas budget before
 /// any is drawn: a 4 GiB atlas budget under a 1 GiB memory budget is
 /// refused, and the bundle is left as it was.
