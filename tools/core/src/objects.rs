@@ -379,4 +379,25 @@ mod tests {
             assert!(e.contains(needle), "{text}: {e}");
         }
     }
+
+    /// A model whose faces name vertices it does not have (or none at all)
+    /// is an error naming the file, not a panic.
+    #[test]
+    fn broken_models_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let ground =
+            |x: f64, y: f64| (x >= 0.0 && y >= 0.0 && x <= 1280.0 && y <= 1280.0).then_some(0.0);
+        for (name, obj) in [
+            ("beyond.obj", "v 0 0 0\nv 1 0 0\nf 1 2 9\n"),
+            ("negative.obj", "v 0 0 0\nf -5 -6 -7\n"),
+            ("empty.obj", ""),
+        ] {
+            std::fs::write(dir.path().join(name), obj).unwrap();
+            let text = format!(
+                r#"{{"features": [{{"properties": {{"model": "{name}"}}, "geometry": {{"type": "Point", "coordinates": [1200, 2600]}}}}]}}"#
+            );
+            let e = parse_placement(&text, dir.path(), &frame(), &ground).unwrap_err();
+            assert!(e.contains(name), "{name}: {e}");
+        }
+    }
 }
