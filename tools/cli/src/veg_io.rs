@@ -16,6 +16,7 @@ use relevo_core::raster::stretch::{stretch_or_default, to_interleaved_u8};
 use relevo_core::raster::Raster;
 use relevo_core::veg::db::VegObject;
 use relevo_core::veg::pipeline::{Extraction, VegImage};
+use relevo_core::veg::samples::Sample;
 use relevo_core::veg::Image;
 use std::path::Path;
 
@@ -156,6 +157,97 @@ pub fn write_gpkg(path: &Path, objects: &[VegObject], crs_wkt: &str) -> Result<(
     });
     gdal::config::clear_config_option("OGR_CURRENT_DATE")?;
     result
+}
+
+/// Land-cover labels from any vector file GDAL reads (GeoPackage, GeoJSON,
+/// Shapefile): each feature's `field` names its class; polygons (their
+/// outer rings) and points (the pixel each falls in) are placed on the pixel
+/// grid of `image`, reprojected from the layer's CRS to the image's.
+pub fn read_land_cover(path: &Path, field: &str, image: &VegImage) -> Result<Vec<Sample>> {
+    let dataset = gdal::Dataset::open(path)
+        .map_err(|e| anyhow!("{}: cannot open as vector data ({e})", path.display()))?;
+    let Some(geo) = image.geotransform else {
+        bail!(
+            "{}: the image is not georeferenced, so land-cover labels cannot be placed on it",
+            path.display()
+        );
+    };
+    let target = match image.crs_wkt.as_str() {
+        "" => None,
+        wkt => Some(SpatialRef::from_wkt(wkt)?),
+    };
+    let mut labels = Vec::new();
+    for mut layer in dataset.layers() {
+        let source = layer.spatial_ref();
+        for feature in layer.features() {
+            let index = feature.field_index(field).map_err(|_| {
+                anyhow!(
+                    "{}: no field {field:?} (--land-cover-field)",
+                    path.display()
+                )
+            })?;
+            let Some(class) = feature.field_as_string(index)?.filter(|c| !c.is_empty()) else {
+                continue;
+            };
+            let Some(geometry) = feature.geometry() else {
+                continue;
+            };
+            let mut shapes = Vec::new();
+            outer_rings(geometry, &mut shapes);
+            for (mut points, is_point) in shapes {
+                if let (Some(from), Some(to)) = (&source, &target) {
+                    let (mut xs, mut ys): (Vec<f64>, Vec<f64>) = points.iter().copied().unzip();
+                    crs::transform_points(from, to, &mut xs, &mut ys)?;
+                    points = xs.into_iter().zip(ys).collect();
+                }
+                let pixels: Option<Vec<[f64; 2]>> = points
+                    .iter()
+                    .map(|&(x, y)| geo.invert(x, y).map(|(c, r)| [c, r]))
+                    .collect();
+                let Some(mut polygon) = pixels else {
+                    bail!(
+                        "{}: the image's georeferencing cannot be inverted",
+                        path.display()
+                    );
+                };
+                if is_point {
+                    let [c, r] = [polygon[0][0].floor(), polygon[0][1].floor()];
+                    polygon = vec![[c, r], [c + 1.0, r], [c + 1.0, r + 1.0], [c, r + 1.0]];
+                }
+                labels.push(Sample {
+                    class: class.clone(),
+                    polygon,
+                });
+            }
+        }
+    }
+    if labels.is_empty() {
+        bail!("{}: no labelled points or polygons", path.display());
+    }
+    Ok(labels)
+}
+
+/// The points of each outer ring of `geometry` (polygons, also inside
+/// multi-geometries), and each point, flagged as a point.
+fn outer_rings(geometry: &Geometry, out: &mut Vec<(Vec<(f64, f64)>, bool)>) {
+    use gdal::vector::{geometry_type_flatten, OGRwkbGeometryType as T};
+    let points = |g: &Geometry| {
+        let mut p = Vec::new();
+        g.get_points(&mut p);
+        p.into_iter().map(|(x, y, _)| (x, y)).collect::<Vec<_>>()
+    };
+    match geometry_type_flatten(geometry.geometry_type()) {
+        T::wkbPoint => out.push((points(geometry), true)),
+        T::wkbPolygon if geometry.geometry_count() > 0 => {
+            out.push((points(&geometry.get_geometry(0)), false));
+        }
+        T::wkbMultiPoint | T::wkbMultiPolygon | T::wkbGeometryCollection => {
+            for k in 0..geometry.geometry_count() {
+                outer_rings(&geometry.get_geometry(k), out);
+            }
+        }
+        _ => {}
+    }
 }
 
 /// Write the labels as a two-band UInt32 GeoTIFF: band 1 the region of each

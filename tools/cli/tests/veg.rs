@@ -709,3 +709,149 @@ fn the_labels_leave_a_no_data_collar_without_a_class() {
         "{collar_px} {data_px}"
     );
 }
+
+/// `veg detect --land-cover` scores the classified pixels against the
+/// land-cover polygons beside the Landsat scene: every class is reported,
+/// with as many labelled pixels as GDAL's own rasterisation of that class
+/// (pixel centres inside, the same rule), and the vegetation counts agree
+/// with the classes' counts.
+#[test]
+fn land_cover_labels_score_the_classified_pixels() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = "tiles/landsat8_overlap/LC08_L1TP_224078_20200518_20200518_01_RT";
+    let rgb = dir.path().join("rgb.vrt");
+    let band = |b: &str| shared(&format!("{scene}_{b}.TIF")).display().to_string();
+    common::gdal_tool(
+        "gdalbuildvrt",
+        &[
+            "-q",
+            "-separate",
+            "-srcnodata",
+            "0",
+            rgb.to_str().unwrap(),
+            &band("B4"),
+            &band("B3"),
+            &band("B2"),
+        ],
+    );
+    let polygons = shared(&format!("{scene}_polygons.gpkg"));
+    let out = dir.path().join("db.csv");
+    let json = veg_detect_ok(
+        &rgb,
+        &repo("data/landcover/landsat_224078_samples.csv"),
+        &out,
+        &["--land-cover", polygons.to_str().unwrap(), "--json"],
+    );
+    let report: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let figures = report["land_cover"].as_array().unwrap();
+    let classes: Vec<&str> = figures
+        .iter()
+        .map(|f| f["class"].as_str().unwrap())
+        .collect();
+    assert_eq!(classes, ["crop", "developed", "tree", "water"]);
+    let a = read(&shared(&format!("{scene}_B4.TIF")));
+    for f in figures {
+        let class = f["class"].as_str().unwrap();
+        let burned = dir.path().join(format!("{class}.tif"));
+        let te = [
+            a.geotransform[0],
+            a.geotransform[3] + a.height as f64 * a.geotransform[5],
+            a.geotransform[0] + a.width as f64 * a.geotransform[1],
+            a.geotransform[3],
+        ]
+        .map(|v| v.to_string());
+        let (w, h) = (a.width.to_string(), a.height.to_string());
+        common::gdal_tool(
+            "gdal_rasterize",
+            &[
+                "-q",
+                "-burn",
+                "1",
+                "-ot",
+                "Byte",
+                "-where",
+                &format!("name = '{class}'"),
+                "-te",
+                &te[0],
+                &te[1],
+                &te[2],
+                &te[3],
+                "-ts",
+                &w,
+                &h,
+                polygons.to_str().unwrap(),
+                burned.to_str().unwrap(),
+            ],
+        );
+        let expected = read(&burned).bands[0].iter().filter(|&&v| v == 1.0).count() as u64;
+        let pixels = f["pixels"].as_u64().unwrap();
+        assert!(expected > 20, "{class}: {expected} pixels burned");
+        assert_eq!(pixels, expected, "{class}");
+        let by_class: u64 = f["by_class"]
+            .as_object()
+            .unwrap()
+            .values()
+            .map(|v| v.as_u64().unwrap())
+            .sum();
+        assert_eq!(by_class, pixels, "{class}");
+        let vegetation = f["vegetation"].as_u64().unwrap();
+        assert_eq!(
+            vegetation,
+            f["by_class"]
+                .get("forest")
+                .map_or(0, |v| v.as_u64().unwrap()),
+            "{class}"
+        );
+    }
+}
+
+/// Land-cover labels that cannot be used are refused naming the file: a
+/// missing file, a field that is not there, an image without
+/// georeferencing to place them on.
+#[test]
+fn unusable_land_cover_labels_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = "tiles/landsat8_overlap/LC08_L1TP_224078_20200518_20200518_01_RT";
+    let polygons = shared(&format!("{scene}_polygons.gpkg"));
+    let b4 = shared(&format!("{scene}_B4.TIF"));
+    let samples = repo("data/landcover/landsat_224078_samples.csv");
+    let out = dir.path().join("db.csv");
+    let missing = dir.path().join("nowhere.gpkg");
+    for (image, extra, needle) in [
+        (
+            &b4,
+            vec!["--land-cover", missing.to_str().unwrap()],
+            "nowhere.gpkg: cannot open",
+        ),
+        (
+            &b4,
+            vec![
+                "--land-cover",
+                polygons.to_str().unwrap(),
+                "--land-cover-field",
+                "landuse",
+            ],
+            "no field \"landuse\"",
+        ),
+    ] {
+        let result = veg_detect(image, &samples, &out, &extra);
+        let stderr = String::from_utf8_lossy(&result.stderr);
+        assert_eq!(result.status.code(), Some(1), "{stderr}");
+        assert!(stderr.contains(needle), "{stderr}");
+    }
+    // An image without georeferencing (SOAP_061 is a plain PNG).
+    let result = veg_detect(
+        &shared("trees/SOAP_061.png"),
+        &repo("data/trees/soap_061_samples.csv"),
+        &out,
+        &[
+            "--pixel-size",
+            "0.1",
+            "--land-cover",
+            polygons.to_str().unwrap(),
+        ],
+    );
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert_eq!(result.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("not georeferenced"), "{stderr}");
+}

@@ -120,6 +120,14 @@ pub struct VegDetectArgs {
     /// Also write a PNG of regions and objects over the image.
     #[arg(long)]
     pub overlay: Option<PathBuf>,
+    /// Score the classified pixels against land-cover labels (a vector
+    /// file of polygons and points, e.g. GeoPackage): per land-cover class,
+    /// the share of its pixels called vegetation and each class's count.
+    #[arg(long, value_name = "FILE")]
+    pub land_cover: Option<PathBuf>,
+    /// The field of --land-cover that names each feature's class.
+    #[arg(long, default_value = "name")]
+    pub land_cover_field: String,
     /// Print a JSON report.
     #[arg(long)]
     pub json: bool,
@@ -196,6 +204,12 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
         image.image.width,
         image.image.height,
     )?;
+    // Land-cover labels are read before any work, so bad ones cost nothing.
+    let land_cover_labels = a
+        .land_cover
+        .as_ref()
+        .map(|path| veg_io::read_land_cover(path, &a.land_cover_field, &image))
+        .transpose()?;
     let options = a.options();
     let extraction = pipeline::extract(&image, &samples, &options)
         .with_context(|| format!("{}", a.image.display()))?;
@@ -211,9 +225,24 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
         let png = encode_rgba(&rgba, image.image.width, image.image.height)?;
         output::write_atomic(path, &png)?;
     }
+    let land_cover = match &land_cover_labels {
+        Some(labels) => {
+            let names: Vec<(&str, bool)> = class_kinds(&extraction).collect();
+            let seg = &extraction.segmentation;
+            let valid = |i: usize| image.valid.as_ref().is_none_or(|v| v[i]);
+            Some(eval::land_cover(labels, seg.width, seg.height, |i| {
+                valid(i).then(|| names[extraction.labels[seg.labels[i] as usize].class])
+            }))
+        }
+        None => None,
+    };
     let r = &extraction.report;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(r)?);
+        let mut report = serde_json::to_value(r)?;
+        if let Some(figures) = &land_cover {
+            report["land_cover"] = serde_json::to_value(figures)?;
+        }
+        println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         println!(
             "{}: {}×{} px of {:.2} m, {} leaves → {} regions, {} objects ({:.0} ms split-and-merge, {:.0} ms classify, {:.0} ms place)",
@@ -235,8 +264,31 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
                 c.objects
             );
         }
+        if let Some(figures) = &land_cover {
+            println!("  land cover       pixels  called vegetation  by class");
+            for f in figures {
+                let by: Vec<String> = f.by_class.iter().map(|(c, n)| format!("{c} {n}")).collect();
+                println!(
+                    "  {:<12} {:>10}  {:>8} ({:>5.1} %)  {}",
+                    f.class,
+                    f.pixels,
+                    f.vegetation,
+                    100.0 * f.vegetation_share,
+                    by.join(", ")
+                );
+            }
+        }
     }
     Ok(())
+}
+
+/// Each extraction class's name and whether it is vegetation, by index.
+fn class_kinds(extraction: &pipeline::Extraction) -> impl Iterator<Item = (&str, bool)> {
+    extraction
+        .report
+        .classes
+        .iter()
+        .map(|c| (c.class.as_str(), c.vegetation))
 }
 
 /// `veg eval`: overall and per-class figures, and the matches as GeoJSON.

@@ -6,6 +6,7 @@
 //! sees where detection fails.
 
 use crate::veg::db::VegObject;
+use crate::veg::samples::Sample;
 use crate::{Error, Result};
 use serde_json::json;
 use std::collections::BTreeMap;
@@ -229,6 +230,74 @@ pub fn matches_geojson(
     json!({"type": "FeatureCollection", "features": features}).to_string()
 }
 
+/// How the pixels of one land-cover class were classified: labelled pixels
+/// (centres inside its polygons), how many fell in vegetation regions, and
+/// how many in each extraction class.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct LandCoverFigures {
+    pub class: String,
+    pub pixels: usize,
+    pub vegetation: usize,
+    /// `vegetation / pixels`.
+    pub vegetation_share: f64,
+    pub by_class: BTreeMap<String, usize>,
+}
+
+/// Score a classification against land-cover labels, per land-cover class.
+/// `labels` are polygons in pixel coordinates of a `width`×`height` image
+/// (a point label is a one-pixel square); `pixel(i)` is the extraction's
+/// class of pixel `i` and whether it is vegetation, `None` without data.
+pub fn land_cover<'a>(
+    labels: &[Sample],
+    width: usize,
+    height: usize,
+    pixel: impl Fn(usize) -> Option<(&'a str, bool)>,
+) -> Vec<LandCoverFigures> {
+    let mut figures: BTreeMap<&str, LandCoverFigures> = BTreeMap::new();
+    for label in labels {
+        let entry = figures
+            .entry(label.class.as_str())
+            .or_insert_with(|| LandCoverFigures {
+                class: label.class.clone(),
+                pixels: 0,
+                vegetation: 0,
+                vegetation_share: 0.0,
+                by_class: BTreeMap::new(),
+            });
+        let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+        for &[x, y] in &label.polygon {
+            (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
+        }
+        let clamp = |v: f64, n: usize| v.floor().clamp(0.0, n as f64) as usize;
+        let (c0, c1) = (clamp(x0, width), clamp(x1 + 1.0, width));
+        let (r0, r1) = (clamp(y0, height), clamp(y1 + 1.0, height));
+        for r in r0..r1 {
+            for c in c0..c1 {
+                if !label.contains(c as f64 + 0.5, r as f64 + 0.5) {
+                    continue;
+                }
+                let Some((class, vegetation)) = pixel(r * width + c) else {
+                    continue;
+                };
+                entry.pixels += 1;
+                entry.vegetation += usize::from(vegetation);
+                *entry.by_class.entry(class.to_string()).or_default() += 1;
+            }
+        }
+    }
+    figures
+        .into_values()
+        .map(|mut f| {
+            f.vegetation_share = if f.pixels == 0 {
+                0.0
+            } else {
+                f.vegetation as f64 / f.pixels as f64
+            };
+            f
+        })
+        .collect()
+}
+
 /// Boxes of a Pascal VOC annotation (`<object><bndbox><xmin>…`).
 pub fn parse_voc(text: &str) -> Result<Vec<TruthBox>> {
     let doc =
@@ -373,6 +442,31 @@ mod tests {
         assert_eq!(features.len(), 6);
         assert_eq!(features[1]["properties"]["matched"], false);
         assert_eq!(features[5]["properties"]["found"], false);
+    }
+
+    #[test]
+    fn land_cover_counts_pixels_inside_each_label() {
+        // A 10×10 image: the left half forest (vegetation), the right water.
+        let square = |class: &str, x0: f64, x1: f64| Sample {
+            class: class.into(),
+            polygon: vec![[x0, 0.0], [x1, 0.0], [x1, 10.0], [x0, 10.0]],
+        };
+        let labels = [square("tree", 0.0, 4.0), square("water", 4.0, 10.0)];
+        let classes = ["forest", "water"];
+        let f = land_cover(&labels, 10, 10, |i| {
+            let forest = i % 10 < 5;
+            Some((classes[usize::from(!forest)], forest))
+        });
+        assert_eq!(
+            (f[0].class.as_str(), f[0].pixels, f[0].vegetation),
+            ("tree", 40, 40)
+        );
+        assert_eq!(
+            (f[1].class.as_str(), f[1].pixels, f[1].vegetation),
+            ("water", 60, 10)
+        );
+        assert_eq!(f[1].by_class["water"], 50);
+        assert!((f[1].vegetation_share - 1.0 / 6.0).abs() < 1e-12);
     }
 
     #[test]
