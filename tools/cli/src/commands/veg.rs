@@ -344,6 +344,14 @@ fn score(
         e.detections,
         e.truth
     );
+    // A ratio, or a dash when nothing was counted.
+    let ratio = |value: f64, of: usize| {
+        if of > 0 {
+            format!("{value:.3}")
+        } else {
+            "—".into()
+        }
+    };
     println!("  class          detections  matched  precision    boxes  found  recall");
     for c in &per_class.classes {
         println!(
@@ -351,18 +359,10 @@ fn score(
             c.class,
             c.detections,
             c.matched,
-            if c.detections > 0 {
-                format!("{:.3}", c.precision)
-            } else {
-                "—".into()
-            },
+            ratio(c.precision, c.detections),
             c.truth,
             c.found,
-            if c.truth > 0 {
-                format!("{:.3}", c.recall)
-            } else {
-                "—".into()
-            },
+            ratio(c.recall, c.truth),
         );
     }
     println!("  matches (detection class → truth class):");
