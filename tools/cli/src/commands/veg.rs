@@ -211,7 +211,7 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
         .map(|path| veg_io::read_land_cover(path, &a.land_cover_field, &image))
         .transpose()?;
     let options = a.options();
-    let extraction = pipeline::extract(&image, &samples, &options)
+    let extraction = extract_with_progress(&image, &samples, &options)
         .with_context(|| format!("{}", a.image.display()))?;
     output::write_atomic(&a.out, db::to_csv(&extraction.objects).as_bytes())?;
     if let Some(path) = &a.gpkg {
@@ -280,6 +280,34 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// [`pipeline::extract`] on a worker thread while a bar shows its stage.
+fn extract_with_progress(
+    image: &pipeline::VegImage,
+    samples: &[samples::Sample],
+    options: &VegOptions,
+) -> relevo_core::Result<pipeline::Extraction> {
+    const STAGES: [&str; pipeline::Watch::STAGES] = ["split and merge", "classify", "place"];
+    let watch = pipeline::Watch::default();
+    let bar = crate::progress::bar(STAGES.len() as u64, "vegetation");
+    let result = std::thread::scope(|scope| {
+        let worker = scope.spawn(|| pipeline::extract_watched(image, samples, options, &watch));
+        while !worker.is_finished() {
+            let done = (watch.fraction() * STAGES.len() as f32).round() as usize;
+            bar.set_position(done as u64);
+            bar.set_message(STAGES.get(done).copied().unwrap_or(""));
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+        worker.join()
+    });
+    bar.finish_and_clear();
+    match result {
+        Ok(extraction) => extraction,
+        Err(_) => Err(relevo_core::Error::Input(
+            "the vegetation extraction stopped unexpectedly".into(),
+        )),
+    }
 }
 
 /// Each extraction class's name and whether it is vegetation, by index.
