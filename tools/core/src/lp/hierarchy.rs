@@ -56,13 +56,6 @@ impl ErrorMetric {
     pub fn unrecorded() -> ErrorMetric {
         ErrorMetric::Midpoint
     }
-
-    pub fn name(self) -> &'static str {
-        match self {
-            ErrorMetric::Bound => "bound",
-            ErrorMetric::Midpoint => "midpoint",
-        }
-    }
 }
 
 /// Per-vertex error and radius, row-major, interleaved as `[δ, r]`: owned

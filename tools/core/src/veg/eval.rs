@@ -97,6 +97,15 @@ impl Evaluation {
     }
 }
 
+/// Per truth box (of `boxes`), whether a detection matched it.
+fn boxes_found(matches: &[Option<usize>], boxes: usize) -> Vec<bool> {
+    let mut found = vec![false; boxes];
+    for &t in matches.iter().flatten() {
+        found[t] = true;
+    }
+    found
+}
+
 /// One class's figures: its detections and how many matched a box of any
 /// class (precision), its truth boxes and how many were found (recall).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -133,15 +142,9 @@ pub fn per_class(
 ) -> PerClass {
     let truth_class = |t: usize| truth[t].class.as_deref().unwrap_or(NO_CLASS);
     let mut confusion: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
-    let mut found = vec![false; truth.len()];
+    let found = boxes_found(matches, truth.len());
     for (&class, m) in detection_classes.iter().zip(matches) {
-        let to = match m {
-            Some(t) => {
-                found[*t] = true;
-                truth_class(*t)
-            }
-            None => NO_CLASS,
-        };
+        let to = m.map_or(NO_CLASS, truth_class);
         *confusion
             .entry(class.into())
             .or_default()
@@ -204,12 +207,9 @@ pub fn matches_geojson(
     truth: &[TruthBox],
     matches: &[Option<usize>],
 ) -> String {
-    let mut found = vec![false; truth.len()];
+    let found = boxes_found(matches, truth.len());
     let mut features = Vec::with_capacity(objects.len() + truth.len());
     for (o, m) in objects.iter().zip(matches) {
-        if let Some(t) = m {
-            found[*t] = true;
-        }
         features.push(json!({
             "type": "Feature",
             "properties": {"kind": "detection", "id": o.id, "class": o.class, "score": o.score,
