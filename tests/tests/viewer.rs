@@ -386,7 +386,7 @@ fn the_hud_counts_the_objects_in_view_and_impostors_stand_on_the_mesh_drawn() {
                 let (_, stats) =
                     render_once(&device, &queue, &mut scene, &flight, &settings, SIZE, false)
                         .unwrap();
-                let camera = flight.camera_for(&scene, SIZE, &settings);
+                let camera = flight.camera(&scene, SIZE);
                 let vegetation = scene.vegetation.as_ref().unwrap();
                 let last = vegetation.cut.last_distance();
                 let planes = camera.frustum_planes();

@@ -364,7 +364,6 @@ impl ViewerApp {
         );
         ui.checkbox(&mut s.morph, "geomorphing (g)");
         ui.checkbox(&mut s.cull, "frustum culling");
-        ui.checkbox(&mut s.true_pitch, "true pitch (mesh, z-buffer)");
         ui.checkbox(&mut s.wireframe, "wireframe (w)");
         ui.checkbox(&mut s.texture, "drape texture (t)");
         ui.label("Raycast");
@@ -404,7 +403,7 @@ impl ViewerApp {
             vegetation_panel(ui, &mut self.settings, vegetation);
         }
         ui.separator();
-        let label = ui.label("Camera X,Y,Z,HEADING[,INCL]");
+        let label = ui.label("Camera X,Y,Z,HEADING[,PITCHdeg][,INCL]");
         ui.text_edit_singleline(&mut self.camera_text)
             .labelled_by(label.id);
         ui.horizontal(|ui| {
@@ -496,7 +495,7 @@ impl ViewerApp {
             controls.turn += drag.x as f64 / 4.0 / dt.max(1e-3) / 60.0;
             controls.look += drag.y as f64 / rect.height() as f64 / dt.max(1e-3) / 0.5;
         }
-        let camera = flight.camera_for(scene, size, &self.settings);
+        let camera = flight.camera(scene, size);
         let pointer = response
             .hover_pos()
             .map(|p| ((p.x - rect.min.x) * ppp, (p.y - rect.min.y) * ppp));
@@ -533,7 +532,7 @@ impl ViewerApp {
         }
         flight.fly(scene, &controls, dt);
 
-        let camera = flight.camera_for(scene, size, &self.settings);
+        let camera = flight.camera(scene, size);
         let (device, queue) = (&state.device, &state.queue);
         let renderer = self
             .renderer

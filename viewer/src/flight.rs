@@ -2,12 +2,14 @@
 //! (after SJD-Vis3D, LP seed §2.2.3: arrows move and turn, `a`/`b` — here
 //! PgUp/PgDn — climb and sink along the terrain normal). The camera never
 //! goes below the surface; terrain following keeps the height above ground.
+//! Looking up and down tilts the camera for real (every mode draws the
+//! pitch, the raycast within its range).
 
-use crate::gpu::{Mode, Settings};
 use crate::scene::Scene;
 use glam::DVec3;
 use relevo_core::camera::Camera;
 use relevo_core::grid::vertex_normal;
+use relevo_core::horizon::pitch_range;
 use relevo_core::scene::{CameraPose, View};
 
 /// Lowest height of the eye above the ground, metres.
@@ -20,7 +22,10 @@ pub struct Flight {
     pub position: DVec3,
     /// Degrees clockwise from north.
     pub heading_deg: f64,
-    /// The horizon's screen row as a fraction of the height from the bottom
+    /// Degrees above the horizon (negative looks down); kept within the
+    /// raycaster's range when the camera is made.
+    pub pitch_deg: f64,
+    /// The view axis's screen row as a fraction of the height from the bottom
     /// (0.5 centred; larger looks further down): the seed's `incl`, kept
     /// relative so a resize keeps the view.
     pub horizon_frac: f64,
@@ -43,14 +48,14 @@ pub struct Controls {
     pub turn: f64,
     /// Climb (+) or sink (−) along the terrain normal.
     pub climb: f64,
-    /// Look down (+) or up (−): moves the horizon on the screen.
+    /// Look down (+) or up (−): tilts the camera.
     pub look: f64,
 }
 
 /// Turn rate at full input, degrees per second.
 const TURN_DEG_PER_S: f64 = 60.0;
-/// Horizon travel at full input, screen heights per second.
-const LOOK_PER_S: f64 = 0.5;
+/// Tilt rate at full input, degrees per second.
+const LOOK_DEG_PER_S: f64 = 30.0;
 
 /// A speed that crosses the scene in about a minute (10 m/s to 2 km/s).
 fn cruising_speed(scene: &Scene) -> f64 {
@@ -64,6 +69,7 @@ impl Flight {
         Flight::from_pose(scene, &view.pose(), 720).unwrap_or(Flight {
             position: DVec3::new(scene.extent_m() / 2.0, 0.0, 1000.0),
             heading_deg: 0.0,
+            pitch_deg: 0.0,
             horizon_frac: 0.75,
             fov_x_deg: 60.0,
             far_cells: 1024.0,
@@ -78,6 +84,7 @@ impl Flight {
         Some(Flight {
             position: DVec3::new(x, y, pose.eye[2]),
             heading_deg: pose.heading_deg,
+            pitch_deg: pose.pitch_deg,
             horizon_frac: pose.incl_px.map_or(0.5, |incl| incl / height_px as f64),
             fov_x_deg: 60.0,
             far_cells: 1024.0,
@@ -95,14 +102,17 @@ impl Flight {
         CameraPose {
             eye: [east, north, self.position.z],
             heading_deg: self.heading_deg.rem_euclid(360.0),
+            pitch_deg: self.pitch_deg,
             incl_px: Some(self.horizon_frac * height_px as f64),
         }
     }
 
-    /// The core camera for a `size` viewport (near plane one cell ahead).
+    /// The core camera for a `size` viewport (near plane one cell ahead),
+    /// its pitch within the raycaster's range for that viewport so that
+    /// every mode draws the same view.
     pub fn camera(&self, scene: &Scene, size: [u32; 2]) -> Camera {
         let cell = scene.frame.cell_size_m;
-        Camera {
+        let mut camera = Camera {
             position: self.position,
             heading_deg: self.heading_deg,
             pitch_deg: 0.0,
@@ -112,21 +122,9 @@ impl Flight {
             height: size[1],
             near_m: cell,
             far_m: self.far_cells * cell,
-        }
-    }
-
-    /// The camera `settings` draw with: with true pitch (mesh and Z-buffer
-    /// modes) the view tilts down by the angle the projection-plane shift
-    /// would show at the screen's centre — atan((incl − h/2) / d), d the
-    /// plane distance in pixels — so switching modes keeps what is in the
-    /// middle of the screen; the raycast always shifts the plane instead.
-    pub fn camera_for(&self, scene: &Scene, size: [u32; 2], settings: &Settings) -> Camera {
-        let mut camera = self.camera(scene, size);
-        if settings.true_pitch && settings.mode != Mode::Raycast {
-            let shift_px = camera.incl_px - size[1] as f64 / 2.0;
-            camera.pitch_deg = -(shift_px / camera.plane_distance_px()).atan().to_degrees();
-            camera.incl_px = size[1] as f64 / 2.0;
-        }
+        };
+        let [low, high] = pitch_range(&camera);
+        camera.pitch_deg = self.pitch_deg.clamp(low, high);
         camera
     }
 
@@ -142,7 +140,9 @@ impl Flight {
         let above = self.height_above_ground(scene);
         self.heading_deg =
             (self.heading_deg + controls.turn * TURN_DEG_PER_S * dt).rem_euclid(360.0);
-        self.horizon_frac = (self.horizon_frac + controls.look * LOOK_PER_S * dt).clamp(0.05, 4.0);
+        // Within the range of a 16:9 view, so that no input is lost beyond it.
+        let [low, high] = pitch_range(&self.camera(scene, [1280, 720]));
+        self.pitch_deg = (self.pitch_deg - controls.look * LOOK_DEG_PER_S * dt).clamp(low, high);
         let h = self.heading_deg.to_radians();
         let step = controls.forward * self.speed_mps * dt;
         self.position += DVec3::new(h.sin() * step, h.cos() * step, 0.0);

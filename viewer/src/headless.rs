@@ -29,9 +29,14 @@ pub struct RenderArgs {
     #[arg(long, default_value = "mesh", value_parser = Mode::parse)]
     pub mode: Mode,
     /// Eye easting, northing (bundle CRS), height (m), heading (° clockwise
-    /// from north) and incl (the horizon's screen row in pixels from the
-    /// bottom; larger looks further down). Default: the home view.
-    #[arg(long, value_name = "X,Y,Z,HEADING[,INCL]", allow_hyphen_values = true)]
+    /// from north), optionally the pitch with its unit (`-20deg` looks down)
+    /// and incl (the view axis's screen row in pixels from the bottom;
+    /// larger looks further down). Default: the home view.
+    #[arg(
+        long,
+        value_name = "X,Y,Z,HEADING[,PITCHdeg][,INCL]",
+        allow_hyphen_values = true
+    )]
     pub camera: Option<String>,
     /// Image size, WIDTHxHEIGHT.
     #[arg(long, default_value = "1280x720", value_parser = scene::parse_size)]
@@ -48,10 +53,6 @@ pub struct RenderArgs {
     /// Mesh mode: no geomorphing.
     #[arg(long)]
     pub no_morph: bool,
-    /// Mesh and Z-buffer modes: tilt the camera by the INCL's angle instead
-    /// of shifting the projection plane.
-    #[arg(long)]
-    pub true_pitch: bool,
     /// Mesh mode: wireframe over the surface.
     #[arg(long)]
     pub wireframe: bool,
@@ -226,7 +227,7 @@ pub fn render_once(
     size: [u32; 2],
     hud: bool,
 ) -> Result<(Readback, FrameStats)> {
-    let camera = flight.camera_for(scene, size, settings);
+    let camera = flight.camera(scene, size);
     let mut renderer = Renderer::new(device, queue, scene, size);
     let start = Instant::now();
     let stats = renderer.render(device, queue, scene, &camera, settings)?;
@@ -287,7 +288,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         .as_deref()
         .map(CameraPose::parse)
         .transpose()
-        .map_err(anyhow::Error::msg)?;
+        .map_err(|e| anyhow::anyhow!("--camera {e}"))?;
     let mut scene = Scene::open(&a.bundle)?;
     if let Some(path) = &a.objects {
         scene.load_objects(path)?;
@@ -310,7 +311,6 @@ pub fn run(a: RenderArgs) -> Result<()> {
         wireframe: a.wireframe,
         texture: !a.no_texture,
         terrain: !a.no_terrain,
-        true_pitch: a.true_pitch,
         objects: !a.no_objects,
         vegetation: a.vegetation,
         sprites: a.sprites,

@@ -27,7 +27,7 @@ struct Cli {
     /// Objects to composite: a GeoJSON placement file (see docs/formats.md).
     #[arg(long, requires = "bundle")]
     objects: Option<PathBuf>,
-    /// Start at this camera, X,Y,Z,HEADING[,INCL] (default: the home view).
+    /// Start at this camera, X,Y,Z,HEADING[,PITCHdeg][,INCL] (default: the home view).
     #[arg(long, requires = "bundle", allow_hyphen_values = true)]
     camera: Option<String>,
     /// Fly a scripted tour of this many frames (forward, turning), then

@@ -462,9 +462,9 @@ pub fn render(data: &Path, runs: usize, json_lines: bool) -> Result<()> {
                         near_m: *cell,
                         far_m: far * cell,
                     };
-                    renderer.render(&terrain, &camera, options); // warm the buffers
+                    renderer.render(&terrain, &camera, options)?; // warm the buffers
                     for _ in 0..runs {
-                        let f = renderer.render(&terrain, &camera, options);
+                        let f = renderer.render(&terrain, &camera, options)?;
                         total.push(f.steps.setup_ms + f.steps.march_ms + f.steps.output_ms);
                         steps.push(f.steps);
                     }

@@ -221,7 +221,7 @@ fn frame_time(
                 heading_deg: heading,
                 ..*home
             };
-            let camera = flight.camera_for(scene, size, settings);
+            let camera = flight.camera(scene, size);
             let start = Instant::now();
             stats = renderer.render(device, queue, scene, &camera, settings)?;
             wait_for_gpu(device)?;

@@ -528,7 +528,7 @@ impl Bench {
                     heading_deg,
                     ..home
                 }
-                .camera_for(&scene, SIZE, &Settings::default())
+                .camera(&scene, SIZE)
             })
             .collect();
         let terrain_only = Settings {

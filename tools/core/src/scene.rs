@@ -17,8 +17,10 @@ pub struct View {
     pub eye: [f64; 3],
     /// Degrees clockwise from north.
     pub heading_deg: f64,
+    /// Tilt of the view above the horizon, degrees (negative looks down).
+    pub pitch_deg: f64,
     /// Projection-plane shift: the screen row, in pixels from the bottom,
-    /// of the horizon; `None` centres it.
+    /// the view axis passes through; `None` centres it.
     pub incl_px: Option<f64>,
     /// Horizontal field of view, degrees.
     pub fov_x_deg: f64,
@@ -34,6 +36,7 @@ impl View {
         CameraPose {
             eye: self.eye,
             heading_deg: self.heading_deg,
+            pitch_deg: self.pitch_deg,
             incl_px: self.incl_px,
         }
     }
@@ -47,6 +50,7 @@ impl View {
         View {
             eye: [x0 + 0.15 * (x1 - x0), y0 + 0.1 * (y1 - y0), top + 150.0],
             heading_deg: 35.0,
+            pitch_deg: 0.0,
             incl_px: Some(size[1] as f64 * 0.75),
             fov_x_deg: 60.0,
             size,
@@ -56,55 +60,78 @@ impl View {
 }
 
 /// The position and direction part of a camera, as typed on the command line
-/// and copied from the viewer: `X,Y,Z,HEADING[,INCL]`.
+/// and copied from the viewer: `X,Y,Z,HEADING[,PITCHdeg][,INCL]` — the eye,
+/// the heading, an optional pitch in degrees (written with its `deg` unit,
+/// negative looks down) and an optional projection-plane shift in pixels
+/// (the seed's `incl`, a bare number as before pitches existed).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CameraPose {
     /// Easting, northing (CRS units), height (metres).
     pub eye: [f64; 3],
     /// Degrees clockwise from north.
     pub heading_deg: f64,
+    /// Degrees above the horizon (0 when the string has none).
+    pub pitch_deg: f64,
     /// Projection-plane shift in pixels from the bottom (see [`View`]).
     pub incl_px: Option<f64>,
 }
 
-impl CameraPose {
-    /// Parse `X,Y,Z,HEADING[,INCL]`.
-    pub fn parse(text: &str) -> Result<CameraPose, String> {
-        let values: Vec<f64> = text
-            .split(',')
-            .map(|v| v.trim().parse::<f64>())
-            .collect::<Result<_, _>>()
-            .map_err(|_| format!("{text:?}: expected numbers X,Y,Z,HEADING[,INCL]"))?;
-        Self::from_values(&values)
-    }
+/// The camera string's syntax, for messages.
+const POSE_SYNTAX: &str = "X,Y,Z,HEADING[,PITCHdeg][,INCL]";
 
-    /// From the numbers `X, Y, Z, HEADING[, INCL]`.
-    pub fn from_values(values: &[f64]) -> Result<CameraPose, String> {
-        if !(4..=5).contains(&values.len()) {
+impl CameraPose {
+    /// Parse `X,Y,Z,HEADING[,PITCHdeg][,INCL]`.
+    pub fn parse(text: &str) -> Result<CameraPose, String> {
+        let fields: Vec<&str> = text.split(',').map(str::trim).collect();
+        if !(4..=6).contains(&fields.len()) {
             return Err(format!(
-                "--camera takes X,Y,Z,HEADING[,INCL], got {} value(s)",
-                values.len()
+                "{text:?}: expected {POSE_SYNTAX}, got {} value(s)",
+                fields.len()
             ));
         }
-        if let Some(bad) = values.iter().find(|v| !v.is_finite()) {
-            return Err(format!(
-                "--camera takes finite numbers X,Y,Z,HEADING[,INCL], got {bad}"
-            ));
+        let number = |field: &str| -> Result<f64, String> {
+            let value: f64 = field
+                .parse()
+                .map_err(|_| format!("{text:?}: {field:?} is not a number ({POSE_SYNTAX})"))?;
+            if value.is_finite() {
+                Ok(value)
+            } else {
+                Err(format!("{text:?}: {field:?} is not a finite number"))
+            }
+        };
+        let mut pose = CameraPose {
+            eye: [number(fields[0])?, number(fields[1])?, number(fields[2])?],
+            heading_deg: number(fields[3])?,
+            pitch_deg: 0.0,
+            incl_px: None,
+        };
+        let mut rest = &fields[4..];
+        if let Some(pitch) = rest.first().and_then(|f| f.strip_suffix("deg")) {
+            pose.pitch_deg = number(pitch)?;
+            if !(-90.0..=90.0).contains(&pose.pitch_deg) {
+                return Err(format!("{text:?}: the pitch must lie in -90deg..90deg"));
+            }
+            rest = &rest[1..];
         }
-        Ok(CameraPose {
-            eye: [values[0], values[1], values[2]],
-            heading_deg: values[3],
-            incl_px: values.get(4).copied(),
-        })
+        match rest {
+            [] => {}
+            [incl] => pose.incl_px = Some(number(incl)?),
+            _ => return Err(format!("{text:?}: expected {POSE_SYNTAX}")),
+        }
+        Ok(pose)
     }
 }
 
 impl std::fmt::Display for CameraPose {
-    /// The same `X,Y,Z,HEADING[,INCL]` syntax [`CameraPose::parse`] reads,
-    /// each number in its shortest form that reads back exactly.
+    /// The same `X,Y,Z,HEADING[,PITCHdeg][,INCL]` syntax [`CameraPose::parse`]
+    /// reads, each number in its shortest form that reads back exactly; a
+    /// level camera's pitch is left out.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let [x, y, z] = self.eye;
         write!(f, "{x},{y},{z},{}", self.heading_deg)?;
+        if self.pitch_deg != 0.0 {
+            write!(f, ",{}deg", self.pitch_deg)?;
+        }
         if let Some(incl) = self.incl_px {
             write!(f, ",{incl}")?;
         }
@@ -122,7 +149,7 @@ pub fn camera(frame: &TerrainFrame, view: &View) -> Result<Camera> {
     Ok(Camera {
         position: DVec3::new(x, y, view.eye[2]),
         heading_deg: view.heading_deg,
-        pitch_deg: 0.0,
+        pitch_deg: view.pitch_deg,
         incl_px: view.incl_px.unwrap_or(view.size[1] as f64 / 2.0),
         fov_x_deg: view.fov_x_deg,
         width: view.size[0],
@@ -221,7 +248,7 @@ pub fn render_bundle(
         terrain = terrain.with_hillshade(az, el);
     }
     let cam = camera(&frame, view)?;
-    Ok(render(&terrain, &cam, options))
+    render(&terrain, &cam, options)
 }
 
 #[cfg(test)]
@@ -232,16 +259,33 @@ mod tests {
     fn camera_strings_round_trip() {
         let pose = CameraPose::parse("289000,9111000,400,40,420").unwrap();
         assert_eq!(pose.eye, [289000.0, 9111000.0, 400.0]);
-        assert_eq!(pose.incl_px, Some(420.0));
+        assert_eq!((pose.pitch_deg, pose.incl_px), (0.0, Some(420.0)));
         assert_eq!(CameraPose::parse(&pose.to_string()).unwrap(), pose);
         let exact = CameraPose {
             eye: [289000.125, 9111000.3, 412.7],
             heading_deg: 33.333,
+            pitch_deg: -27.25,
             incl_px: None,
         };
+        assert_eq!(
+            exact.to_string(),
+            "289000.125,9111000.3,412.7,33.333,-27.25deg"
+        );
         assert_eq!(CameraPose::parse(&exact.to_string()).unwrap(), exact);
-        assert!(CameraPose::parse("1,2,3").is_err());
-        assert!(CameraPose::parse("1,2,x,4").is_err());
+        let both = CameraPose::parse("1,2,3,4, -10deg ,300").unwrap();
+        assert_eq!((both.pitch_deg, both.incl_px), (-10.0, Some(300.0)));
+        assert_eq!(CameraPose::parse(&both.to_string()).unwrap(), both);
+        for bad in [
+            "1,2,3",
+            "1,2,x,4",
+            "1,2,3,4,5,6",
+            "1,2,3,4,300,-10deg",
+            "1,2,3,4,-95deg",
+            "1,2,3,4,NaNdeg",
+            "1,2,3,inf",
+        ] {
+            assert!(CameraPose::parse(bad).is_err(), "{bad}");
+        }
     }
 
     #[test]

@@ -293,9 +293,6 @@ pub struct Settings {
     pub objects: bool,
     /// Draw the terrain (off: objects alone, to check composition).
     pub terrain: bool,
-    /// Mesh and Z-buffer modes tilt the camera instead of shifting the
-    /// projection plane (the raycast always shifts it).
-    pub true_pitch: bool,
     /// What chooses the vegetation drawn: relevo-core's quadtree cut, or a
     /// baseline.
     pub vegetation: VegetationSelection,
@@ -388,7 +385,6 @@ impl Default for Settings {
             raycast: RenderOptions::default(),
             objects: true,
             terrain: true,
-            true_pitch: false,
             vegetation: VegetationSelection::Quadtree,
             sprites: false,
             alpha: true,
@@ -534,7 +530,7 @@ impl Renderer {
                     settings,
                     objects_drawn,
                     &mut stats,
-                );
+                )?;
                 self.raycast.draw(&mut encoder, &self.targets);
             }
         }

@@ -69,7 +69,8 @@ impl RaycastPass {
     }
 
     /// Raycast for `camera` and upload the colour, and the depth when
-    /// objects will be drawn against it.
+    /// objects will be drawn against it. Fails on a pitch the raycaster
+    /// does not draw.
     #[allow(clippy::too_many_arguments)]
     pub fn prepare(
         &mut self,
@@ -80,18 +81,18 @@ impl RaycastPass {
         settings: &Settings,
         objects_drawn: bool,
         stats: &mut FrameStats,
-    ) {
+    ) -> anyhow::Result<()> {
         let start = Instant::now();
         let frame = scene
             .raycaster
-            .render(&scene.terrain, camera, &settings.raycast);
+            .render(&scene.terrain, camera, &settings.raycast)?;
         stats.raycast_ms = start.elapsed().as_secs_f64() * 1e3;
         let size = [camera.width, camera.height];
         if self.uploads.as_ref().is_none_or(|u| u.size != size) {
             self.uploads = Some(self.uploads_of(device, size));
         }
         let Some(uploads) = &self.uploads else {
-            return;
+            return Ok(());
         };
         let write = |texture: &wgpu::Texture, bytes: &[u8]| {
             queue.write_texture(
@@ -114,6 +115,7 @@ impl RaycastPass {
             write(&uploads.depth, bytemuck::cast_slice(&frame.depth));
             stats.depth_upload_ms = start.elapsed().as_secs_f64() * 1e3;
         }
+        Ok(())
     }
 
     /// Write the uploaded raycast into the targets.

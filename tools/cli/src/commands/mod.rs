@@ -86,7 +86,14 @@ pub enum Command {
     #[command(after_help = "Examples:
   relevo render olinda.relevo --camera 290000,9112000,400,45,300 --size 960x540 --out shot.png
   relevo render olinda.relevo --camera 290000,9112000,400,45,300 --depth depth.f32 --bands 2000:4:sub,inf:1 --out shot.png
-  relevo render olinda.relevo --camera 290000,9112000,400,45,300 --mode distorted --out voxel_space.png")]
+  relevo render olinda.relevo --camera 290000,9112000,900,45,-35deg --size 1920x1080 --out looking_down.png
+  relevo render olinda.relevo --camera 290000,9112000,400,45,300 --mode distorted --out voxel_space.png
+
+The pitch (PITCHdeg) tilts the camera for real; the raycaster draws pitches
+while every screen row looks forward and needs at most 4 marched lines per
+column — about -60deg..60deg at a 60° field of view and 16:9 — and refuses
+others, naming the range for that size and field of view. INCL (a bare
+number) shifts the projection plane instead, as before pitches existed.")]
     Render(render::RenderArgs),
     /// Vegetation: detect objects in imagery from marked samples; score detections.
     #[command(subcommand)]

@@ -15,16 +15,18 @@ pub struct RenderArgs {
     /// The bundle to render.
     pub bundle: PathBuf,
     /// Eye easting, northing (bundle CRS), height (m), heading (° clockwise
-    /// from north) and incl (projection-plane shift: the screen row, in pixels
-    /// from the bottom, of the horizon; larger looks further down).
+    /// from north), then optionally the pitch in degrees with its unit
+    /// (`-20deg` looks 20° down; see `relevo render --help` for its range)
+    /// and incl (projection-plane shift: the screen row, in pixels from the
+    /// bottom, the view axis passes through; larger looks further down).
     #[arg(
         long,
-        value_delimiter = ',',
-        allow_negative_numbers = true,
-        value_name = "X,Y,Z,HEADING[,INCL]",
+        allow_hyphen_values = true,
+        value_name = "X,Y,Z,HEADING[,PITCHdeg][,INCL]",
+        value_parser = CameraPose::parse,
         required = true
     )]
-    pub camera: Vec<f64>,
+    pub camera: CameraPose,
     /// Horizontal field of view, degrees.
     #[arg(long, default_value_t = 60.0)]
     pub fov: f64,
@@ -84,7 +86,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
             a.far
         );
     }
-    let pose = CameraPose::from_values(&a.camera).map_err(anyhow::Error::msg)?;
+    let pose = a.camera;
     if a.hillshade.as_ref().is_some_and(|h| h.len() != 2) {
         bail!("--hillshade takes AZIMUTH,ELEVATION");
     }
@@ -99,6 +101,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let view = View {
         eye: pose.eye,
         heading_deg: pose.heading_deg,
+        pitch_deg: pose.pitch_deg,
         incl_px: pose.incl_px,
         fov_x_deg: a.fov,
         size: a.size,

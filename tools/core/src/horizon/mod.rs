@@ -22,12 +22,17 @@
 //! column at the same distance, rays evenly spaced in angle, radial steps)
 //! as a baseline; it does not match the GPU.
 
+mod march;
 mod sample;
+mod screen;
 
 pub use sample::{ColorSource, Terrain};
+pub use screen::{pitch_range, MAX_LINE_DENSITY};
 
 use crate::camera::Camera;
+use crate::{Error, Result};
 use rayon::prelude::*;
+use screen::Screen;
 use std::time::Instant;
 
 /// Projection used for the rays.
@@ -117,13 +122,10 @@ impl Frame {
     }
 }
 
-/// One slice: forward distance, its depth and its band.
+/// One slice: horizontal forward distance and its band.
 #[derive(Debug)]
 struct Slice {
     distance_m: f64,
-    depth: f32,
-    /// Screen pixels per metre of height at this distance, d/s.
-    scale: f64,
     subvoxel: bool,
     /// With prefiltering: a screen pixel's ground footprint across the ray
     /// (s/d) and the factor s²/d that, divided by the eye's height above the
@@ -143,21 +145,37 @@ impl Slice {
     }
 }
 
-/// Forward distances of the slices from the near to the far plane
-/// (seed 000, Algorithm 2b generalised to bands).
-fn fill_slices(out: &mut Vec<Slice>, terrain: &Terrain, camera: &Camera, opts: &RenderOptions) {
+/// Horizontal forward distances of the slices (seed 000, Algorithm 2b
+/// generalised to bands), from the nearest that can show anything to the
+/// farthest.
+fn fill_slices(
+    out: &mut Vec<Slice>,
+    terrain: &Terrain,
+    camera: &Camera,
+    screen: &Screen,
+    opts: &RenderOptions,
+) {
     let d = camera.plane_distance_px();
     out.clear();
+    // A row's rays reach the near and far planes at s = near·α/d and
+    // far·α/d; the slices span the widest of those.
+    let deepest = screen.forward_per_depth.iter().copied().fold(0.0, f64::max);
     // Slices off the terrain's square sample nothing: skip (in whole steps)
     // those nearer than the square and stop past its farthest corner, so the
     // slice count is bounded by the square's size whatever `far` is.
     let extent = (terrain.side - 1) as f64 * terrain.cell_m;
     let gap = |e: f64| (-e).max(e - extent).max(0.0);
     let reach = |e: f64| e.abs().max((e - extent).abs());
-    let (x, y) = (camera.position.x, camera.position.y);
-    let nearest = gap(x).hypot(gap(y));
-    let end = camera.far_m.min(reach(x).hypot(reach(y)));
-    let mut s = camera.near_m;
+    let (x, y, z) = (camera.position.x, camera.position.y, camera.position.z);
+    let mut nearest = gap(x).hypot(gap(y));
+    // Nothing nearer than where the highest terrain would reach the bottom
+    // row's rays can show (when they point down and the eye is above it).
+    let lowest_slope = screen.slope.first().copied().unwrap_or(0.0);
+    if lowest_slope < 0.0 && z > terrain.highest_m {
+        nearest = nearest.max((z - terrain.highest_m) / -lowest_slope);
+    }
+    let end = (camera.far_m * deepest).min(reach(x).hypot(reach(y)));
+    let mut s = camera.near_m * deepest;
     let mut band = 0;
     while s <= end {
         while band + 1 < opts.bands.len() && s > opts.bands[band].until_m {
@@ -174,8 +192,6 @@ fn fill_slices(out: &mut Vec<Slice>, terrain: &Terrain, camera: &Camera, opts: &
         let footprint = opts.prefilter.then_some((s / d, s * s / d));
         out.push(Slice {
             distance_m: s,
-            depth: camera.depth_at(s) as f32,
-            scale: d / s,
             subvoxel: b.subvoxel,
             footprint,
         });
@@ -185,64 +201,25 @@ fn fill_slices(out: &mut Vec<Slice>, terrain: &Terrain, camera: &Camera, opts: &
 
 /// Render `terrain` seen from `camera` into a new frame (see [`Renderer`]
 /// to reuse buffers from frame to frame).
-pub fn render(terrain: &Terrain, camera: &Camera, opts: &RenderOptions) -> Frame {
+pub fn render(terrain: &Terrain, camera: &Camera, opts: &RenderOptions) -> Result<Frame> {
     let mut renderer = Renderer::default();
-    renderer.render(terrain, camera, opts);
-    renderer.frame
+    renderer.render(terrain, camera, opts)?;
+    Ok(renderer.frame)
 }
 
-/// Buffers reused from frame to frame: after the first frame of a size,
-/// rendering allocates nothing.
+/// Buffers reused from frame to frame: after the first frame of a size and
+/// pitch, rendering allocates nothing.
 #[derive(Debug, Default)]
 pub struct Renderer {
     slices: Vec<Slice>,
-    columns: Vec<[f64; 2]>,
-    /// Colour and depth column by column, bottom row first.
-    colour_columns: Vec<u32>,
-    depth_columns: Vec<f32>,
+    screen: Screen,
+    /// Ground direction of each line.
+    directions: Vec<[f64; 2]>,
+    /// A pitched camera's lines, row by row (top row first), before each
+    /// pixel takes its nearest line.
+    line_colour: Vec<u32>,
+    line_depth: Vec<f32>,
     frame: Frame,
-}
-
-/// One column being painted, bottom row first.
-struct ColumnOut<'a> {
-    colour: &'a mut [u32],
-    depth: &'a mut [f32],
-}
-
-impl ColumnOut<'_> {
-    fn height(&self) -> usize {
-        self.colour.len()
-    }
-
-    /// Set pixel `row` (counted from the bottom).
-    #[inline]
-    fn paint(&mut self, row: usize, colour: u32, depth: f32) {
-        self.colour[row] = colour;
-        self.depth[row] = depth;
-    }
-
-    /// Paint rows from `*row` up while `below(row)` (the row's centre lies
-    /// under the sample), advancing `*row`; true once the column is full.
-    #[inline]
-    fn paint_while(
-        &mut self,
-        row: &mut usize,
-        below: impl Fn(usize) -> bool,
-        colour: u32,
-        depth: f32,
-    ) -> bool {
-        while *row < self.height() && below(*row) {
-            self.paint(*row, colour, depth);
-            *row += 1;
-        }
-        *row >= self.height()
-    }
-
-    /// Sky (depth 1) from `row` to the top.
-    fn finish(&mut self, row: usize, sky: u32) {
-        self.colour[row..].fill(sky);
-        self.depth[row..].fill(1.0);
-    }
 }
 
 impl Renderer {
@@ -251,133 +228,169 @@ impl Renderer {
         &self.frame
     }
 
-    /// Render `terrain` seen from `camera` (whose pitch must be 0: tilt is
-    /// the projection-plane shift `incl_px`).
-    pub fn render(&mut self, terrain: &Terrain, camera: &Camera, opts: &RenderOptions) -> &Frame {
+    /// Render `terrain` seen from `camera`, pitched within
+    /// [`pitch_range`] (the distorted mode only level).
+    pub fn render(
+        &mut self,
+        terrain: &Terrain,
+        camera: &Camera,
+        opts: &RenderOptions,
+    ) -> Result<&Frame> {
         let start = Instant::now();
+        if opts.mode == Mode::Distorted && camera.pitch_deg != 0.0 {
+            return Err(Error::Input(
+                "the distorted (voxel-space) mode draws only level cameras (pitch 0)".into(),
+            ));
+        }
+        self.screen.fill(camera)?;
         let (w, h) = (camera.width as usize, camera.height as usize);
-        fill_slices(&mut self.slices, terrain, camera, opts);
-        let d = camera.plane_distance_px();
+        fill_slices(&mut self.slices, terrain, camera, &self.screen, opts);
         let heading = camera.heading_deg.to_radians();
         let forward = [heading.sin(), heading.cos()];
         let right = [heading.cos(), -heading.sin()];
         let q = camera.fov_x_deg.to_radians();
-        // Ground direction of column k, scaled so that moving by `dir · s`
-        // advances the slice distance s (forward distance, or radial when distorted).
-        self.columns.clear();
-        self.columns.extend((0..w).map(|k| {
-            let offset = k as f64 + 0.5 - w as f64 / 2.0;
-            match opts.mode {
-                Mode::Raycast => [
-                    forward[0] + right[0] * offset / d,
-                    forward[1] + right[1] * offset / d,
-                ],
+        // Ground direction of line j, scaled so that moving by `dir · s`
+        // advances the slice distance s (forward distance, or radial when
+        // distorted).
+        let screen = &self.screen;
+        self.directions.clear();
+        self.directions
+            .extend((0..screen.lines).map(|j| match opts.mode {
+                Mode::Raycast => {
+                    let a = screen.first_offset + j as f64 * screen.offset_step;
+                    [forward[0] + right[0] * a, forward[1] + right[1] * a]
+                }
                 Mode::Distorted => {
-                    let theta = (offset / w as f64) * q;
+                    let theta = ((j as f64 + 0.5) / w as f64 - 0.5) * q;
                     let (sin, cos) = theta.sin_cos();
                     [
                         forward[0] * cos + right[0] * sin,
                         forward[1] * cos + right[1] * sin,
                     ]
                 }
-            }
-        }));
+            }));
         let setup_ms = start.elapsed().as_secs_f64() * 1e3;
 
         let start = Instant::now();
-        let eye = [camera.position.x, camera.position.y, camera.position.z];
-        let sky = u32::from_le_bytes(opts.sky);
-        self.colour_columns.resize(w * h, 0);
-        self.depth_columns.resize(w * h, 0.0);
-        let slices = &self.slices;
-        self.colour_columns
-            .par_chunks_mut(h)
-            .zip(self.depth_columns.par_chunks_mut(h))
-            .zip(self.columns.par_iter())
-            .for_each(|((colour, depth), dir)| {
-                let mut out = ColumnOut { colour, depth };
-                match opts.arithmetic {
-                    Arithmetic::Float => {
-                        march_float(terrain, slices, eye, *dir, camera.incl_px, sky, &mut out);
-                    }
-                    Arithmetic::Fixed => {
-                        march_fixed(terrain, slices, eye, *dir, camera.incl_px, sky, &mut out);
-                    }
-                }
-            });
-        let march_ms = start.elapsed().as_secs_f64() * 1e3;
-
-        // Transpose in bands of rows so that reads of each column stay in cache.
-        let start = Instant::now();
-        const BAND: usize = 16;
         let f = &mut self.frame;
         f.width = w;
         f.height = h;
         f.rgba.resize(w * h, 0);
         f.depth.resize(w * h, 0.0);
-        let (colour_columns, depth_columns) = (&self.colour_columns, &self.depth_columns);
-        f.rgba
-            .par_chunks_mut(w * BAND)
-            .zip(f.depth.par_chunks_mut(w * BAND))
-            .enumerate()
-            .for_each(|(band, (rows, drows))| {
-                let count = drows.len() / w;
-                // Column k's rows of this band, bottom-counted from `low`, reversed.
-                let low = h - band * BAND - count;
-                for k in 0..w {
-                    let column = &colour_columns[k * h + low..k * h + low + count];
-                    let dcolumn = &depth_columns[k * h + low..k * h + low + count];
-                    for y in 0..count {
-                        rows[y * w + k] = column[count - 1 - y];
-                        drows[y * w + k] = dcolumn[count - 1 - y];
-                    }
+        let target = if screen.pitched {
+            let size = screen.lines * h;
+            self.line_colour.resize(size, 0);
+            self.line_depth.resize(size, 0.0);
+            march::Target::new(&mut self.line_colour, &mut self.line_depth, screen.lines, h)
+        } else {
+            march::Target::new(&mut f.rgba, &mut f.depth, w, h)
+        };
+        let (near, far) = (camera.near_m, camera.far_m);
+        let pass = march::Pass {
+            terrain,
+            slices: &self.slices,
+            screen,
+            directions: &self.directions,
+            eye_z: camera.position.z,
+            depth_terms: [far / (far - near), far * near / (far - near)],
+            far_m: far,
+            sky: u32::from_le_bytes(opts.sky),
+        };
+        let eye = [camera.position.x, camera.position.y];
+        let packets = screen.lines.div_ceil(march::PACKET);
+        let march_packet = |p: usize| {
+            let first = p * march::PACKET;
+            let count = march::PACKET.min(screen.lines - first);
+            // SAFETY: each packet index comes once from the range, so each
+            // line is marched by one task only.
+            unsafe {
+                match opts.arithmetic {
+                    Arithmetic::Float => pass.march(
+                        &march::FloatSampling { terrain, eye },
+                        first,
+                        count,
+                        &target,
+                    ),
+                    Arithmetic::Fixed => pass.march(
+                        &march::FixedSampling::new(terrain, eye),
+                        first,
+                        count,
+                        &target,
+                    ),
                 }
-            });
+            }
+        };
+        (0..packets).into_par_iter().for_each(march_packet);
+        let march_ms = start.elapsed().as_secs_f64() * 1e3;
+
+        // A pitched screen: every pixel takes its nearest line.
+        let start = Instant::now();
+        if screen.pitched {
+            let lines = screen.lines;
+            let (line_colour, line_depth) = (&self.line_colour, &self.line_depth);
+            f.rgba
+                .par_chunks_mut(w)
+                .zip(f.depth.par_chunks_mut(w))
+                .enumerate()
+                .for_each(|(y, (rgba, depth))| {
+                    let r = h - 1 - y;
+                    let row = y * lines;
+                    for p in 0..w {
+                        let j = screen.line_at(r, p);
+                        rgba[p] = line_colour[row + j];
+                        depth[p] = line_depth[row + j];
+                    }
+                });
+        }
         let output_ms = start.elapsed().as_secs_f64() * 1e3;
         f.steps = Steps {
             setup_ms,
             march_ms,
             output_ms,
         };
-        &self.frame
+        Ok(&self.frame)
     }
 }
 
 /// The ray through the centre of pixel (`px`, `py`) (from the top-left),
-/// as a terrain-frame direction scaled so that moving by `dir · s` advances
-/// the forward distance by s. Pitch must be 0.
+/// as a terrain-frame direction scaled so that moving by `dir · t` advances
+/// the view depth (distance along the view axis) by t.
 pub fn pixel_ray(camera: &Camera, px: f64, py: f64) -> [f64; 3] {
     let d = camera.plane_distance_px();
-    let heading = camera.heading_deg.to_radians();
-    let (forward, right) = (
-        [heading.sin(), heading.cos()],
-        [heading.cos(), -heading.sin()],
+    let (heading, pitch) = (
+        camera.heading_deg.to_radians(),
+        camera.pitch_deg.to_radians(),
     );
+    let (sin, cos) = pitch.sin_cos();
+    let level_forward = [heading.sin(), heading.cos()];
+    let right = [heading.cos(), -heading.sin()];
     let across = px + 0.5 - camera.width as f64 / 2.0;
     let up = (camera.height as f64 - 1.0 - py) + 0.5 - camera.incl_px;
+    // forward = cos θ·level + sin θ·z, up = −sin θ·level + cos θ·z.
+    let ahead = (d * cos - up * sin) / d;
     [
-        forward[0] + right[0] * across / d,
-        forward[1] + right[1] * across / d,
-        up / d,
+        level_forward[0] * ahead + right[0] * across / d,
+        level_forward[1] * ahead + right[1] * across / d,
+        (d * sin + up * cos) / d,
     ]
 }
 
 /// Where the ray through pixel (`px`, `py`) first meets the exact bilinear
-/// terrain surface, as a forward distance in metres: an independent
-/// reference for the raycaster's depth, and a way to pick terrain points.
-/// Marches in steps of 1/32 cell, then bisects.
+/// terrain surface, as a view depth in metres: an independent reference
+/// for the raycaster's depth, and a way to pick terrain points. Marches in
+/// steps of 1/32 cell over the ground, then bisects.
 pub fn pick(terrain: &Terrain, camera: &Camera, px: f64, py: f64) -> Option<f64> {
     let dir = pixel_ray(camera, px, py);
     let eye = camera.position;
-    let below = |s: f64| {
-        let (x, y, z) = (eye.x + dir[0] * s, eye.y + dir[1] * s, eye.z + dir[2] * s);
+    let below = |t: f64| {
+        let (x, y, z) = (eye.x + dir[0] * t, eye.y + dir[1] * t, eye.z + dir[2] * t);
         terrain.surface(x, y).map(|ground| z <= ground)
     };
-    let step = terrain.cell_m / 32.0;
-    let mut s = camera.near_m;
-    while s <= camera.far_m {
-        if below(s) == Some(true) {
-            let (mut lo, mut hi) = (s - step, s);
+    let step = terrain.cell_m / 32.0 / dir[0].hypot(dir[1]).max(1e-6);
+    let mut t = camera.near_m;
+    while t <= camera.far_m {
+        if below(t) == Some(true) {
+            let (mut lo, mut hi) = (t - step, t);
             for _ in 0..40 {
                 let mid = (lo + hi) / 2.0;
                 if below(mid) == Some(true) {
@@ -388,83 +401,15 @@ pub fn pick(terrain: &Terrain, camera: &Camera, px: f64, py: f64) -> Option<f64>
             }
             return Some(hi.max(camera.near_m));
         }
-        s += step;
+        t += step;
     }
     None
 }
 
-/// Forward distance of a [0, 1] depth, inverting eq. 5.11.
+/// View depth of a [0, 1] depth, inverting eq. 5.11.
 pub fn distance_of_depth(camera: &Camera, depth: f64) -> f64 {
     let (n, f) = (camera.near_m, camera.far_m);
     f * n / (f - depth * (f - n))
-}
-
-/// One column in floating point (seed 000, Algorithm 1 with depth, line 11A).
-fn march_float(
-    terrain: &Terrain,
-    slices: &[Slice],
-    eye: [f64; 3],
-    dir: [f64; 2],
-    incl: f64,
-    sky: u32,
-    out: &mut ColumnOut,
-) {
-    let mut row = 0usize; // next unpainted row, from the bottom
-    for s in slices {
-        let x = eye[0] + dir[0] * s.distance_m;
-        let y = eye[1] + dir[1] * s.distance_m;
-        let Some(z) = terrain.height(x, y, s.subvoxel) else {
-            continue;
-        };
-        let top = incl + (z - eye[2]) * s.scale;
-        if (row as f64 + 0.5) >= top {
-            continue;
-        }
-        let c = terrain.color(x, y, s.subvoxel, s.level(terrain, eye[2], z));
-        if out.paint_while(&mut row, |r| (r as f64 + 0.5) < top, c, s.depth) {
-            break;
-        }
-    }
-    out.finish(row, sky);
-}
-
-/// One column in 16.16 fixed point: ground position and heights in 1/65536
-/// of a cell and of a metre, the per-slice scale in 1/65536 pixel per metre.
-fn march_fixed(
-    terrain: &Terrain,
-    slices: &[Slice],
-    eye: [f64; 3],
-    dir: [f64; 2],
-    incl: f64,
-    sky: u32,
-    out: &mut ColumnOut,
-) {
-    const ONE: f64 = 65536.0;
-    let to_cell = ONE / terrain.cell_m;
-    let (ex, ey) = ((eye[0] * to_cell) as i64, (eye[1] * to_cell) as i64);
-    let (dx, dy) = ((dir[0] * to_cell) as i64, (dir[1] * to_cell) as i64);
-    let ez = (eye[2] * ONE) as i64;
-    let incl = (incl * ONE) as i64;
-    let mut row = 0usize; // next unpainted row, from the bottom
-    for s in slices {
-        let dist = (s.distance_m * ONE) as i64;
-        let x = ex + ((dx * dist) >> 16);
-        let y = ey + ((dy * dist) >> 16);
-        let Some(z) = terrain.height_fixed(x, y, s.subvoxel) else {
-            continue;
-        };
-        let scale = (s.scale * ONE) as i64;
-        let top = incl + (((z - ez) * scale) >> 16);
-        let centre = |row: usize| ((row as i64) << 16) + (1 << 15);
-        if centre(row) >= top {
-            continue;
-        }
-        let c = terrain.color_fixed(x, y, s.subvoxel, s.level(terrain, eye[2], z as f64 / ONE));
-        if out.paint_while(&mut row, |r| centre(r) < top, c, s.depth) {
-            break;
-        }
-    }
-    out.finish(row, sky);
 }
 
 #[cfg(test)]
@@ -520,13 +465,17 @@ mod tests {
 
     /// Top pixel (column, row) of each pole in the image, by its red colour,
     /// against where the camera's projection matrix sends the pole's top.
-    fn pole_misses(mode: Mode) -> Vec<f64> {
+    fn pole_misses(mode: Mode, pitch_deg: f64) -> Vec<f64> {
         let side = 257;
         let (heights, mask, rgba, spots) = poles();
         let color = texel_per_cell(&rgba, side);
         let terrain = Terrain::new(side, 1.0, &heights, &mask, Some(color));
-        // Eye south of the poles, looking north, level.
-        let cam = camera(960, 540, [128.0, 0.0, 30.0], 0.0, 270.0, 400.0);
+        // Eye south of the poles, looking north; for steep pitches the
+        // projection plane is also shifted so their tops (above the eye)
+        // stay on screen.
+        let incl = if pitch_deg < -15.0 { 60.0 } else { 270.0 };
+        let mut cam = camera(960, 540, [128.0, 0.0, 30.0], 0.0, incl, 400.0);
+        cam.pitch_deg = pitch_deg;
         let opts = RenderOptions {
             mode,
             bands: vec![Band {
@@ -536,7 +485,7 @@ mod tests {
             }],
             ..Default::default()
         };
-        let frame = render(&terrain, &cam, &opts);
+        let frame = render(&terrain, &cam, &opts).unwrap();
         let vp = cam.view_projection();
         spots
             .iter()
@@ -571,14 +520,17 @@ mod tests {
 
     #[test]
     fn poles_land_where_the_projection_matrix_puts_them() {
-        let raycast = pole_misses(Mode::Raycast);
-        assert!(
-            raycast.iter().all(|&m| m <= 1.0),
-            "raycast misses {raycast:?} px"
-        );
-        let distorted = pole_misses(Mode::Distorted);
+        for pitch in [0.0, -10.0, -25.0, 12.0] {
+            let raycast = pole_misses(Mode::Raycast, pitch);
+            eprintln!("pitch {pitch}°: pole misses {raycast:.2?} px");
+            assert!(
+                raycast.iter().all(|&m| m <= 1.0),
+                "pitch {pitch}°: raycast misses {raycast:?} px"
+            );
+        }
+        let distorted = pole_misses(Mode::Distorted, 0.0);
         let worst = distorted.iter().cloned().fold(0.0, f64::max);
-        eprintln!("pole misses, raycast {raycast:.2?} px, distorted {distorted:.2?} px");
+        eprintln!("pole misses, distorted {distorted:.2?} px");
         assert!(
             worst > 3.0,
             "distorted mode should miss the off-centre poles, worst {worst}"
@@ -598,10 +550,15 @@ mod tests {
             }],
             ..Default::default()
         };
-        let frame = render(terrain, cam, &opts);
-        let spacing = terrain.cell_m / 8.0;
+        let frame = render(terrain, cam, &opts).unwrap();
         let (mut errors, mut disagree) = (Vec::new(), 0);
+        let d = cam.plane_distance_px();
+        let (sin, cos) = cam.pitch_deg.to_radians().sin_cos();
         for py in 0..cam.height as usize {
+            // The slices' spacing along this row's rays, as view depth:
+            // horizontal spacing · d / α (see `screen`).
+            let rho = (cam.height as usize - 1 - py) as f64 + 0.5 - cam.incl_px;
+            let spacing = terrain.cell_m / 8.0 * d / (d * cos - rho * sin);
             for px in 0..cam.width as usize {
                 let d = frame.depth[py * cam.width as usize + px];
                 match (d < 1.0, pick(terrain, cam, px as f64, py as f64)) {
@@ -651,36 +608,46 @@ mod tests {
 
     #[test]
     fn depth_of_real_dems_matches_the_exact_surface() {
-        // From the south-west quarter of each crop looking north-east, 150 m
-        // above its highest point, the horizon three quarters up the screen.
-        for dem in [
+        // From the south-west quarter of each crop looking north-east.
+        // 150 m above the highest point, level with the plane shifted, then
+        // pitched for real (centred plane) down and up.
+        let dems = [
             crate::testdata::dem("srtm_ref_257.f32"),
             crate::testdata::dem("copernicus_grenoble_257.f32"),
-        ] {
+        ];
+        for (dem, (pitch, incl)) in dems
+            .iter()
+            .flat_map(|dem| [(0.0, 0.75), (-15.0, 0.5), (-40.0, 0.5), (5.0, 0.5)].map(|p| (dem, p)))
+        {
             let (side, cell) = (dem.side, dem.cell_size_m);
             let extent = (side - 1) as f64 * cell;
             let top = dem.heights.iter().copied().fold(f32::MIN, f32::max) as f64;
             let mask = vec![1u8; side * side];
             let terrain = Terrain::new(side, cell, &dem.heights, &mask, None);
             let eye = [0.15 * extent, 0.1 * extent, top + 150.0];
-            let mut cam = camera(240, 135, eye, 35.0, 0.75 * 135.0, 1024.0 * cell);
+            let mut cam = camera(240, 135, eye, 35.0, incl * 135.0, 1024.0 * cell);
+            cam.pitch_deg = pitch;
             cam.near_m = cell;
             let (_, errors, disagree) = depth_against_exact_surface(&terrain, &cam);
             let (median, p95) = (errors[errors.len() / 2], errors[errors.len() * 95 / 100]);
             let pixels = 240 * 135;
+            // A pitched pixel takes the line nearest it, up to half a pixel
+            // aside: at far silhouettes that half pixel can cross a ridge.
+            let p95_bound = if pitch == 0.0 { 2.0 } else { 2.5 };
             eprintln!(
-                "{}: depth vs exact surface median {median:.3}, p95 {p95:.3} slice spacings; \
-                 {disagree} of {pixels} pixels disagree on terrain/sky",
-                dem.name
+                "{} pitch {pitch}°: depth vs exact surface median {median:.3}, p95 {p95:.3} slice spacings \
+                 over {} terrain pixels; {disagree} of {pixels} pixels disagree on terrain/sky",
+                dem.name,
+                errors.len()
             );
             assert!(
-                errors.len() > pixels / 2,
+                errors.len() > pixels / 4,
                 "{}: {} terrain pixels",
                 dem.name,
                 errors.len()
             );
             assert!(
-                median <= 1.0 && p95 <= 2.0,
+                median <= 1.0 && p95 <= p95_bound,
                 "{}: median {median}, p95 {p95}",
                 dem.name
             );
@@ -712,7 +679,7 @@ mod tests {
             let mut renderer = Renderer::default();
             let mut far = camera(240, 135, eye, 0.0, 100.0, 1e12);
             far.near_m = cell;
-            renderer.render(&terrain, &far, &opts);
+            renderer.render(&terrain, &far, &opts).unwrap();
             assert!(
                 renderer.slices.len() <= most,
                 "{} slices",
@@ -723,7 +690,7 @@ mod tests {
             let mut bounded = camera(240, 135, eye, 0.0, 100.0, reach + cell);
             bounded.near_m = cell;
             let mut reference = Renderer::default();
-            reference.render(&terrain, &bounded, &opts);
+            reference.render(&terrain, &bounded, &opts).unwrap();
             if eye[1] > -1e6 {
                 assert!(renderer.slices.len() > 100);
                 assert_eq!(renderer.frame.rgba, reference.frame.rgba);
@@ -774,8 +741,8 @@ mod tests {
                             ..Default::default()
                         };
                         let (a, b) = (
-                            render(&floor, &cam, &options),
-                            render(&walled, &cam, &options),
+                            render(&floor, &cam, &options).unwrap(),
+                            render(&walled, &cam, &options).unwrap(),
                         );
                         let terrain = a.depth.iter().filter(|&&d| d < 1.0).count();
                         assert!(
@@ -800,7 +767,7 @@ mod tests {
         let color = texel_per_cell(&rgba, side);
         let terrain = Terrain::new(side, 1.0, &heights, &mask, Some(color));
         let cam = camera(320, 180, [128.0, 0.0, 30.0], 10.0, 120.0, 400.0);
-        let float = render(&terrain, &cam, &RenderOptions::default());
+        let float = render(&terrain, &cam, &RenderOptions::default()).unwrap();
         let fixed = render(
             &terrain,
             &cam,
@@ -808,7 +775,8 @@ mod tests {
                 arithmetic: Arithmetic::Fixed,
                 ..Default::default()
             },
-        );
+        )
+        .unwrap();
         let differ = float
             .depth
             .iter()
@@ -842,7 +810,7 @@ mod tests {
                 prefilter,
                 ..Default::default()
             };
-            let f = render(&terrain, &cam, &opts);
+            let f = render(&terrain, &cam, &opts).unwrap();
             // High-frequency energy of the far half of the terrain rows: mean
             // absolute difference of horizontal neighbours.
             let terrain_rows: Vec<usize> =

@@ -10,6 +10,16 @@ use std::borrow::Cow;
 /// Sub-voxel divisions per cell side (seed 000, §6.2 uses 8).
 const DIVISIONS: usize = 8;
 
+/// Side of the square tiles the march's heights are stored in, vertices: a
+/// tile is 1 KiB, four to a page.
+const TILE: usize = 16;
+
+/// Where vertex (`c`, `r`) lies in tiles of [`TILE`]² stored row by row.
+#[inline]
+fn tile_index(tiles_across: usize, c: usize, r: usize) -> usize {
+    ((r / TILE) * tiles_across + c / TILE) * TILE * TILE + (r % TILE) * TILE + c % TILE
+}
+
 /// Bilinear weights of the four voxels around each of the DIVISIONS² sub-voxels,
 /// `[top-left, top-right, bottom-left, bottom-right]` in grid order — the
 /// contribution matrix of seed 000, Algorithm 3, taken at sub-voxel centres.
@@ -151,10 +161,17 @@ pub struct Terrain<'a> {
     /// padding holds (it would rise or fall as a curtain along the edge).
     /// `None` when no masked vertex touches data.
     edge_heights: Option<Vec<f32>>,
-    /// Per vertex: the height, NaN where the mask is 0, and the colour used
-    /// without imagery (a grey ramp by height, shaded) — one cache line
-    /// answers a sample.
-    sampled: Vec<(f32, u32)>,
+    /// The heights the march reads (NaN where the mask is 0), in tiles of
+    /// [`TILE`]² vertices so that neighbouring rays and slices share cache
+    /// lines and pages.
+    tiled: Vec<f32>,
+    /// Tiles per row of tiles.
+    tiles_across: usize,
+    /// Per vertex, the colour used without imagery: a grey ramp by height,
+    /// shaded.
+    vertex_colours: Vec<u32>,
+    /// The highest height with data, metres (−∞ without data).
+    pub(super) highest_m: f64,
     /// Heights in 16.16 fixed point, built on the first fixed-point render.
     heights_fixed: std::sync::OnceLock<Vec<i32>>,
     mask: Cow<'a, [u8]>,
@@ -179,18 +196,28 @@ impl<'a> Terrain<'a> {
         let (heights, mask) = (heights.into(), mask.into());
         assert_eq!(heights.len(), side * side);
         assert_eq!(mask.len(), side * side);
-        let sampled = heights
-            .iter()
-            .zip(mask.iter())
-            .map(|(&h, &m)| (if m == 1 { h } else { f32::NAN }, 0))
-            .collect();
+        let tiles_across = side.div_ceil(TILE);
+        let mut tiled = vec![f32::NAN; tiles_across * tiles_across * TILE * TILE];
+        let mut highest_m = f64::NEG_INFINITY;
+        for r in 0..side {
+            for c in 0..side {
+                let i = r * side + c;
+                if mask[i] == 1 {
+                    tiled[tile_index(tiles_across, c, r)] = heights[i];
+                    highest_m = highest_m.max(heights[i] as f64);
+                }
+            }
+        }
         let edge_heights = heights_beside_data(&heights, &mask, side);
         let mut terrain = Terrain {
             side,
             cell_m,
             heights,
             edge_heights,
-            sampled,
+            tiled,
+            tiles_across,
+            vertex_colours: vec![0; side * side],
+            highest_m,
             heights_fixed: std::sync::OnceLock::new(),
             mask,
             color,
@@ -223,11 +250,11 @@ impl<'a> Terrain<'a> {
         if self.color.is_some() {
             return;
         }
-        for (i, sample) in self.sampled.iter_mut().enumerate() {
+        for (i, colour) in self.vertex_colours.iter_mut().enumerate() {
             let g = (80.0 + (self.heights[i] as f64 * 0.05).rem_euclid(150.0)).min(255.0);
             let light = self.shade.as_ref().map_or(1.0, |s| s[i] as f64);
             let v = (g * light).round().clamp(0.0, 255.0) as u8;
-            sample.1 = u32::from_le_bytes([v, v, v, 255]);
+            *colour = u32::from_le_bytes([v, v, v, 255]);
         }
     }
 
@@ -308,10 +335,26 @@ impl<'a> Terrain<'a> {
         )
     }
 
+    /// Height of the vertex nearest (x, y), metres; NaN off the grid or
+    /// where the mask is 0. The march's one memory access per sample.
+    #[inline]
+    pub(super) fn nearest_height(&self, x: f64, y: f64) -> f32 {
+        let c = x * self.inv_cell + 0.5;
+        let r = self.last - y * self.inv_cell + 0.5;
+        if !(c >= 0.0 && r >= 0.0) {
+            return f32::NAN;
+        }
+        let (c, r) = (c as usize, r as usize);
+        if c >= self.side || r >= self.side {
+            return f32::NAN;
+        }
+        self.tiled[tile_index(self.tiles_across, c, r)]
+    }
+
     /// Terrain height at (x, y), metres; `None` off the grid or over masked cells.
     #[inline]
     pub fn height(&self, x: f64, y: f64, subvoxel: bool) -> Option<f64> {
-        let z = self.sampled[self.nearest(x, y)?].0;
+        let z = self.nearest_height(x, y);
         if z.is_nan() {
             return None;
         }
@@ -391,7 +434,7 @@ impl<'a> Terrain<'a> {
     #[inline]
     pub fn color(&self, x: f64, y: f64, subvoxel: bool, level: usize) -> u32 {
         let Some(src) = &self.color else {
-            return self.nearest(x, y).map_or(0, |i| self.sampled[i].1);
+            return self.nearest(x, y).map_or(0, |i| self.vertex_colours[i]);
         };
         let (c, r) = self.grid(x, y);
         let light = match &self.shade {

@@ -1,0 +1,255 @@
+//! The floating-horizon loop: lines marched in packets, slice by slice, each
+//! painting its rows bottom-up (seed 000, Algorithm 1 with depth, line 11A).
+//!
+//! A packet is [`PACKET`] neighbouring lines marched in lockstep: at each
+//! slice all their ground positions are computed and their heights loaded
+//! before any is compared, so the loads — neighbours on the ground, often in
+//! one cache line — are in flight together instead of one after another,
+//! and the painted rows of neighbouring lines share the target's cache
+//! lines. The packet ends when every line has painted the top row it is
+//! needed on (the horizon reached the top of the screen) or the slices run
+//! out.
+
+use super::sample::Terrain;
+use super::screen::Screen;
+use super::Slice;
+
+/// Lines marched together.
+pub(super) const PACKET: usize = 16;
+
+/// A row-major colour and depth image, top row first, that tasks marching
+/// disjoint sets of lines write into at once: column j belongs to line j.
+pub(super) struct Target {
+    colour: *mut u32,
+    depth: *mut f32,
+    stride: usize,
+    rows: usize,
+}
+
+// SAFETY: tasks write only the columns of their own lines (see `set`), so no
+// element is ever written by two threads, and nothing reads while they run.
+unsafe impl Send for Target {}
+// SAFETY: as for `Send`.
+unsafe impl Sync for Target {}
+
+impl Target {
+    /// `colour` and `depth` hold `rows` rows of `stride` elements.
+    pub fn new(colour: &mut [u32], depth: &mut [f32], stride: usize, rows: usize) -> Self {
+        assert!(colour.len() >= stride * rows && depth.len() >= stride * rows);
+        Target {
+            colour: colour.as_mut_ptr(),
+            depth: depth.as_mut_ptr(),
+            stride,
+            rows,
+        }
+    }
+
+    /// Set row `r` (from the bottom) of column `line`.
+    ///
+    /// # Safety
+    /// No other thread may be writing column `line`.
+    #[inline]
+    unsafe fn set(&self, r: usize, line: usize, colour: u32, depth: f32) {
+        assert!(r < self.rows && line < self.stride);
+        let i = (self.rows - 1 - r) * self.stride + line;
+        // SAFETY: `i` is in bounds (checked above) and, by the caller's
+        // promise, no other thread writes this column.
+        unsafe {
+            *self.colour.add(i) = colour;
+            *self.depth.add(i) = depth;
+        }
+    }
+}
+
+/// How positions and heights are computed (seed 000, chapter 7).
+pub(super) trait Sampling: Sync {
+    type Position: Copy + Default;
+    /// The ground position `distance_m` along ground direction `dir`.
+    fn position(&self, dir: [f64; 2], distance_m: f64) -> Self::Position;
+    /// Height at `p`, metres; NaN off the grid or where the mask is 0.
+    fn height(&self, p: Self::Position, subvoxel: bool) -> f64;
+    /// Colour at `p` from colour level `level`.
+    fn colour(&self, p: Self::Position, subvoxel: bool, level: usize) -> u32;
+}
+
+/// Floating point throughout.
+pub(super) struct FloatSampling<'a> {
+    pub terrain: &'a Terrain<'a>,
+    pub eye: [f64; 2],
+}
+
+impl Sampling for FloatSampling<'_> {
+    type Position = [f64; 2];
+
+    #[inline]
+    fn position(&self, dir: [f64; 2], distance_m: f64) -> [f64; 2] {
+        [
+            self.eye[0] + dir[0] * distance_m,
+            self.eye[1] + dir[1] * distance_m,
+        ]
+    }
+
+    #[inline]
+    fn height(&self, [x, y]: [f64; 2], subvoxel: bool) -> f64 {
+        if subvoxel {
+            self.terrain.height(x, y, true).unwrap_or(f64::NAN)
+        } else {
+            self.terrain.nearest_height(x, y) as f64
+        }
+    }
+
+    #[inline]
+    fn colour(&self, [x, y]: [f64; 2], subvoxel: bool, level: usize) -> u32 {
+        self.terrain.color(x, y, subvoxel, level)
+    }
+}
+
+/// 16.16 fixed point for ground positions (in cells) and heights (in
+/// metres).
+pub(super) struct FixedSampling<'a> {
+    pub terrain: &'a Terrain<'a>,
+    /// The eye in 1/65536 cell.
+    pub eye: [i64; 2],
+}
+
+/// One in 16.16 fixed point.
+pub(super) const ONE: f64 = 65536.0;
+
+impl<'a> FixedSampling<'a> {
+    pub fn new(terrain: &'a Terrain<'a>, eye: [f64; 2]) -> Self {
+        let to_cell = ONE / terrain.cell_m;
+        FixedSampling {
+            terrain,
+            eye: [(eye[0] * to_cell) as i64, (eye[1] * to_cell) as i64],
+        }
+    }
+}
+
+impl Sampling for FixedSampling<'_> {
+    type Position = [i64; 2];
+
+    #[inline]
+    fn position(&self, dir: [f64; 2], distance_m: f64) -> [i64; 2] {
+        let to_cell = ONE / self.terrain.cell_m;
+        let (dx, dy) = ((dir[0] * to_cell) as i64, (dir[1] * to_cell) as i64);
+        let dist = (distance_m * ONE) as i64;
+        [
+            self.eye[0] + ((dx * dist) >> 16),
+            self.eye[1] + ((dy * dist) >> 16),
+        ]
+    }
+
+    #[inline]
+    fn height(&self, [x, y]: [i64; 2], subvoxel: bool) -> f64 {
+        self.terrain
+            .height_fixed(x, y, subvoxel)
+            .map_or(f64::NAN, |z| z as f64 / ONE)
+    }
+
+    #[inline]
+    fn colour(&self, [x, y]: [i64; 2], subvoxel: bool, level: usize) -> u32 {
+        self.terrain.color_fixed(x, y, subvoxel, level)
+    }
+}
+
+/// What every packet of a frame shares.
+pub(super) struct Pass<'a> {
+    pub terrain: &'a Terrain<'a>,
+    pub slices: &'a [Slice],
+    pub screen: &'a Screen,
+    /// Ground direction of each line, scaled so that `dir · s` advances the
+    /// slice distance s.
+    pub directions: &'a [[f64; 2]],
+    pub eye_z: f64,
+    /// Depth A − B/z of a view distance z (eq. 5.11): [A, B].
+    pub depth_terms: [f64; 2],
+    pub far_m: f64,
+    pub sky: u32,
+}
+
+impl Pass<'_> {
+    /// March lines `first..first + count` (count ≤ [`PACKET`]) into `target`.
+    ///
+    /// # Safety
+    /// No other thread may be marching any of these lines into `target`.
+    pub unsafe fn march<S: Sampling>(
+        &self,
+        sampling: &S,
+        first: usize,
+        count: usize,
+        target: &Target,
+    ) {
+        let lines = first..first + count;
+        let dirs = &self.directions[lines.clone()];
+        let needed = &self.screen.rows_needed[lines];
+        let slope = &self.screen.slope[..];
+        let forward_per_depth = &self.screen.forward_per_depth[..];
+        let [depth_a, depth_b] = self.depth_terms;
+        // Next unpainted row of each line, and the row its work ends at.
+        let mut row = [0usize; PACKET];
+        let mut end = [0usize; PACKET];
+        for k in 0..count {
+            end[k] = needed[k][1];
+        }
+        let mut busy = (0..count).filter(|&k| end[k] > 0).count();
+        let mut position = [S::Position::default(); PACKET];
+        let mut rise = [f64::NAN; PACKET];
+        for slice in self.slices {
+            let s = slice.distance_m;
+            // All loads first, then the comparisons.
+            for k in 0..count {
+                rise[k] = f64::NAN;
+                if row[k] < end[k] {
+                    position[k] = sampling.position(dirs[k], s);
+                    rise[k] = sampling.height(position[k], slice.subvoxel) - self.eye_z;
+                }
+            }
+            for k in 0..count {
+                // A NaN rise (no data) covers nothing.
+                if row[k] >= end[k] || rise[k].is_nan() || rise[k] <= s * slope[row[k]] {
+                    continue;
+                }
+                let level = slice.level(self.terrain, self.eye_z, rise[k] + self.eye_z);
+                let colour = sampling.colour(position[k], slice.subvoxel, level);
+                let depth_over = depth_b / s;
+                let [lo, _] = needed[k];
+                while row[k] < end[k] && rise[k] > s * slope[row[k]] {
+                    let r = row[k];
+                    if r >= lo {
+                        // Beyond the far plane for this row's rays: sky
+                        // (only a pitched camera's rows differ).
+                        let (c, depth) = if s > self.far_m * forward_per_depth[r] {
+                            (self.sky, 1.0)
+                        } else {
+                            (colour, (depth_a - depth_over * forward_per_depth[r]) as f32)
+                        };
+                        // SAFETY: this line is ours (the caller's promise).
+                        unsafe { target.set(r, first + k, c, depth) };
+                    }
+                    row[k] += 1;
+                }
+                if row[k] >= end[k] {
+                    busy -= 1;
+                }
+            }
+            if busy == 0 {
+                break;
+            }
+        }
+        // Sky above each line's horizon, row by row so that neighbouring
+        // lines' pixels are written together.
+        let from = (0..count)
+            .map(|k| row[k].max(needed[k][0]))
+            .min()
+            .unwrap_or(0);
+        let to = (0..count).map(|k| needed[k][1]).max().unwrap_or(0);
+        for r in from..to {
+            for k in 0..count {
+                if r >= row[k].max(needed[k][0]) && r < needed[k][1] {
+                    // SAFETY: as above.
+                    unsafe { target.set(r, first + k, self.sky, 1.0) };
+                }
+            }
+        }
+    }
+}
