@@ -204,15 +204,15 @@ fn headless_frames_of_each_mode_match_their_references() {
     }
 }
 
-/// At pitch 0 the raycast's depth (eq. 5.11 per slice) and the GPU's depth
-/// of the full-resolution mesh (τ = 0, no culling, no morphing) agree per
-/// pixel: compared as distances along the view axis, in grid cells.
+/// The raycast's depth (eq. 5.11, per slice level, per row pitched) and
+/// the GPU's depth of the full-resolution mesh (τ = 0, no culling, no
+/// morphing) agree per pixel, level with the plane shifted and pitched for
+/// real down and up: compared as distances along the view axis, in cells.
 #[test]
 fn raycast_depth_agrees_with_the_full_resolution_mesh() {
     let d = tempfile::tempdir().unwrap();
     let mut scene = olinda(d.path());
     let (device, queue) = lavapipe();
-    let flight = Flight::home(&scene);
     let mesh = Settings {
         mode: Mode::Mesh,
         tau_px: 0.0,
@@ -225,38 +225,59 @@ fn raycast_depth_agrees_with_the_full_resolution_mesh() {
         ..Default::default()
     };
     raycast.raycast.bands = fine_bands();
-    let (mesh_frame, _) =
-        render_once(&device, &queue, &mut scene, &flight, &mesh, SIZE, false).unwrap();
-    let (ray_frame, _) =
-        render_once(&device, &queue, &mut scene, &flight, &raycast, SIZE, false).unwrap();
-    let camera = flight.camera(&scene, SIZE);
-    let cell = scene.frame.cell_size_m;
-    let (mut errors, mut disagree) = (Vec::new(), 0usize);
-    for (&m, &r) in mesh_frame.depth.iter().zip(&ray_frame.depth) {
-        match (m < 1.0, r < 1.0) {
-            (true, true) => errors.push(
-                (distance_of_depth(&camera, m as f64) - distance_of_depth(&camera, r as f64)).abs()
-                    / cell,
-            ),
-            (false, false) => {}
-            _ => disagree += 1,
+    for (pitch, horizon) in [
+        (0.0, None),
+        (-20.0, Some(0.5)),
+        (-45.0, Some(0.5)),
+        (4.0, Some(0.5)),
+    ] {
+        let mut flight = Flight::home(&scene);
+        flight.pitch_deg = pitch;
+        if let Some(h) = horizon {
+            flight.horizon_frac = h;
         }
+        let (mesh_frame, _) =
+            render_once(&device, &queue, &mut scene, &flight, &mesh, SIZE, false).unwrap();
+        let (ray_frame, _) =
+            render_once(&device, &queue, &mut scene, &flight, &raycast, SIZE, false).unwrap();
+        let camera = flight.camera(&scene, SIZE);
+        assert_eq!(camera.pitch_deg, pitch);
+        let cell = scene.frame.cell_size_m;
+        let (mut errors, mut disagree) = (Vec::new(), 0usize);
+        for (&m, &r) in mesh_frame.depth.iter().zip(&ray_frame.depth) {
+            match (m < 1.0, r < 1.0) {
+                (true, true) => errors.push(
+                    (distance_of_depth(&camera, m as f64) - distance_of_depth(&camera, r as f64))
+                        .abs()
+                        / cell,
+                ),
+                (false, false) => {}
+                _ => disagree += 1,
+            }
+        }
+        errors.sort_by(f64::total_cmp);
+        let at = |q: f64| errors[((errors.len() - 1) as f64 * q) as usize];
+        let pixels = (SIZE[0] * SIZE[1]) as usize;
+        eprintln!(
+            "pitch {pitch}°: raycast vs mesh depth over {} terrain pixels: median {:.3}, p90 {:.3}, p95 {:.3}, p99 {:.3} cells; {disagree} of {pixels} pixels disagree on terrain/sky",
+            errors.len(), at(0.5), at(0.9), at(0.95), at(0.99)
+        );
+        assert!(
+            errors.len() > pixels / 3,
+            "pitch {pitch}°: {} terrain pixels",
+            errors.len()
+        );
+        assert!(
+            at(0.5) <= 0.15 && at(0.95) <= 0.3,
+            "pitch {pitch}°: median {}, p95 {}",
+            at(0.5),
+            at(0.95)
+        );
+        assert!(
+            disagree * 100 <= pixels,
+            "pitch {pitch}°: {disagree} pixels disagree"
+        );
     }
-    errors.sort_by(f64::total_cmp);
-    let at = |q: f64| errors[((errors.len() - 1) as f64 * q) as usize];
-    let pixels = (SIZE[0] * SIZE[1]) as usize;
-    eprintln!(
-        "raycast vs mesh depth over {} terrain pixels: median {:.3}, p90 {:.3}, p95 {:.3}, p99 {:.3} cells; {disagree} of {pixels} pixels disagree on terrain/sky",
-        errors.len(), at(0.5), at(0.9), at(0.95), at(0.99)
-    );
-    assert!(errors.len() > pixels / 3, "{} terrain pixels", errors.len());
-    assert!(
-        at(0.5) <= 0.15 && at(0.95) <= 0.3,
-        "median {}, p95 {}",
-        at(0.5),
-        at(0.95)
-    );
-    assert!(disagree * 100 <= pixels, "{disagree} pixels disagree");
 }
 
 /// The sample region's vegetation, from relevo-core's quadtree cut, in

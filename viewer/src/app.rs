@@ -387,6 +387,7 @@ impl ViewerApp {
             };
         }
         ui.checkbox(&mut s.raycast.prefilter, "prefiltered colour");
+        ui.checkbox(&mut s.raycast.grow_steps, "slices spread with distance");
         ui.separator();
         if let Some(f) = &mut self.flight {
             ui.add(

@@ -68,6 +68,9 @@ pub struct RenderArgs {
     /// Raycast mode: prefiltered colour levels by slice footprint.
     #[arg(long)]
     pub prefilter: bool,
+    /// Raycast mode: slices spreading with distance (see `relevo render --help`).
+    #[arg(long)]
+    pub grow_steps: bool,
     /// Objects to composite: a GeoJSON placement file (see docs/formats.md).
     #[arg(long)]
     pub objects: Option<PathBuf>,
@@ -328,6 +331,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         bail!("--view-angle {}: must lie in 0–90°", a.view_angle);
     }
     settings.raycast.prefilter = a.prefilter;
+    settings.raycast.grow_steps = a.grow_steps;
     if a.fixed {
         settings.raycast.arithmetic = Arithmetic::Fixed;
     }

@@ -153,7 +153,7 @@ pub fn tempfile_dir() -> Result<PathBuf> {
 }
 
 /// The raw srtm_ref DEM (1000², no reprojection) padded to 1025².
-fn srtm_padded(data: &Path) -> Result<relevo_core::grid::HeightGrid> {
+pub fn srtm_padded(data: &Path) -> Result<relevo_core::grid::HeightGrid> {
     use relevo_core::grid::{HeightGrid, Squaring};
     let srtm = gdalio::open(&data.join("dem/srtm_ref.tif"))?;
     let raw = srtm.read(srtm.nodata)?;
@@ -374,134 +374,6 @@ fn mesh_bound(
             ),
         );
     }
-}
-
-/// Raycast figures: ms per frame for each configuration, the step
-/// breakdown, and how time grows with width, height and far.
-pub fn render(data: &Path, runs: usize, json_lines: bool) -> Result<()> {
-    use relevo_core::camera::Camera;
-    use relevo_core::horizon::{self, Arithmetic, Band, Mode, RenderOptions, Steps, Terrain};
-
-    let srtm = srtm_padded(data)?;
-    // (name, side, heights, mask, cell size in metres)
-    type Grid<'a> = (&'a str, usize, Vec<f32>, Vec<u8>, f64);
-    let grids: Vec<Grid> = vec![
-        (
-            "fractal 4097²",
-            4097,
-            fractal_heights(4097, 1),
-            vec![1u8; 4097 * 4097],
-            30.0,
-        ),
-        (
-            "srtm_ref 1025²",
-            srtm.side,
-            srtm.heights.clone(),
-            srtm.mask.clone(),
-            90.0,
-        ),
-    ];
-    let band = |spc: f64, subvoxel: bool| {
-        vec![Band {
-            until_m: f64::INFINITY,
-            slices_per_cell: spc,
-            subvoxel,
-        }]
-    };
-    let configs: Vec<(&str, RenderOptions)> = vec![
-        ("raycast", RenderOptions::default()),
-        (
-            "raycast-fixed",
-            RenderOptions {
-                arithmetic: Arithmetic::Fixed,
-                ..Default::default()
-            },
-        ),
-        (
-            "raycast-fator2-subvoxel",
-            RenderOptions {
-                bands: band(2.0, true),
-                ..Default::default()
-            },
-        ),
-        (
-            "raycast-fator2-subvoxel-fixed",
-            RenderOptions {
-                bands: band(2.0, true),
-                arithmetic: Arithmetic::Fixed,
-                ..Default::default()
-            },
-        ),
-        (
-            "distorted",
-            RenderOptions {
-                mode: Mode::Distorted,
-                ..Default::default()
-            },
-        ),
-    ];
-    for (name, side, heights, mask, cell) in &grids {
-        let terrain = Terrain::new(*side, *cell, heights, mask, None).with_hillshade(315.0, 40.0);
-        let extent = (*side - 1) as f64 * cell;
-        let top = heights.iter().cloned().fold(f32::MIN, f32::max) as f64;
-        // Eight headings from a point a quarter into the grid, 100 m above its highest point.
-        let frame =
-            |width: u32, height: u32, far: f64, options: &RenderOptions| -> Result<(f64, Steps)> {
-                let mut total = Vec::new();
-                let mut steps = Vec::new();
-                let mut renderer = horizon::Renderer::default();
-                for k in 0..8 {
-                    let camera = Camera {
-                        position: glam::DVec3::new(extent * 0.5, extent * 0.5, top + 100.0),
-                        heading_deg: k as f64 * 45.0,
-                        pitch_deg: 0.0,
-                        incl_px: height as f64 * 0.7,
-                        fov_x_deg: 60.0,
-                        width,
-                        height,
-                        near_m: *cell,
-                        far_m: far * cell,
-                    };
-                    renderer.render(&terrain, &camera, options)?; // warm the buffers
-                    for _ in 0..runs {
-                        let f = renderer.render(&terrain, &camera, options)?;
-                        total.push(f.steps.setup_ms + f.steps.march_ms + f.steps.output_ms);
-                        steps.push(f.steps);
-                    }
-                }
-                let mut order: Vec<usize> = (0..total.len()).collect();
-                order.sort_by(|&a, &b| total[a].total_cmp(&total[b]));
-                let mid = order[order.len() / 2];
-                Ok((total[mid], steps[mid]))
-            };
-        for (mode, options) in &configs {
-            let (ms, st) = frame(1920, 1080, 1024.0, options)?;
-            emit(
-                json_lines,
-                json!({"bench": "render", "grid": name, "mode": mode, "width": 1920, "height": 1080, "far": 1024,
-                       "ms": ms, "setup_ms": st.setup_ms, "march_ms": st.march_ms, "output_ms": st.output_ms}),
-                format!("{name:>15} {mode:>30}: {ms:7.2} ms/frame (setup {:.2}, march {:.2}, output {:.2})", st.setup_ms, st.march_ms, st.output_ms),
-            );
-        }
-        let plain = &configs[0].1;
-        for (w, h, far) in [
-            (960, 1080, 1024.0),
-            (3840, 1080, 1024.0),
-            (1920, 540, 1024.0),
-            (1920, 2160, 1024.0),
-            (1920, 1080, 256.0),
-            (1920, 1080, 512.0),
-            (1920, 1080, 2048.0),
-        ] {
-            let (ms, _) = frame(w, h, far, plain)?;
-            emit(
-                json_lines,
-                json!({"bench": "render-growth", "grid": name, "mode": "raycast", "width": w, "height": h, "far": far, "ms": ms}),
-                format!("{name:>15} raycast {w}×{h}, far {far}: {ms:7.2} ms/frame"),
-            );
-        }
-    }
-    Ok(())
 }
 
 /// Vegetation figures: detection accuracy on the annotated NEON crops beside

@@ -48,6 +48,11 @@ pub struct RenderArgs {
     /// Sample prefiltered colour levels by slice footprint (anti-aliasing).
     #[arg(long)]
     pub prefilter: bool,
+    /// Let slices spread with distance while a step moves the terrain by at
+    /// most a pixel: faster far away, a little less detail (see
+    /// docs/benchmarks.md for the cost in PSNR).
+    #[arg(long)]
+    pub grow_steps: bool,
     /// Bake a hillshade: sun AZIMUTH,ELEVATION in degrees.
     #[arg(long, value_delimiter = ',', value_name = "AZIMUTH,ELEVATION")]
     pub hillshade: Option<Vec<f64>>,
@@ -111,7 +116,8 @@ pub fn run(a: RenderArgs) -> Result<()> {
         RenderMode::Raycast => Mode::Raycast,
         RenderMode::Distorted => Mode::Distorted,
     };
-    let options = scene::render_options(mode, a.fixed, a.bands, a.prefilter)?;
+    let mut options = scene::render_options(mode, a.fixed, a.bands, a.prefilter)?;
+    options.grow_steps = a.grow_steps;
     let hillshade = a.hillshade.map(|v| [v[0], v[1]]);
     let frame = scene::render_bundle(&bundle, &view, &options, hillshade)?;
     let png = encode_rgba(frame.rgba_bytes(), frame.width, frame.height)?;

@@ -4,15 +4,17 @@
 //! A packet is [`PACKET`] neighbouring lines marched in lockstep: at each
 //! slice all their ground positions are computed and their heights loaded
 //! before any is compared, so the loads — neighbours on the ground, often in
-//! one cache line — are in flight together instead of one after another,
-//! and the painted rows of neighbouring lines share the target's cache
-//! lines. The packet ends when every line has painted the top row it is
-//! needed on (the horizon reached the top of the screen) or the slices run
-//! out.
+//! one cache line — are in flight together instead of one after another.
+//! The packet paints into a small image of its own, [`PACKET`] pixels a
+//! row (it stays in cache), and copies each row to the frame whole, so the
+//! frame is written once, in runs of 64 bytes. The packet ends when every
+//! line has painted the top row it is needed on (the horizon reached the top
+//! of the screen) or the slices run out.
 
 use super::sample::Terrain;
 use super::screen::Screen;
 use super::Slice;
+use std::cell::RefCell;
 
 /// Lines marched together.
 pub(super) const PACKET: usize = 16;
@@ -44,19 +46,36 @@ impl Target {
         }
     }
 
-    /// Set row `r` (from the bottom) of column `line`.
+    /// Write `colour` and `depth` into row `r` (from the bottom), from
+    /// column `first` on.
     ///
     /// # Safety
-    /// No other thread may be writing column `line`.
+    /// No other thread may be writing those columns.
     #[inline]
-    unsafe fn set(&self, r: usize, line: usize, colour: u32, depth: f32) {
-        assert!(r < self.rows && line < self.stride);
-        let i = (self.rows - 1 - r) * self.stride + line;
-        // SAFETY: `i` is in bounds (checked above) and, by the caller's
-        // promise, no other thread writes this column.
+    unsafe fn set_run(&self, r: usize, first: usize, colour: &[u32], depth: &[f32]) {
+        let n = colour.len();
+        assert!(r < self.rows && first + n <= self.stride && depth.len() == n);
+        let i = (self.rows - 1 - r) * self.stride + first;
+        // SAFETY: `i..i + n` is in bounds (checked above) and, by the
+        // caller's promise, no other thread writes these columns; the
+        // sources are the caller's own buffers, so nothing overlaps.
         unsafe {
-            *self.colour.add(i) = colour;
-            *self.depth.add(i) = depth;
+            let (c, d) = (self.colour.add(i), self.depth.add(i));
+            match (
+                <&[u32; PACKET]>::try_from(colour),
+                <&[f32; PACKET]>::try_from(depth),
+            ) {
+                // A whole packet's row: one fixed-size copy each (vector
+                // moves, no call).
+                (Ok(colour), Ok(depth)) => {
+                    c.cast::<[u32; PACKET]>().write_unaligned(*colour);
+                    d.cast::<[f32; PACKET]>().write_unaligned(*depth);
+                }
+                _ => {
+                    std::ptr::copy_nonoverlapping(colour.as_ptr(), c, n);
+                    std::ptr::copy_nonoverlapping(depth.as_ptr(), d, n);
+                }
+            }
         }
     }
 }
@@ -152,6 +171,18 @@ impl Sampling for FixedSampling<'_> {
     }
 }
 
+/// A packet's own image, [`PACKET`] pixels a row, bottom row first; one
+/// per thread, kept from frame to frame.
+#[derive(Default)]
+struct PacketImage {
+    colour: Vec<u32>,
+    depth: Vec<f32>,
+}
+
+thread_local! {
+    static PACKET_IMAGE: RefCell<PacketImage> = RefCell::default();
+}
+
 /// What every packet of a frame shares.
 pub(super) struct Pass<'a> {
     pub terrain: &'a Terrain<'a>,
@@ -179,12 +210,56 @@ impl Pass<'_> {
         count: usize,
         target: &Target,
     ) {
+        PACKET_IMAGE.with_borrow_mut(|image| {
+            self.paint(sampling, first, count, image);
+            let needed = &self.screen.rows_needed[first..first + count];
+            for r in 0..self.screen.height {
+                let at = r * PACKET;
+                let inside = |k: usize| (needed[k][0]..needed[k][1]).contains(&r);
+                if (0..count).all(inside) {
+                    // SAFETY: these lines are ours (the caller's promise).
+                    unsafe {
+                        target.set_run(
+                            r,
+                            first,
+                            &image.colour[at..at + count],
+                            &image.depth[at..at + count],
+                        );
+                    }
+                } else {
+                    // A pitched screen's outer lines need only some rows.
+                    for k in (0..count).filter(|&k| inside(k)) {
+                        // SAFETY: as above.
+                        unsafe {
+                            target.set_run(
+                                r,
+                                first + k,
+                                &image.colour[at + k..at + k + 1],
+                                &image.depth[at + k..at + k + 1],
+                            );
+                        }
+                    }
+                }
+            }
+        });
+    }
+
+    /// March lines `first..first + count` into the packet's own image.
+    fn paint<S: Sampling>(
+        &self,
+        sampling: &S,
+        first: usize,
+        count: usize,
+        image: &mut PacketImage,
+    ) {
         let lines = first..first + count;
         let dirs = &self.directions[lines.clone()];
         let needed = &self.screen.rows_needed[lines];
         let slope = &self.screen.slope[..];
         let forward_per_depth = &self.screen.forward_per_depth[..];
         let [depth_a, depth_b] = self.depth_terms;
+        image.colour.resize(self.screen.height * PACKET, 0);
+        image.depth.resize(self.screen.height * PACKET, 0.0);
         // Next unpainted row of each line, and the row its work ends at.
         let mut row = [0usize; PACKET];
         let mut end = [0usize; PACKET];
@@ -212,20 +287,17 @@ impl Pass<'_> {
                 let level = slice.level(self.terrain, self.eye_z, rise[k] + self.eye_z);
                 let colour = sampling.colour(position[k], slice.subvoxel, level);
                 let depth_over = depth_b / s;
-                let [lo, _] = needed[k];
                 while row[k] < end[k] && rise[k] > s * slope[row[k]] {
                     let r = row[k];
-                    if r >= lo {
-                        // Beyond the far plane for this row's rays: sky
-                        // (only a pitched camera's rows differ).
-                        let (c, depth) = if s > self.far_m * forward_per_depth[r] {
-                            (self.sky, 1.0)
-                        } else {
-                            (colour, (depth_a - depth_over * forward_per_depth[r]) as f32)
-                        };
-                        // SAFETY: this line is ours (the caller's promise).
-                        unsafe { target.set(r, first + k, c, depth) };
-                    }
+                    // Beyond the far plane for this row's rays: sky (only a
+                    // pitched camera's rows differ).
+                    let (c, depth) = if s > self.far_m * forward_per_depth[r] {
+                        (self.sky, 1.0)
+                    } else {
+                        (colour, (depth_a - depth_over * forward_per_depth[r]) as f32)
+                    };
+                    image.colour[r * PACKET + k] = c;
+                    image.depth[r * PACKET + k] = depth;
                     row[k] += 1;
                 }
                 if row[k] >= end[k] {
@@ -236,19 +308,11 @@ impl Pass<'_> {
                 break;
             }
         }
-        // Sky above each line's horizon, row by row so that neighbouring
-        // lines' pixels are written together.
-        let from = (0..count)
-            .map(|k| row[k].max(needed[k][0]))
-            .min()
-            .unwrap_or(0);
-        let to = (0..count).map(|k| needed[k][1]).max().unwrap_or(0);
-        for r in from..to {
-            for k in 0..count {
-                if r >= row[k].max(needed[k][0]) && r < needed[k][1] {
-                    // SAFETY: as above.
-                    unsafe { target.set(r, first + k, self.sky, 1.0) };
-                }
+        // Sky above each line's horizon.
+        for k in 0..count {
+            for r in row[k]..end[k] {
+                image.colour[r * PACKET + k] = self.sky;
+                image.depth[r * PACKET + k] = 1.0;
             }
         }
     }

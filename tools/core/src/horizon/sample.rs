@@ -167,11 +167,12 @@ pub struct Terrain<'a> {
     tiled: Vec<f32>,
     /// Tiles per row of tiles.
     tiles_across: usize,
-    /// Per vertex, the colour used without imagery: a grey ramp by height,
-    /// shaded.
+    /// Per vertex, the colour used without imagery (a grey ramp by height,
+    /// shaded), in the same tiles as `tiled`.
     vertex_colours: Vec<u32>,
-    /// The highest height with data, metres (−∞ without data).
+    /// The highest and lowest heights with data, metres (∓∞ without data).
     pub(super) highest_m: f64,
+    pub(super) lowest_m: f64,
     /// Heights in 16.16 fixed point, built on the first fixed-point render.
     heights_fixed: std::sync::OnceLock<Vec<i32>>,
     mask: Cow<'a, [u8]>,
@@ -198,13 +199,14 @@ impl<'a> Terrain<'a> {
         assert_eq!(mask.len(), side * side);
         let tiles_across = side.div_ceil(TILE);
         let mut tiled = vec![f32::NAN; tiles_across * tiles_across * TILE * TILE];
-        let mut highest_m = f64::NEG_INFINITY;
+        let (mut highest_m, mut lowest_m) = (f64::NEG_INFINITY, f64::INFINITY);
         for r in 0..side {
             for c in 0..side {
                 let i = r * side + c;
                 if mask[i] == 1 {
                     tiled[tile_index(tiles_across, c, r)] = heights[i];
                     highest_m = highest_m.max(heights[i] as f64);
+                    lowest_m = lowest_m.min(heights[i] as f64);
                 }
             }
         }
@@ -216,8 +218,9 @@ impl<'a> Terrain<'a> {
             edge_heights,
             tiled,
             tiles_across,
-            vertex_colours: vec![0; side * side],
+            vertex_colours: vec![0; tiles_across * tiles_across * TILE * TILE],
             highest_m,
+            lowest_m,
             heights_fixed: std::sync::OnceLock::new(),
             mask,
             color,
@@ -250,11 +253,12 @@ impl<'a> Terrain<'a> {
         if self.color.is_some() {
             return;
         }
-        for (i, colour) in self.vertex_colours.iter_mut().enumerate() {
+        for i in 0..self.side * self.side {
             let g = (80.0 + (self.heights[i] as f64 * 0.05).rem_euclid(150.0)).min(255.0);
             let light = self.shade.as_ref().map_or(1.0, |s| s[i] as f64);
             let v = (g * light).round().clamp(0.0, 255.0) as u8;
-            *colour = u32::from_le_bytes([v, v, v, 255]);
+            let at = tile_index(self.tiles_across, i % self.side, i / self.side);
+            self.vertex_colours[at] = u32::from_le_bytes([v, v, v, 255]);
         }
     }
 
@@ -298,16 +302,17 @@ impl<'a> Terrain<'a> {
         (x * self.inv_cell, self.last - y * self.inv_cell)
     }
 
-    /// Index of the vertex nearest (x, y), if on the grid (mask not checked).
+    /// Column and row of the vertex nearest (x, y), if on the grid (mask
+    /// not checked).
     #[inline]
-    fn nearest(&self, x: f64, y: f64) -> Option<usize> {
+    fn nearest_vertex(&self, x: f64, y: f64) -> Option<(usize, usize)> {
         let c = x * self.inv_cell + 0.5;
         let r = self.last - y * self.inv_cell + 0.5;
         if !(c >= 0.0 && r >= 0.0) {
             return None;
         }
         let (c, r) = (c as usize, r as usize);
-        (c < self.side && r < self.side).then(|| r * self.side + c)
+        (c < self.side && r < self.side).then_some((c, r))
     }
 
     /// Nearest vertex with data, if (c, r) is on the grid.
@@ -339,16 +344,9 @@ impl<'a> Terrain<'a> {
     /// where the mask is 0. The march's one memory access per sample.
     #[inline]
     pub(super) fn nearest_height(&self, x: f64, y: f64) -> f32 {
-        let c = x * self.inv_cell + 0.5;
-        let r = self.last - y * self.inv_cell + 0.5;
-        if !(c >= 0.0 && r >= 0.0) {
-            return f32::NAN;
-        }
-        let (c, r) = (c as usize, r as usize);
-        if c >= self.side || r >= self.side {
-            return f32::NAN;
-        }
-        self.tiled[tile_index(self.tiles_across, c, r)]
+        self.nearest_vertex(x, y).map_or(f32::NAN, |(c, r)| {
+            self.tiled[tile_index(self.tiles_across, c, r)]
+        })
     }
 
     /// Terrain height at (x, y), metres; `None` off the grid or over masked cells.
@@ -434,7 +432,9 @@ impl<'a> Terrain<'a> {
     #[inline]
     pub fn color(&self, x: f64, y: f64, subvoxel: bool, level: usize) -> u32 {
         let Some(src) = &self.color else {
-            return self.nearest(x, y).map_or(0, |i| self.vertex_colours[i]);
+            return self.nearest_vertex(x, y).map_or(0, |(c, r)| {
+                self.vertex_colours[tile_index(self.tiles_across, c, r)]
+            });
         };
         let (c, r) = self.grid(x, y);
         let light = match &self.shade {

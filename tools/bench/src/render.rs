@@ -1,0 +1,294 @@
+//! Raycast figures: milliseconds per frame for each configuration of the
+//! floating-horizon renderer, level and pitched, with an image-quality
+//! figure beside each time, and the classic voxel-space loop in the same run
+//! as the baseline.
+
+use crate::bench::{emit, srtm_padded};
+use anyhow::Result;
+use rayon::prelude::*;
+use relevo_core::camera::Camera;
+use relevo_core::grid::fractal_heights;
+use relevo_core::horizon::{self, Arithmetic, Band, Frame, Mode, RenderOptions, Terrain};
+use serde_json::json;
+use std::path::Path;
+use std::time::Instant;
+
+/// Headings each configuration is timed from.
+const HEADINGS: usize = 8;
+
+/// A terrain to fly over: name, side, heights (NaN-free), mask, cell size.
+struct Grid {
+    name: &'static str,
+    side: usize,
+    heights: Vec<f32>,
+    mask: Vec<u8>,
+    cell_m: f64,
+}
+
+/// The camera of heading `k`: from the grid's centre, 100 m above its
+/// highest point, looking down either by the projection-plane shift (incl at
+/// 70 % of the height, pitch 0) or by a real pitch (centred plane).
+fn camera(grid: &Grid, k: usize, size: [u32; 2], pitch_deg: f64) -> Camera {
+    let extent = (grid.side - 1) as f64 * grid.cell_m;
+    let top = grid.heights.iter().copied().fold(f32::MIN, f32::max) as f64;
+    let incl = if pitch_deg == 0.0 { 0.7 } else { 0.5 };
+    Camera {
+        position: glam::DVec3::new(extent * 0.5, extent * 0.5, top + 100.0),
+        heading_deg: k as f64 * 360.0 / HEADINGS as f64,
+        pitch_deg,
+        incl_px: size[1] as f64 * incl,
+        fov_x_deg: 60.0,
+        width: size[0],
+        height: size[1],
+        near_m: grid.cell_m,
+        far_m: 1024.0 * grid.cell_m,
+    }
+}
+
+/// The median of `times`.
+fn median(mut times: Vec<f64>) -> f64 {
+    times.sort_by(f64::total_cmp);
+    times[times.len() / 2]
+}
+
+/// The classic voxel-space loop as published by S. Macke
+/// (github.com/s-macke/VoxelSpace, after NovaLogic's Comanche, 1992): lines
+/// parallel to the screen from front to back, the step growing by 0.005
+/// cell per line, each column drawn as a vertical line up from its y-buffer
+/// into a row-major RGBA image; nearest samples, no depth. Re-implemented
+/// from that description for this comparison; `threads` column ranges are
+/// drawn in parallel, each into its own row-major strip.
+struct ClassicVoxelSpace {
+    strips: Vec<Vec<u32>>,
+}
+
+impl ClassicVoxelSpace {
+    fn render(&mut self, grid: &Grid, colours: &[u32], camera: &Camera, threads: usize) {
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let strip_w = w.div_ceil(threads);
+        self.strips.resize(threads, Vec::new());
+        let heading = camera.heading_deg.to_radians();
+        let (sin, cos) = heading.sin_cos();
+        let d = camera.plane_distance_px();
+        let horizon = h as f64 - camera.incl_px;
+        let half = (camera.fov_x_deg.to_radians() / 2.0).tan();
+        let (ex, ey) = (
+            camera.position.x / grid.cell_m,
+            camera.position.y / grid.cell_m,
+        );
+        let last = (grid.side - 1) as f64;
+        let far = camera.far_m / grid.cell_m;
+        self.strips
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(t, strip)| {
+                let first = t * strip_w;
+                let width = strip_w.min(w.saturating_sub(first));
+                strip.clear();
+                strip.resize(width * h, 0);
+                let mut y_buffer = vec![h as f64; width];
+                let (mut z, mut dz) = (1.0f64, 1.0f64);
+                while z < far {
+                    // The slice's left end and the step between columns, in cells.
+                    let (fx, fy) = (ex + sin * z, ey + cos * z);
+                    let across = half * z * 2.0 / w as f64;
+                    let (mut px, mut py) = (
+                        fx - cos * half * z + cos * across * (first as f64 + 0.5),
+                        fy + sin * half * z - sin * across * (first as f64 + 0.5),
+                    );
+                    let scale = d / (z * grid.cell_m);
+                    for (i, top) in y_buffer.iter_mut().enumerate() {
+                        let (c, r) = ((px + 0.5).floor(), (last - py + 0.5).floor());
+                        px += cos * across;
+                        py -= sin * across;
+                        if c < 0.0 || r < 0.0 || c > last || r > last {
+                            continue;
+                        }
+                        let v = r as usize * grid.side + c as usize;
+                        let on_screen =
+                            (camera.position.z - grid.heights[v] as f64) * scale + horizon;
+                        if on_screen < *top {
+                            let from = on_screen.max(0.0) as usize;
+                            for row in from..(*top as usize).min(h) {
+                                strip[row * width + i] = colours[v];
+                            }
+                            *top = on_screen.max(0.0);
+                        }
+                    }
+                    z += dz;
+                    dz += 0.005;
+                }
+            });
+    }
+}
+
+/// Raycast figures: each configuration at 1920×1080 and 1280×720, far 1024
+/// cells, the median over 8 headings × `runs`, with its PSNR against the
+/// full-resolution level or pitched render, beside the classic loop.
+pub fn render(data: &Path, runs: usize, json_lines: bool) -> Result<()> {
+    let srtm = srtm_padded(data)?;
+    let grids = [
+        Grid {
+            name: "fractal 4097²",
+            side: 4097,
+            heights: fractal_heights(4097, 1),
+            mask: vec![1u8; 4097 * 4097],
+            cell_m: 30.0,
+        },
+        Grid {
+            name: "srtm_ref 1025²",
+            side: srtm.side,
+            heights: srtm.heights.clone(),
+            mask: srtm.mask.clone(),
+            cell_m: 90.0,
+        },
+    ];
+    let band = |spc: f64, subvoxel: bool| {
+        vec![Band {
+            until_m: f64::INFINITY,
+            slices_per_cell: spc,
+            subvoxel,
+        }]
+    };
+    // (name, options, pitch): the first of each pitch is its reference.
+    let configs: Vec<(&str, RenderOptions, f64)> = vec![
+        ("raycast", RenderOptions::default(), 0.0),
+        (
+            "raycast, growing steps",
+            RenderOptions {
+                grow_steps: true,
+                ..Default::default()
+            },
+            0.0,
+        ),
+        (
+            "raycast, 16.16 fixed point",
+            RenderOptions {
+                arithmetic: Arithmetic::Fixed,
+                ..Default::default()
+            },
+            0.0,
+        ),
+        (
+            "raycast, 2 slices/cell + sub-voxel",
+            RenderOptions {
+                bands: band(2.0, true),
+                ..Default::default()
+            },
+            0.0,
+        ),
+        (
+            "distorted (voxel-space shortcuts)",
+            RenderOptions {
+                mode: Mode::Distorted,
+                ..Default::default()
+            },
+            0.0,
+        ),
+        ("raycast, pitch -30°", RenderOptions::default(), -30.0),
+        (
+            "raycast, pitch -30°, growing steps",
+            RenderOptions {
+                grow_steps: true,
+                ..Default::default()
+            },
+            -30.0,
+        ),
+    ];
+    let threads = rayon::current_num_threads();
+    for grid in &grids {
+        let terrain = Terrain::new(grid.side, grid.cell_m, &grid.heights, &grid.mask, None)
+            .with_hillshade(315.0, 40.0);
+        let shade = terrain_colours(&terrain, grid);
+        for size in [[1920u32, 1080], [1280, 720]] {
+            let mut renderer = horizon::Renderer::default();
+            // The reference frames of each heading and pitch.
+            let mut references: Vec<(f64, Vec<Frame>)> = Vec::new();
+            for (name, options, pitch) in &configs {
+                let mut times = Vec::new();
+                let mut quality = Vec::new();
+                let reference = references.iter().position(|(p, _)| p == pitch);
+                let mut frames = Vec::new();
+                for k in 0..HEADINGS {
+                    let cam = camera(grid, k, size, *pitch);
+                    renderer.render(&terrain, &cam, options)?; // warm the buffers
+                    for _ in 0..runs {
+                        let start = Instant::now();
+                        renderer.render(&terrain, &cam, options)?;
+                        times.push(start.elapsed().as_secs_f64() * 1e3);
+                    }
+                    let frame = renderer.frame();
+                    match reference {
+                        Some(r) => quality.push(frame.psnr_db(&references[r].1[k])),
+                        None => frames.push(frame.clone()),
+                    }
+                }
+                if reference.is_none() {
+                    references.push((*pitch, frames));
+                }
+                let ms = median(times);
+                // The worst heading's PSNR (infinite: the same image).
+                let psnr_db = quality.iter().copied().fold(f64::INFINITY, f64::min);
+                emit(
+                    json_lines,
+                    json!({"bench": "render", "grid": grid.name, "mode": name, "width": size[0],
+                           "height": size[1], "far": 1024, "pitch_deg": pitch, "threads": threads,
+                           "ms": ms, "psnr_db": if psnr_db.is_finite() { json!(psnr_db) } else { json!("equal") }}),
+                    format!(
+                        "{:>15} {}×{} {name:>36}: {ms:7.2} ms/frame, PSNR {}",
+                        grid.name,
+                        size[0],
+                        size[1],
+                        if reference.is_none() {
+                            "reference".to_string()
+                        } else if psnr_db.is_finite() {
+                            format!("{psnr_db:.1} dB")
+                        } else {
+                            "equal".to_string()
+                        }
+                    ),
+                );
+            }
+            for threads in [1, 2] {
+                let mut classic = ClassicVoxelSpace { strips: Vec::new() };
+                let mut times = Vec::new();
+                for k in 0..HEADINGS {
+                    let cam = camera(grid, k, size, 0.0);
+                    classic.render(grid, &shade, &cam, threads);
+                    for _ in 0..runs {
+                        let start = Instant::now();
+                        classic.render(grid, &shade, &cam, threads);
+                        times.push(start.elapsed().as_secs_f64() * 1e3);
+                    }
+                }
+                let ms = median(times);
+                emit(
+                    json_lines,
+                    json!({"bench": "render", "grid": grid.name, "mode": "classic voxel space",
+                           "threads": threads, "width": size[0], "height": size[1], "far": 1024, "ms": ms}),
+                    format!(
+                        "{:>15} {}×{} {:>36}: {ms:7.2} ms/frame ({threads} thread{}, no depth)",
+                        grid.name,
+                        size[0],
+                        size[1],
+                        "classic voxel space (s-macke)",
+                        if threads == 1 { "" } else { "s" }
+                    ),
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The raycaster's own colour of every vertex (hillshaded height ramp), row
+/// by row, for the classic loop to draw the same picture.
+fn terrain_colours(terrain: &Terrain, grid: &Grid) -> Vec<u32> {
+    let last = (grid.side - 1) as f64;
+    (0..grid.side * grid.side)
+        .map(|i| {
+            let (c, r) = ((i % grid.side) as f64, (i / grid.side) as f64);
+            terrain.color(c * grid.cell_m, (last - r) * grid.cell_m, false, 0)
+        })
+        .collect()
+}
