@@ -37,38 +37,47 @@ fn decode_png(path: &Path) -> Vec<u8> {
 }
 
 /// The command writes the PNG and depth the library renders for the same
-/// camera (the snapshots of those renders are in `tests/tests/render.rs`).
+/// camera, level and pitched (the snapshots of those renders are in
+/// `tests/tests/render.rs`).
 #[test]
 fn render_command_writes_what_the_library_renders() {
     let d = tempfile::tempdir().unwrap();
     let path = bundle_of("data/olinda/REGION.toml", d.path());
     let b = Bundle::open(&path).unwrap();
-    let view = View::home(&b.manifest.grid, [320, 180]);
-    let (png, depth) = (d.path().join("s.png"), d.path().join("s.f32"));
-    relevo_ok([
-        "render".as_ref(),
-        path.as_os_str(),
-        "--camera".as_ref(),
-        view.pose().to_string().as_ref(),
-        "--size".as_ref(),
-        "320x180".as_ref(),
-        "--bands".as_ref(),
-        "3000:4:sub,inf:1".as_ref(),
-        "--depth".as_ref(),
-        depth.as_os_str(),
-        "--out".as_ref(),
-        png.as_os_str(),
-    ]);
-    let bands = scene::parse_bands("3000:4:sub,inf:1").unwrap();
-    let options = scene::render_options(Mode::Raycast, false, Some(bands), false).unwrap();
-    let frame = scene::render_bundle(&b, &view, &options, None).unwrap();
-    assert_eq!(decode_png(&png), frame.rgba_bytes());
-    let written: Vec<f32> = std::fs::read(&depth)
-        .unwrap()
-        .chunks(4)
-        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-        .collect();
-    assert_eq!(written, frame.depth);
+    let home = View::home(&b.manifest.grid, [320, 180]);
+    let pitched = View {
+        pitch_deg: -30.0,
+        incl_px: None,
+        ..home
+    };
+    for view in [home, pitched] {
+        let (png, depth) = (d.path().join("s.png"), d.path().join("s.f32"));
+        relevo_ok([
+            "render".as_ref(),
+            path.as_os_str(),
+            "--camera".as_ref(),
+            view.pose().to_string().as_ref(),
+            "--size".as_ref(),
+            "320x180".as_ref(),
+            "--bands".as_ref(),
+            "3000:4:sub,inf:1".as_ref(),
+            "--depth".as_ref(),
+            depth.as_os_str(),
+            "--out".as_ref(),
+            png.as_os_str(),
+            "--force".as_ref(),
+        ]);
+        let bands = scene::parse_bands("3000:4:sub,inf:1").unwrap();
+        let options = scene::render_options(Mode::Raycast, false, Some(bands), false).unwrap();
+        let frame = scene::render_bundle(&b, &view, &options, None).unwrap();
+        assert_eq!(decode_png(&png), frame.rgba_bytes());
+        let written: Vec<f32> = std::fs::read(&depth)
+            .unwrap()
+            .chunks(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        assert_eq!(written, frame.depth);
+    }
 }
 
 #[test]
@@ -89,6 +98,23 @@ fn bad_render_arguments_fail_cleanly() {
         (
             vec!["--camera", "290000,9112000,400,45", "--bands", "10:0"],
             "slices per cell",
+        ),
+        (
+            vec!["--camera", "290000,9112000,400,45,-75deg"],
+            "outside the raycast's range",
+        ),
+        (
+            vec![
+                "--camera",
+                "290000,9112000,400,45,-20deg",
+                "--mode",
+                "distorted",
+            ],
+            "level cameras",
+        ),
+        (
+            vec!["--camera", "290000,9112000,400,45,-20dg"],
+            "not a number",
         ),
     ] {
         let res = relevo(
