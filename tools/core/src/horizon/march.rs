@@ -287,6 +287,16 @@ impl Pass<'_> {
                 let level = slice.level(self.terrain, self.eye_z, rise[k] + self.eye_z);
                 let colour = sampling.colour(position[k], slice.subvoxel, level);
                 let depth_over = depth_b / s;
+                if !self.screen.pitched {
+                    // Level: one depth for the slice, and the slices end
+                    // before the far plane.
+                    let depth = (depth_a - depth_over) as f32;
+                    while row[k] < end[k] && rise[k] > s * slope[row[k]] {
+                        image.colour[row[k] * PACKET + k] = colour;
+                        image.depth[row[k] * PACKET + k] = depth;
+                        row[k] += 1;
+                    }
+                }
                 while row[k] < end[k] && rise[k] > s * slope[row[k]] {
                     let r = row[k];
                     // Beyond the far plane for this row's rays: sky (only a

@@ -431,11 +431,18 @@ impl<'a> Terrain<'a> {
     /// Colour at (x, y) from colour level `level`, RGBA packed little-endian.
     #[inline]
     pub fn color(&self, x: f64, y: f64, subvoxel: bool, level: usize) -> u32 {
-        let Some(src) = &self.color else {
-            return self.nearest_vertex(x, y).map_or(0, |(c, r)| {
+        match &self.color {
+            None => self.nearest_vertex(x, y).map_or(0, |(c, r)| {
                 self.vertex_colours[tile_index(self.tiles_across, c, r)]
-            });
-        };
+            }),
+            Some(src) => self.image_color(src, x, y, subvoxel, level),
+        }
+    }
+
+    /// [`Terrain::color`] from the drape image (kept out of line: the march
+    /// inlines only the vertex colours' lookup).
+    #[inline(never)]
+    fn image_color(&self, src: &ColorSource, x: f64, y: f64, subvoxel: bool, level: usize) -> u32 {
         let (c, r) = self.grid(x, y);
         let light = match &self.shade {
             None => 1.0,
