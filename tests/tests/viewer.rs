@@ -151,8 +151,25 @@ fn headless_frames_of_each_mode_match_their_references() {
         sprites,
         ..Default::default()
     };
+    // The same forest from 300 m above the ground, looking 20° down for
+    // real (centred plane): the raycast marches lines through the nadir,
+    // and the impostors composite through its pitched depth.
+    let mut down = forest;
+    down.position.z += 180.0;
+    down.pitch_deg = -20.0;
+    down.horizon_frac = 0.5;
     let with_vegetation = [
         ("mesh_vegetation", vegetation(Mode::Mesh, false), forest),
+        (
+            "mesh_vegetation_pitched",
+            vegetation(Mode::Mesh, false),
+            down,
+        ),
+        (
+            "raycast_vegetation_pitched",
+            vegetation(Mode::Raycast, false),
+            down,
+        ),
         (
             "raycast_vegetation",
             vegetation(Mode::Raycast, false),
