@@ -280,8 +280,16 @@ impl Renderer {
                 "the distorted (voxel-space) mode draws only level cameras (pitch 0)".into(),
             ));
         }
-        self.screen.fill(camera)?;
         let (w, h) = (camera.width as usize, camera.height as usize);
+        if w == 0 || h == 0 {
+            // A window minimised to nothing: an empty frame.
+            self.frame.width = w;
+            self.frame.height = h;
+            self.frame.rgba.clear();
+            self.frame.depth.clear();
+            return Ok(&self.frame);
+        }
+        self.screen.fill(camera)?;
         fill_slices(&mut self.slices, terrain, camera, &self.screen, opts);
         let heading = camera.heading_deg.to_radians();
         let forward = [heading.sin(), heading.cos()];
@@ -796,6 +804,18 @@ mod tests {
             }
         }
         assert_eq!(compared, 32);
+    }
+
+    #[test]
+    fn an_empty_viewport_renders_an_empty_frame() {
+        let (heights, mask, _, _) = poles();
+        let terrain = Terrain::new(257, 1.0, &heights, &mask, None);
+        for (w, h, pitch) in [(0, 90, 0.0), (160, 0, -20.0), (0, 0, 10.0)] {
+            let mut cam = camera(w, h, [128.0, 0.0, 30.0], 0.0, 0.0, 400.0);
+            cam.pitch_deg = pitch;
+            let frame = render(&terrain, &cam, &RenderOptions::default()).unwrap();
+            assert!(frame.rgba.is_empty() && frame.depth.is_empty());
+        }
     }
 
     /// Slices that spread with distance draw fewer slices on a real DEM seen
