@@ -28,8 +28,9 @@ pub(super) struct Target {
     rows: usize,
 }
 
-// SAFETY: tasks write only the columns of their own lines (see `set`), so no
-// element is ever written by two threads, and nothing reads while they run.
+// SAFETY: tasks write only the columns of their own lines (see `set_run`),
+// so no element is ever written by two threads, and nothing reads while
+// they run.
 unsafe impl Send for Target {}
 // SAFETY: as for `Send`.
 unsafe impl Sync for Target {}
