@@ -3,7 +3,7 @@
 //! figure beside each time, and the classic voxel-space loop in the same run
 //! as the baseline.
 
-use crate::bench::{emit, srtm_padded};
+use crate::bench::{emit, median, srtm_padded};
 use anyhow::Result;
 use rayon::prelude::*;
 use relevo_core::camera::Camera;
@@ -43,12 +43,6 @@ fn camera(grid: &Grid, k: usize, size: [u32; 2], pitch_deg: f64) -> Camera {
         near_m: grid.cell_m,
         far_m: 1024.0 * grid.cell_m,
     }
-}
-
-/// The median of `times`.
-fn median(mut times: Vec<f64>) -> f64 {
-    times.sort_by(f64::total_cmp);
-    times[times.len() / 2]
 }
 
 /// The classic voxel-space loop as published by S. Macke
@@ -226,7 +220,7 @@ pub fn render(data: &Path, runs: usize, json_lines: bool) -> Result<()> {
                 if reference.is_none() {
                     references.push((*pitch, frames));
                 }
-                let ms = median(times);
+                let ms = median(&times);
                 // The worst heading's PSNR (infinite: the same image).
                 let psnr_db = quality.iter().copied().fold(f64::INFINITY, f64::min);
                 emit(
@@ -261,7 +255,7 @@ pub fn render(data: &Path, runs: usize, json_lines: bool) -> Result<()> {
                         times.push(start.elapsed().as_secs_f64() * 1e3);
                     }
                 }
-                let ms = median(times);
+                let ms = median(&times);
                 emit(
                     json_lines,
                     json!({"bench": "render", "grid": grid.name, "mode": "classic voxel space",

@@ -74,8 +74,15 @@ impl Camera {
     /// The [0, 1] depth of a point `distance_m` ahead of the eye along the
     /// view axis: (f − f·n/d)/(f − n), seed 000 eq. 5.11 with near n and far f.
     pub fn depth_at(&self, distance_m: f64) -> f64 {
+        let [a, b] = self.depth_terms();
+        a - b / distance_m
+    }
+
+    /// Eq. 5.11 as depth = A − B/d: [A, B] = [f/(f − n), f·n/(f − n)], for
+    /// loops that divide once per distance and share the rest.
+    pub fn depth_terms(&self) -> [f64; 2] {
         let (n, f) = (self.near_m, self.far_m);
-        (f - f * n / distance_m) / (f - n)
+        [f / (f - n), f * n / (f - n)]
     }
 
     pub fn view_projection(&self) -> DMat4 {

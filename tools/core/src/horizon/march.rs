@@ -66,8 +66,7 @@ impl Target {
                 <&[u32; PACKET]>::try_from(colour),
                 <&[f32; PACKET]>::try_from(depth),
             ) {
-                // A whole packet's row: one fixed-size copy each (vector
-                // moves, no call).
+                // A whole packet's row: one fixed-size copy each.
                 (Ok(colour), Ok(depth)) => {
                     c.cast::<[u32; PACKET]>().write_unaligned(*colour);
                     d.cast::<[f32; PACKET]>().write_unaligned(*depth);
@@ -133,7 +132,7 @@ pub(super) struct FixedSampling<'a> {
 }
 
 /// One in 16.16 fixed point.
-pub(super) const ONE: f64 = 65536.0;
+const ONE: f64 = 65536.0;
 
 impl<'a> FixedSampling<'a> {
     pub fn new(terrain: &'a Terrain<'a>, eye: [f64; 2]) -> Self {

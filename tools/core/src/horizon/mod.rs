@@ -331,15 +331,14 @@ impl Renderer {
         } else {
             march::Target::new(&mut f.rgba, &mut f.depth, w, h)
         };
-        let (near, far) = (camera.near_m, camera.far_m);
         let pass = march::Pass {
             terrain,
             slices: &self.slices,
             screen,
             directions: &self.directions,
             eye_z: camera.position.z,
-            depth_terms: [far / (far - near), far * near / (far - near)],
-            far_m: far,
+            depth_terms: camera.depth_terms(),
+            far_m: camera.far_m,
             sky: u32::from_le_bytes(opts.sky),
         };
         let eye = [camera.position.x, camera.position.y];
@@ -403,21 +402,16 @@ impl Renderer {
 /// the view depth (distance along the view axis) by t.
 pub fn pixel_ray(camera: &Camera, px: f64, py: f64) -> [f64; 3] {
     let d = camera.plane_distance_px();
-    let (heading, pitch) = (
-        camera.heading_deg.to_radians(),
-        camera.pitch_deg.to_radians(),
-    );
-    let (sin, cos) = pitch.sin_cos();
+    let heading = camera.heading_deg.to_radians();
     let level_forward = [heading.sin(), heading.cos()];
     let right = [heading.cos(), -heading.sin()];
     let across = px + 0.5 - camera.width as f64 / 2.0;
     let up = (camera.height as f64 - 1.0 - py) + 0.5 - camera.incl_px;
-    // forward = cos θ·level + sin θ·z, up = −sin θ·level + cos θ·z.
-    let ahead = (d * cos - up * sin) / d;
+    let (ahead, rise) = screen::ray_at(camera, up);
     [
-        level_forward[0] * ahead + right[0] * across / d,
-        level_forward[1] * ahead + right[1] * across / d,
-        (d * sin + up * cos) / d,
+        level_forward[0] * ahead / d + right[0] * across / d,
+        level_forward[1] * ahead / d + right[1] * across / d,
+        rise / d,
     ]
 }
 
@@ -454,8 +448,8 @@ pub fn pick(terrain: &Terrain, camera: &Camera, px: f64, py: f64) -> Option<f64>
 
 /// View depth of a [0, 1] depth, inverting eq. 5.11.
 pub fn distance_of_depth(camera: &Camera, depth: f64) -> f64 {
-    let (n, f) = (camera.near_m, camera.far_m);
-    f * n / (f - depth * (f - n))
+    let [a, b] = camera.depth_terms();
+    b / (a - depth)
 }
 
 #[cfg(test)]

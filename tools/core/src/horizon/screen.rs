@@ -64,12 +64,18 @@ pub(super) struct Screen {
     pub pitched: bool,
 }
 
-/// α(r) and β(r) in pixels for row `r` from the bottom.
-fn row_ray(camera: &Camera, r: usize) -> (f64, f64) {
+/// α and β in pixels of the rays `rho` pixels above the principal point:
+/// how far they advance horizontally forward and rise per unit
+/// (forward = cos θ·level + sin θ·up, the camera's up = −sin θ·level + cos θ·up).
+pub(super) fn ray_at(camera: &Camera, rho: f64) -> (f64, f64) {
     let d = camera.plane_distance_px();
     let (sin, cos) = camera.pitch_deg.to_radians().sin_cos();
-    let rho = r as f64 + 0.5 - camera.incl_px;
     (d * cos - rho * sin, d * sin + rho * cos)
+}
+
+/// α(r) and β(r) in pixels for row `r` from the bottom.
+fn row_ray(camera: &Camera, r: usize) -> (f64, f64) {
+    ray_at(camera, r as f64 + 0.5 - camera.incl_px)
 }
 
 /// Lines per column the camera's pitch asks for (max α / min α), or `None`
