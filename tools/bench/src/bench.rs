@@ -470,7 +470,7 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
             pixel_m: 0.1,
             valid: None,
         };
-        let params = options.segment_params();
+        let params = options.segment_params(veg_image.image.brightness_span());
         let mut steps = Vec::new();
         let segment_ms = median_ms(runs, || {
             steps.push(segment::segment(&veg_image.image, &params)?.steps);

@@ -7,6 +7,7 @@
 mod bench;
 mod clusters;
 mod render;
+mod veg_protocol;
 mod view;
 mod view_vegetation;
 
@@ -24,6 +25,7 @@ use std::process::ExitCode;
   cargo run --release -p relevo-bench -- hierarchy --max-side 8193 --runs 3
   cargo run --release -p relevo-bench -- render --json --runs 3
   cargo run --release -p relevo-bench -- veg --json --runs 3 --max-side 10000
+  cargo run --release -p relevo-bench -- veg-protocol --json
   cargo run --release -p relevo-bench -- view --json --runs 3
   cargo run --release -p relevo-bench -- clusters --json --runs 5"
 )]
@@ -69,6 +71,13 @@ enum BenchCommand {
         #[arg(long, default_value_t = 10000)]
         max_side: usize,
     },
+    /// Vegetation across images: options tuned on one annotated image and
+    /// reported on the other, both ways; the defaults on both and on
+    /// contrast-changed copies.
+    #[command(after_help = "Examples:
+  relevo-bench veg-protocol
+  relevo-bench veg-protocol --json --data ../shared/data")]
+    VegProtocol(BenchArgs),
     /// The viewer's vegetation on the GPU found (lavapipe without one), at
     /// 1280×720: the seed's tables 4.1–4.5 (billboards against sprites,
     /// culling along a flight, texture sizes, list/blobs/quadtree, large
@@ -166,6 +175,7 @@ fn main() -> ExitCode {
             common: a,
             max_side,
         } => bench::veg(&a.repo, &a.data, a.runs.max(1), max_side, a.json),
+        BenchCommand::VegProtocol(a) => veg_protocol::run(&a.repo, &a.data, a.json),
         BenchCommand::Hierarchy {
             common: a,
             max_side,

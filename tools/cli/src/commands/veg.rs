@@ -75,10 +75,12 @@ pub struct VegDetectArgs {
     /// Ground size of a pixel in metres, for images that are not georeferenced.
     #[arg(long, allow_negative_numbers = true)]
     pub pixel_size: Option<f64>,
-    /// Largest brightness standard deviation in a region (8-bit units).
+    /// Largest brightness standard deviation in a region, as a share of the
+    /// image's brightness span (1st to 99th percentile), e.g. 0.18.
     #[arg(long, allow_negative_numbers = true)]
     pub brightness_std: Option<f32>,
-    /// Largest chroma standard deviation in a region (8-bit units).
+    /// Largest standard deviation of each chroma channel in a region, as a
+    /// share of the image's brightness span, e.g. 0.04.
     #[arg(long, allow_negative_numbers = true)]
     pub chroma_std: Option<f32>,
     /// Regions smaller than this (pixels) join their most similar neighbour.
@@ -108,6 +110,11 @@ pub struct VegDetectArgs {
     /// Fill mode: objects per hectare.
     #[arg(long, allow_negative_numbers = true)]
     pub density: Option<f64>,
+    /// Side of the tiles a large image is analysed in, pixels (default
+    /// 2048; at least 256): an image no larger is analysed whole; smaller
+    /// tiles use less memory.
+    #[arg(long)]
+    pub tile: Option<usize>,
     /// The database (semicolon CSV).
     #[arg(long, short)]
     pub out: PathBuf,
@@ -148,7 +155,7 @@ impl VegDetectArgs {
         set!(brightness_std => brightness_std, chroma_std => chroma_std,
              min_region => min_region_px, min_block => min_block_px, window => window_px, neighbours => neighbours, negative => negative_class,
              crown_spacing => crown_spacing_m,
-             crown_min_radius => crown_min_radius_m, density => density_per_ha);
+             crown_min_radius => crown_min_radius_m, density => density_per_ha, tile => tile_px);
         if let Some(mode) = self.mode {
             o.mode = mode.into();
         }
@@ -282,21 +289,26 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
     Ok(())
 }
 
-/// [`pipeline::extract`] on a worker thread while a bar shows its stage.
+/// [`pipeline::extract`] on a worker thread while a bar shows its steps
+/// (learning from the samples, then each tile).
 fn extract_with_progress(
     image: &pipeline::VegImage,
     samples: &[samples::Sample],
     options: &VegOptions,
 ) -> relevo_core::Result<pipeline::Extraction> {
-    const STAGES: [&str; pipeline::Watch::STAGES] = ["split and merge", "classify", "place"];
     let watch = pipeline::Watch::default();
-    let bar = crate::progress::bar(STAGES.len() as u64, "vegetation");
+    let bar = crate::progress::bar(1, "vegetation");
     let result = std::thread::scope(|scope| {
         let worker = scope.spawn(|| pipeline::extract_watched(image, samples, options, &watch));
         while !worker.is_finished() {
-            let done = (watch.fraction() * STAGES.len() as f32).round() as usize;
+            let (done, all) = watch.progress();
+            bar.set_length(all.max(1) as u64);
             bar.set_position(done as u64);
-            bar.set_message(STAGES.get(done).copied().unwrap_or(""));
+            bar.set_message(if done == 0 {
+                "learning from the samples"
+            } else {
+                "tiles"
+            });
             std::thread::sleep(std::time::Duration::from_millis(50));
         }
         worker.join()

@@ -35,6 +35,32 @@ fn dominant_region(segmentation: &Segmentation, sample: &Sample) -> Option<usize
         .map(|(k, _)| k)
 }
 
+/// The signatures one sample gives in a segmentation: every region whose
+/// centroid lies in the sample, and the region covering most of the sample.
+pub fn sample_signatures(
+    image: &Image,
+    segmentation: &Segmentation,
+    sample: &Sample,
+    window_px: u32,
+) -> Vec<Vec<f32>> {
+    let mut inside: Vec<usize> = segmentation
+        .regions
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| sample.contains(r.centroid[0] as f64, r.centroid[1] as f64))
+        .map(|(k, _)| k)
+        .collect();
+    if let Some(k) = dominant_region(segmentation, sample) {
+        if !inside.contains(&k) {
+            inside.push(k);
+        }
+    }
+    inside
+        .into_iter()
+        .map(|k| region_signature(image, segmentation, k, window_px))
+        .collect()
+}
+
 /// Signatures learnt per class, standardised per feature.
 #[derive(Debug, Clone)]
 pub struct Classifier {
@@ -60,44 +86,28 @@ pub struct Label {
 }
 
 impl Classifier {
-    /// Learn signatures: every region whose centroid lies in a sample, and
-    /// the region covering most of the sample, gives one signature of the
-    /// sample's class.
-    pub fn train(
-        image: &Image,
-        segmentation: &Segmentation,
-        samples: &[Sample],
+    /// Learn from the signatures of marked regions: `(class, signature)`
+    /// pairs in the order the samples were marked (their first appearance
+    /// orders the classes), e.g. from [`sample_signatures`].
+    pub fn learn(
+        marked: Vec<(String, Vec<f32>)>,
         window_px: u32,
         neighbours: usize,
     ) -> Result<Classifier> {
-        if samples.is_empty() {
+        if marked.is_empty() {
             return Err(Error::Input("no samples to learn from".into()));
         }
         let mut classes: Vec<String> = Vec::new();
-        let mut raw: Vec<(usize, Vec<f32>)> = Vec::new();
-        for sample in samples {
-            let class = match classes.iter().position(|c| *c == sample.class) {
+        let mut raw: Vec<(usize, Vec<f32>)> = Vec::with_capacity(marked.len());
+        for (name, signature) in marked {
+            let class = match classes.iter().position(|c| *c == name) {
                 Some(k) => k,
                 None => {
-                    classes.push(sample.class.clone());
+                    classes.push(name);
                     classes.len() - 1
                 }
             };
-            let mut inside: Vec<usize> = segmentation
-                .regions
-                .iter()
-                .enumerate()
-                .filter(|(_, r)| sample.contains(r.centroid[0] as f64, r.centroid[1] as f64))
-                .map(|(k, _)| k)
-                .collect();
-            if let Some(k) = dominant_region(segmentation, sample) {
-                if !inside.contains(&k) {
-                    inside.push(k);
-                }
-            }
-            for k in inside {
-                raw.push((class, region_signature(image, segmentation, k, window_px)));
-            }
+            raw.push((class, signature));
         }
         let features = raw[0].1.len();
         let n = raw.len() as f32;

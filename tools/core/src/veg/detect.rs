@@ -51,6 +51,8 @@ pub struct Object {
 
 /// Objects for every pixel whose region's class is in `vegetation` (and
 /// that has data, where `valid` is given), sorted by row then column.
+/// `origin` is where the image's first pixel lies in a larger image it is a
+/// tile of (`[0, 0]` for a whole image): the fill grid is that image's.
 pub fn detect(
     image: &super::Image,
     segmentation: &Segmentation,
@@ -58,6 +60,7 @@ pub fn detect(
     vegetation: &[bool],
     valid: Option<&[bool]>,
     placement: Placement,
+    origin: [usize; 2],
 ) -> Vec<Object> {
     let (w, h) = (segmentation.width, segmentation.height);
     let label_at = |x: usize, y: usize| labels[segmentation.labels[y * w + x] as usize];
@@ -79,16 +82,18 @@ pub fn detect(
             diameter_px,
         } => {
             let s = spacing_px.max(1e-3) as f64;
-            let (cols, rows) = ((w as f64 / s).ceil() as u64, (h as f64 / s).ceil() as u64);
-            (0..rows)
-                .into_par_iter()
+            let (ox, oy) = (origin[0] as f64, origin[1] as f64);
+            let cells =
+                |o: f64, n: usize| (o / s).floor() as u64..((o + n as f64) / s).ceil() as u64;
+            let (columns, rows) = (cells(ox, w), cells(oy, h));
+            rows.into_par_iter()
                 .flat_map_iter(|j| {
-                    (0..cols).filter_map(move |i| {
+                    columns.clone().filter_map(move |i| {
                         let r = splitmix64(j << 32 | i);
                         let u = (r >> 40) as f64 / (1u64 << 24) as f64;
                         let v = (r & 0xff_ffff) as f64 / (1u64 << 24) as f64;
-                        let (x, y) = ((i as f64 + u) * s, (j as f64 + v) * s);
-                        (x < w as f64 && y < h as f64).then_some((x, y))
+                        let (x, y) = ((i as f64 + u) * s - ox, (j as f64 + v) * s - oy);
+                        (x >= 0.0 && y >= 0.0 && x < w as f64 && y < h as f64).then_some((x, y))
                     })
                 })
                 .filter(|&(x, y)| is_vegetation(x as usize, y as usize))
@@ -323,20 +328,28 @@ mod tests {
             spacing_px: 2.0,
             diameter_px: 2.0,
         };
-        let all = detect(&image, &segmentation, &labels, &[true], None, fill);
+        let all = detect(&image, &segmentation, &labels, &[true], None, fill, [0, 0]);
         // One object per 2×2 pixels.
         assert_eq!(all.len(), w * h / 4);
         assert_eq!(
             all,
-            detect(&image, &segmentation, &labels, &[true], None, fill)
+            detect(&image, &segmentation, &labels, &[true], None, fill, [0, 0])
         );
         // No data in the left half: objects only on the right.
         let valid: Vec<bool> = (0..w * h).map(|i| i % w >= 20).collect();
-        let right = detect(&image, &segmentation, &labels, &[true], Some(&valid), fill);
+        let right = detect(
+            &image,
+            &segmentation,
+            &labels,
+            &[true],
+            Some(&valid),
+            fill,
+            [0, 0],
+        );
         assert!(right.iter().all(|o| o.x >= 20.0));
         assert_eq!(right.len(), all.iter().filter(|o| o.x >= 20.0).count());
         // A class that is not vegetation gets nothing.
-        assert!(detect(&image, &segmentation, &labels, &[false], None, fill).is_empty());
+        assert!(detect(&image, &segmentation, &labels, &[false], None, fill, [0, 0]).is_empty());
     }
 
     #[test]

@@ -12,8 +12,9 @@
 //! - [`detect`]: vegetation objects from classified regions.
 //! - [`db`]: the `id;x;y;class;size;score` database.
 //! - [`eval`]: precision, recall and F1 against truth boxes.
-//! - [`pipeline`]: the whole extraction on one image (options, report,
-//!   overlay), as every program runs it.
+//! - [`tiles`]: cutting a large image into tiles with a margin of context.
+//! - [`pipeline`]: the whole extraction on one image, tile by tile (options,
+//!   report, overlay), as every program runs it.
 //! - [`baseline`]: excess-green detection, to measure against.
 
 pub mod baseline;
@@ -25,6 +26,7 @@ pub mod haar;
 pub mod pipeline;
 pub mod samples;
 pub mod segment;
+pub mod tiles;
 
 use crate::{Error, Result};
 
@@ -87,6 +89,22 @@ impl Image {
                 .unwrap_or(255) as f32
         };
         level(0.99) - level(0.01)
+    }
+
+    /// The pixels of `[x0, y0, x1, y1)`, a rectangle inside the image.
+    pub fn window(&self, [x0, y0, x1, y1]: [usize; 4]) -> Image {
+        let b = self.bands;
+        let mut pixels = Vec::with_capacity((x1 - x0) * (y1 - y0) * b);
+        for y in y0..y1 {
+            let row = y * self.width;
+            pixels.extend_from_slice(&self.pixels[(row + x0) * b..(row + x1) * b]);
+        }
+        Image {
+            width: x1 - x0,
+            height: y1 - y0,
+            bands: b,
+            pixels,
+        }
     }
 
     /// The pixel at `(x, y)` in the opponent colour space of [`opponent`].

@@ -3,15 +3,18 @@
 //! samples, classification of every region and object placement, with a
 //! report of what was found and an overlay for people to check it.
 
-use super::classify::{Classifier, Label};
+use super::classify::{sample_signatures, Classifier, Label};
 use super::db::VegObject;
-use super::detect::{detect, Placement};
+use super::detect::{detect, Object, Placement};
 use super::samples::Sample;
-use super::segment::{segment, SegmentParams, Segmentation};
+use super::segment::{segment, Region, SegmentParams, SegmentSteps, Segmentation};
+use super::tiles::{Tile, Tiling};
 use super::Image;
 use crate::geo::GeoTransform;
 use crate::{Error, Result};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Instant;
 
 /// Every setting of vegetation extraction, as in REGION.toml's
@@ -19,7 +22,11 @@ use std::time::Instant;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct VegOptions {
-    /// Split-and-merge thresholds (see `relevo_core::veg::segment`).
+    /// Split-and-merge thresholds (see `relevo_core::veg::segment`):
+    /// largest standard deviation of brightness, and of each chroma
+    /// channel, in a region, as shares of the image's brightness span (1st
+    /// to 99th percentile, [`super::Image::brightness_span`]), so that a
+    /// stretched or a dull copy of an image splits the same way.
     pub brightness_std: f32,
     pub chroma_std: f32,
     pub min_region_px: u32,
@@ -38,14 +45,17 @@ pub struct VegOptions {
     pub crown_min_radius_m: f64,
     /// Fill: objects per hectare of vegetation.
     pub density_per_ha: f64,
+    /// Side of the tiles a large image is analysed in, pixels (see
+    /// [`super::tiles`]); smaller tiles use less memory.
+    pub tile_px: usize,
 }
 
 impl Default for VegOptions {
     fn default() -> Self {
         let s = SegmentParams::default();
         VegOptions {
-            brightness_std: s.brightness_std,
-            chroma_std: s.chroma_std,
+            brightness_std: 0.18,
+            chroma_std: 0.04,
             min_region_px: s.min_region_px,
             min_block_px: s.min_block_px,
             window_px: 8,
@@ -55,6 +65,7 @@ impl Default for VegOptions {
             crown_spacing_m: 2.5,
             crown_min_radius_m: 0.5,
             density_per_ha: 100.0,
+            tile_px: super::tiles::CORE_PX,
         }
     }
 }
@@ -70,14 +81,28 @@ pub enum Mode {
 }
 
 impl VegOptions {
-    /// The split-and-merge thresholds among these options.
-    pub fn segment_params(&self) -> SegmentParams {
+    /// The split-and-merge thresholds among these options, in 8-bit units
+    /// for an image whose brightness spans `brightness_span` (at least one
+    /// level, so a flat image still splits into blocks).
+    pub fn segment_params(&self, brightness_span: f32) -> SegmentParams {
+        let span = brightness_span.max(1.0);
         SegmentParams {
-            brightness_std: self.brightness_std,
-            chroma_std: self.chroma_std,
+            brightness_std: self.brightness_std * span,
+            chroma_std: self.chroma_std * span,
             min_region_px: self.min_region_px,
             min_block_px: self.min_block_px,
         }
+    }
+
+    /// How an image is cut into tiles for `placement`.
+    pub fn tiling(&self, placement: Placement) -> Result<Tiling> {
+        if self.tile_px < MIN_TILE_PX {
+            return Err(Error::Input(format!(
+                "tile_px: tiles of {} pixels are too small to hold crowns with their context (at least {MIN_TILE_PX})",
+                self.tile_px
+            )));
+        }
+        Ok(Tiling::for_placement(placement, self.tile_px))
     }
 
     /// The placement for pixels of `pixel_m` metres.
@@ -126,6 +151,9 @@ impl VegOptions {
         })
     }
 }
+
+/// Smallest tile side, pixels.
+pub const MIN_TILE_PX: usize = 256;
 
 /// Densest fill a vegetation class may ask for: one object per square
 /// metre.
@@ -195,13 +223,19 @@ pub struct Report {
     /// 1st to 99th percentile of brightness, in 8-bit units.
     pub brightness_span: f32,
     pub placement: Placement,
+    /// Tiles the image was analysed in (1: whole).
+    pub tiles: usize,
     pub leaves: usize,
     pub regions: usize,
     pub classes: Vec<ClassReport>,
     pub objects: usize,
+    /// Time of each stage summed over tiles (tiles run side by side, so
+    /// these can add up to more than the whole), ms.
     pub segment_ms: f64,
     pub classify_ms: f64,
     pub detect_ms: f64,
+    /// Wall time of the whole extraction, ms.
+    pub total_ms: f64,
 }
 
 #[derive(Debug, Serialize)]
@@ -215,34 +249,44 @@ pub struct ClassReport {
 }
 
 /// Progress and cancellation of an extraction running elsewhere (a
-/// viewer's background thread): the stages done out of [`Watch::STAGES`]
-/// (split-and-merge, classification, placement), and a flag that stops the
-/// extraction at the next stage boundary.
+/// viewer's background thread, the CLI's progress bar): steps done out of
+/// a total (learning from the samples, then each tile), and a flag that
+/// stops the extraction at the next step.
 #[derive(Debug, Default)]
 pub struct Watch {
-    cancelled: std::sync::atomic::AtomicBool,
-    stages_done: std::sync::atomic::AtomicUsize,
+    cancelled: AtomicBool,
+    steps_done: AtomicUsize,
+    steps: AtomicUsize,
 }
 
 impl Watch {
-    pub const STAGES: usize = 3;
-
-    /// Ask the extraction to stop at the next stage boundary.
+    /// Ask the extraction to stop at the next step.
     pub fn cancel(&self) {
-        self.cancelled
-            .store(true, std::sync::atomic::Ordering::Relaxed);
+        self.cancelled.store(true, Ordering::Relaxed);
     }
 
-    /// Share of the stages done, 0–1.
+    /// Steps done and steps in all (0 of 0 before the extraction starts).
+    pub fn progress(&self) -> (usize, usize) {
+        (
+            self.steps_done.load(Ordering::Relaxed),
+            self.steps.load(Ordering::Relaxed),
+        )
+    }
+
+    /// Share of the steps done, 0–1.
     pub fn fraction(&self) -> f32 {
-        self.stages_done.load(std::sync::atomic::Ordering::Relaxed) as f32 / Self::STAGES as f32
+        let (done, all) = self.progress();
+        done as f32 / all.max(1) as f32
     }
 
-    /// A stage is done: count it, and stop if cancelled.
-    fn stage_done(&self) -> Result<()> {
-        self.stages_done
-            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        if self.cancelled.load(std::sync::atomic::Ordering::Relaxed) {
+    fn start(&self, steps: usize) {
+        self.steps.store(steps, Ordering::Relaxed);
+    }
+
+    /// A step is done: count it, and stop if cancelled.
+    fn step_done(&self) -> Result<()> {
+        self.steps_done.fetch_add(1, Ordering::Relaxed);
+        if self.cancelled.load(Ordering::Relaxed) {
             return Err(Error::Input("the extraction was cancelled".into()));
         }
         Ok(())
@@ -254,8 +298,15 @@ pub fn extract(image: &VegImage, samples: &[Sample], options: &VegOptions) -> Re
     extract_watched(image, samples, options, &Watch::default())
 }
 
-/// [`extract`], reporting each stage to `watch` and stopping when it is
+/// [`extract`], reporting each step to `watch` and stopping when it is
 /// cancelled.
+///
+/// The image is analysed in tiles of `options.tile_px` ([`Tiling`]): an
+/// image no larger than a tile is analysed whole; a larger
+/// one is streamed tile by tile, as many at once as there are threads, so
+/// memory follows the tile size. Thresholds come from the whole image's
+/// brightness span, signatures from the tiles that hold the samples, and
+/// one classifier serves every tile.
 pub fn extract_watched(
     image: &VegImage,
     samples: &[Sample],
@@ -263,35 +314,72 @@ pub fn extract_watched(
     watch: &Watch,
 ) -> Result<Extraction> {
     let placement = options.placement(image.pixel_m)?;
+    extract_tiled(image, samples, options, options.tiling(placement)?, watch)
+}
+
+/// [`extract_watched`] with a given tiling.
+pub fn extract_tiled(
+    image: &VegImage,
+    samples: &[Sample],
+    options: &VegOptions,
+    tiling: Tiling,
+    watch: &Watch,
+) -> Result<Extraction> {
+    let placement = options.placement(image.pixel_m)?;
     let brightness_span = image.image.brightness_span();
-    if brightness_span < 128.0 {
+    if brightness_span < 32.0 {
         tracing::warn!(
             brightness_span,
             "the image is low in contrast (1st to 99th percentile of brightness span {brightness_span:.0} of 255): \
-             thresholds are in 8-bit units, so regions will be few and large; stretch it (--stretch, image.stretch)"
+             so few 8-bit levels blur the texture the signatures describe; stretch it (--stretch, image.stretch)"
         );
     }
+    let params = options.segment_params(brightness_span);
+    params.check()?;
+    let (w, h) = (image.image.width, image.image.height);
+    let tiles = tiling.plan(w, h);
+    watch.start(1 + tiles.len());
+    let wall = Instant::now();
+
+    // Learn: each sample from the tile owning its centre, in marking order.
     let start = Instant::now();
-    let segmentation = segment(&image.image, &options.segment_params())?;
-    let segment_ms = start.elapsed().as_secs_f64() * 1e3;
-    tracing::info!(
-        leaves = segmentation.leaves,
-        regions = segmentation.regions.len(),
-        segment_ms,
-        "split and merge"
-    );
-    watch.stage_done()?;
-    let start = Instant::now();
-    let classifier = Classifier::train(
-        &image.image,
-        &segmentation,
-        samples,
-        options.window_px,
-        options.neighbours,
-    )?;
-    let labels = classifier.classify_regions(&image.image, &segmentation);
-    let classify_ms = start.elapsed().as_secs_f64() * 1e3;
-    watch.stage_done()?;
+    let owner = |s: &Sample| {
+        let [x, y] = s.centre();
+        let (x, y) = (x.clamp(0.0, w as f64 - 0.5), y.clamp(0.0, h as f64 - 0.5));
+        tiles.iter().position(|t| t.owns(x, y)).unwrap_or(0)
+    };
+    let owners: Vec<usize> = samples.iter().map(owner).collect();
+    let mut marked: Vec<Vec<Vec<f32>>> = vec![Vec::new(); samples.len()];
+    let mut learn_segment_ms = 0.0;
+    let whole = tiles.len() == 1;
+    // A whole image's segmentation serves learning and classification.
+    let mut whole_segmentation = None;
+    for (t, tile) in tiles.iter().enumerate() {
+        if !owners.contains(&t) {
+            continue;
+        }
+        let context = TileImage::of(image, tile);
+        let seg_start = Instant::now();
+        let segmentation = segment(context.image(), &params)?;
+        learn_segment_ms += seg_start.elapsed().as_secs_f64() * 1e3;
+        let [x0, y0, ..] = tile.context;
+        for (k, sample) in samples.iter().enumerate() {
+            if owners[k] == t {
+                let local = sample.translated(-(x0 as f64), -(y0 as f64));
+                marked[k] =
+                    sample_signatures(context.image(), &segmentation, &local, options.window_px);
+            }
+        }
+        if whole {
+            whole_segmentation = Some(segmentation);
+        }
+    }
+    let marked: Vec<(String, Vec<f32>)> = samples
+        .iter()
+        .zip(marked)
+        .flat_map(|(s, signatures)| signatures.into_iter().map(|g| (s.class.clone(), g)))
+        .collect();
+    let classifier = Classifier::learn(marked, options.window_px, options.neighbours)?;
     let vegetation: Vec<bool> = classifier
         .classes
         .iter()
@@ -303,17 +391,73 @@ pub fn extract_watched(
             options.negative_class
         )));
     }
-    let start = Instant::now();
-    let found = detect(
-        &image.image,
-        &segmentation,
-        &labels,
-        &vegetation,
-        image.valid.as_deref(),
-        placement,
+    let learn_ms = start.elapsed().as_secs_f64() * 1e3;
+    watch.step_done()?;
+
+    // Classify and place, tile by tile, as many at once as threads.
+    let whole_segmentation = std::sync::Mutex::new(whole_segmentation);
+    let mut labels_map = vec![0u32; w * h];
+    let mut regions = Vec::new();
+    let mut labels = Vec::new();
+    let mut found = Vec::new();
+    let mut leaves = 0;
+    let mut steps = SegmentSteps::default();
+    let (mut segment_ms, mut classify_ms, mut detect_ms) = (0.0, 0.0, 0.0);
+    for batch in tiles.chunks(rayon::current_num_threads().max(1)) {
+        let results: Vec<Result<TileResult>> = batch
+            .par_iter()
+            .map(|tile| {
+                let segmented = whole_segmentation.lock().ok().and_then(|mut s| s.take());
+                let result = analyse_tile(
+                    image,
+                    tile,
+                    segmented,
+                    &params,
+                    &classifier,
+                    &vegetation,
+                    placement,
+                );
+                watch.step_done()?;
+                result
+            })
+            .collect();
+        for (tile, result) in batch.iter().zip(results) {
+            let r = result?;
+            let offset = regions.len() as u32;
+            let [x0, y0, x1, _] = tile.core;
+            let side = x1 - x0;
+            for (dy, row) in r.core_labels.chunks_exact(side).enumerate() {
+                let at = (y0 + dy) * w + x0;
+                for (out, &l) in labels_map[at..at + side].iter_mut().zip(row) {
+                    *out = l + offset;
+                }
+            }
+            regions.extend(r.regions);
+            labels.extend(r.labels);
+            found.extend(r.objects);
+            leaves += r.leaves;
+            steps.add(&r.steps);
+            segment_ms += r.segment_ms;
+            classify_ms += r.classify_ms;
+            detect_ms += r.detect_ms;
+        }
+    }
+    found.sort_by(|a, b| a.y.total_cmp(&b.y).then(a.x.total_cmp(&b.x)));
+    let segmentation = Segmentation {
+        width: w,
+        height: h,
+        labels: labels_map,
+        regions,
+        leaves,
+        steps,
+    };
+    tracing::info!(
+        tiles = tiles.len(),
+        leaves = segmentation.leaves,
+        regions = segmentation.regions.len(),
+        ms = wall.elapsed().as_secs_f64() * 1e3,
+        "vegetation extraction"
     );
-    let detect_ms = start.elapsed().as_secs_f64() * 1e3;
-    watch.stage_done()?;
     let objects: Vec<VegObject> = found
         .iter()
         .enumerate()
@@ -352,18 +496,20 @@ pub fn extract_watched(
         })
         .collect();
     let report = Report {
-        width: image.image.width,
-        height: image.image.height,
+        width: w,
+        height: h,
         pixel_m: image.pixel_m,
         brightness_span,
         placement,
+        tiles: tiles.len(),
         leaves: segmentation.leaves,
         regions: segmentation.regions.len(),
         classes,
         objects: objects.len(),
-        segment_ms,
-        classify_ms,
+        segment_ms: segment_ms + learn_segment_ms,
+        classify_ms: classify_ms + learn_ms - learn_segment_ms,
         detect_ms,
+        total_ms: wall.elapsed().as_secs_f64() * 1e3,
     };
     Ok(Extraction {
         segmentation,
@@ -371,6 +517,180 @@ pub fn extract_watched(
         labels,
         objects,
         report,
+    })
+}
+
+/// A tile's pixels: the image itself when the tile is the whole image.
+enum TileImage<'a> {
+    Whole(&'a Image),
+    Window(Image, Option<Vec<bool>>),
+}
+
+impl<'a> TileImage<'a> {
+    fn of(image: &'a VegImage, tile: &Tile) -> TileImage<'a> {
+        let (w, h) = (image.image.width, image.image.height);
+        if tile.context == [0, 0, w, h] {
+            return TileImage::Whole(&image.image);
+        }
+        let [x0, y0, x1, y1] = tile.context;
+        let valid = image.valid.as_ref().map(|v| {
+            (y0..y1)
+                .flat_map(|y| v[y * w + x0..y * w + x1].iter().copied())
+                .collect()
+        });
+        TileImage::Window(image.image.window(tile.context), valid)
+    }
+
+    fn image(&self) -> &Image {
+        match self {
+            TileImage::Whole(image) => image,
+            TileImage::Window(image, _) => image,
+        }
+    }
+
+    fn valid<'b>(&'b self, whole: &'b VegImage) -> Option<&'b [bool]> {
+        match self {
+            TileImage::Whole(_) => whole.valid.as_deref(),
+            TileImage::Window(_, valid) => valid.as_deref(),
+        }
+    }
+}
+
+/// What one tile gives: its core's region labels (numbered from 0 among
+/// the regions its core holds), those regions and their classes, and the
+/// objects it owns in the image's pixel coordinates.
+struct TileResult {
+    core_labels: Vec<u32>,
+    regions: Vec<Region>,
+    labels: Vec<Label>,
+    objects: Vec<Object>,
+    leaves: usize,
+    steps: SegmentSteps,
+    segment_ms: f64,
+    classify_ms: f64,
+    detect_ms: f64,
+}
+
+/// Segment (unless `segmented` is given: a whole image already segmented),
+/// classify and place on one tile's context; keep its core.
+fn analyse_tile(
+    image: &VegImage,
+    tile: &Tile,
+    segmented: Option<Segmentation>,
+    params: &SegmentParams,
+    classifier: &Classifier,
+    vegetation: &[bool],
+    placement: Placement,
+) -> Result<TileResult> {
+    let context = TileImage::of(image, tile);
+    let start = Instant::now();
+    let whole = segmented.is_some();
+    let segmentation = match segmented {
+        Some(s) => s,
+        None => segment(context.image(), params)?,
+    };
+    let segment_ms = start.elapsed().as_secs_f64() * 1e3;
+    let start = Instant::now();
+    let labels = classifier.classify_regions(context.image(), &segmentation);
+    let classify_ms = start.elapsed().as_secs_f64() * 1e3;
+    let start = Instant::now();
+    let [x0, y0, ..] = tile.context;
+    let objects: Vec<Object> = detect(
+        context.image(),
+        &segmentation,
+        &labels,
+        vegetation,
+        context.valid(image),
+        placement,
+        [x0, y0],
+    )
+    .into_iter()
+    .map(|o| Object {
+        x: o.x + x0 as f64,
+        y: o.y + y0 as f64,
+        ..o
+    })
+    .filter(|o| tile.owns(o.x, o.y))
+    .collect();
+    let detect_ms = start.elapsed().as_secs_f64() * 1e3;
+    let Segmentation {
+        labels: context_labels,
+        regions: context_regions,
+        leaves,
+        steps,
+        width: context_width,
+        ..
+    } = segmentation;
+    if whole {
+        return Ok(TileResult {
+            core_labels: context_labels,
+            regions: context_regions,
+            labels,
+            objects,
+            leaves,
+            steps,
+            segment_ms,
+            classify_ms,
+            detect_ms,
+        });
+    }
+    // Keep the regions the core holds, in index order, described by their
+    // pixels in the core (their colour statistics stay the context's).
+    let [cx0, cy0, cx1, cy1] = tile.core;
+    let mut index = vec![u32::MAX; context_regions.len()];
+    let mut core_labels = Vec::with_capacity((cx1 - cx0) * (cy1 - cy0));
+    for y in cy0..cy1 {
+        let at = (y - y0) * context_width + (cx0 - x0);
+        core_labels.extend_from_slice(&context_labels[at..at + (cx1 - cx0)]);
+    }
+    for &l in &core_labels {
+        index[l as usize] = 0;
+    }
+    let mut kept_regions = Vec::new();
+    let mut kept_labels = Vec::new();
+    for (k, region) in context_regions.into_iter().enumerate() {
+        if index[k] == 0 {
+            index[k] = kept_regions.len() as u32;
+            kept_regions.push(Region {
+                pixels: 0,
+                bbox: [u32::MAX, u32::MAX, 0, 0],
+                centroid: [0.0; 2],
+                ..region
+            });
+            kept_labels.push(labels[k]);
+        }
+    }
+    let mut centre_sums = vec![[0.0f64; 2]; kept_regions.len()];
+    let side = cx1 - cx0;
+    for (i, l) in core_labels.iter_mut().enumerate() {
+        *l = index[*l as usize];
+        let (x, y) = ((cx0 + i % side) as u32, (cy0 + i / side) as u32);
+        let region = &mut kept_regions[*l as usize];
+        region.pixels += 1;
+        region.bbox = [
+            region.bbox[0].min(x),
+            region.bbox[1].min(y),
+            region.bbox[2].max(x + 1),
+            region.bbox[3].max(y + 1),
+        ];
+        let sums = &mut centre_sums[*l as usize];
+        sums[0] += x as f64 + 0.5;
+        sums[1] += y as f64 + 0.5;
+    }
+    for (region, sums) in kept_regions.iter_mut().zip(&centre_sums) {
+        let n = region.pixels as f64;
+        region.centroid = [(sums[0] / n) as f32, (sums[1] / n) as f32];
+    }
+    Ok(TileResult {
+        core_labels,
+        regions: kept_regions,
+        labels: kept_labels,
+        objects,
+        leaves,
+        steps,
+        segment_ms,
+        classify_ms,
+        detect_ms,
     })
 }
 
@@ -443,7 +763,7 @@ pub fn overlay(image: &VegImage, extraction: &Extraction, negative: &str) -> Vec
 mod tests {
     use super::*;
     use crate::testdata;
-    use crate::veg::{eval, samples};
+    use crate::veg::{eval, samples, Image};
 
     /// The NEON crop at 0.1 m with its ten marked samples.
     fn soap_061() -> (VegImage, Vec<Sample>) {
@@ -460,11 +780,8 @@ mod tests {
         (image, samples)
     }
 
-    #[test]
-    fn crowns_found_on_a_real_image_score_against_its_annotations() {
-        let (image, samples) = soap_061();
-        let options = VegOptions::default();
-        let found = extract(&image, &samples, &options).unwrap();
+    /// F1 of an extraction against SOAP_061's annotated crowns.
+    fn soap_061_f1(found: &Extraction) -> f64 {
         let truth = std::fs::read_to_string(testdata::path("SOAP_061.xml")).unwrap();
         let boxes = eval::parse_voc(&truth).unwrap();
         let points: Vec<(f64, f64, f32)> =
@@ -474,8 +791,17 @@ mod tests {
             "SOAP_061: P {:.3} R {:.3} F1 {:.3}",
             e.precision, e.recall, e.f1
         );
-        // Regression floor under the recorded 0.627 (docs/benchmarks.md).
-        assert!(e.f1 >= 0.60, "F1 {}", e.f1);
+        e.f1
+    }
+
+    #[test]
+    fn crowns_found_on_a_real_image_score_against_its_annotations() {
+        let (image, samples) = soap_061();
+        let options = VegOptions::default();
+        let found = extract(&image, &samples, &options).unwrap();
+        // Regression floor under the recorded 0.576 (docs/benchmarks.md).
+        let f1 = soap_061_f1(&found);
+        assert!(f1 >= 0.55, "F1 {f1}");
         // Every object sits on a region of a vegetation class, inside the image.
         let seg = &found.segmentation;
         for o in &found.objects {
@@ -489,6 +815,82 @@ mod tests {
         let rgba = overlay(&image, &found, &options.negative_class);
         assert_eq!(rgba.len(), 400 * 400 * 4);
         assert!(rgba.chunks_exact(4).any(|p| p[..3] == [255, 0, 0]));
+    }
+
+    /// Thresholds are shares of the image's contrast: a copy at half the
+    /// contrast (no value clipped) splits, classifies and places nearly the
+    /// same way. Measured: F1 0.576 on the image, 0.587 on the copy.
+    #[test]
+    fn a_dull_copy_scores_as_the_image() {
+        let (image, samples) = soap_061();
+        let whole = soap_061_f1(&extract(&image, &samples, &VegOptions::default()).unwrap());
+        let i = &image.image;
+        let dull_pixels = i.pixels.iter().map(|&v| v / 2 + 64).collect();
+        let dull = VegImage {
+            image: Image::new(i.width, i.height, i.bands, dull_pixels).unwrap(),
+            ..image
+        };
+        assert!(dull.image.brightness_span() < 0.6 * i.brightness_span());
+        let dull_f1 = soap_061_f1(&extract(&dull, &samples, &VegOptions::default()).unwrap());
+        assert!(
+            (dull_f1 - whole).abs() <= 0.05,
+            "F1 {whole} on the image, {dull_f1} on the dull copy"
+        );
+    }
+
+    /// SOAP_061 in 2×2 tiles of 256 pixels (cores 256, margins 128) against
+    /// the whole image. Measured: 28 of the whole run's 29 crowns found again
+    /// within a pixel, 8 more (36), F1 0.576 → 0.575.
+    #[test]
+    fn a_tiled_extraction_agrees_with_the_whole_image() {
+        let (image, samples) = soap_061();
+        let options = VegOptions::default();
+        let whole = extract(&image, &samples, &options).unwrap();
+        let tiled_options = VegOptions {
+            tile_px: MIN_TILE_PX,
+            ..options.clone()
+        };
+        let tiled = extract(&image, &samples, &tiled_options).unwrap();
+        assert_eq!(whole.report.tiles, 1);
+        assert_eq!(tiled.report.tiles, 4);
+        // Every pixel belongs to one region, and regions count their pixels.
+        let seg = &tiled.segmentation;
+        assert_eq!(seg.labels.len(), 400 * 400);
+        let mut pixels = vec![0u32; seg.regions.len()];
+        for &l in &seg.labels {
+            pixels[l as usize] += 1;
+        }
+        assert!(seg
+            .regions
+            .iter()
+            .zip(&pixels)
+            .all(|(r, &n)| r.pixels == n && n > 0));
+        assert_eq!(tiled.labels.len(), seg.regions.len());
+        // The crowns: found again, none twice.
+        let near =
+            |a: &VegObject, b: &VegObject| (a.x - b.x).abs() <= 1.0 && (a.y - b.y).abs() <= 1.0;
+        let again = whole
+            .objects
+            .iter()
+            .filter(|o| tiled.objects.iter().any(|t| near(o, t)))
+            .count();
+        assert!(
+            again * 100 >= whole.objects.len() * 95,
+            "{again} of {}",
+            whole.objects.len()
+        );
+        assert!(tiled.objects.len() * 100 <= whole.objects.len() * 130);
+        for (k, a) in tiled.objects.iter().enumerate() {
+            assert!(
+                tiled.objects[k + 1..].iter().all(|b| !near(a, b)),
+                "{a:?} twice"
+            );
+        }
+        let (f1_whole, f1_tiled) = (soap_061_f1(&whole), soap_061_f1(&tiled));
+        assert!(
+            (f1_whole - f1_tiled).abs() <= 0.05,
+            "{f1_whole} whole, {f1_tiled} tiled"
+        );
     }
 
     #[test]
@@ -518,9 +920,9 @@ mod tests {
         };
         assert!(e.to_string().contains("cancelled"), "{e}");
         assert_eq!(
-            cancelled.fraction(),
-            1.0 / Watch::STAGES as f32,
-            "stopped after the first stage"
+            cancelled.progress(),
+            (1, 2),
+            "stopped after learning, before the one tile"
         );
     }
 }

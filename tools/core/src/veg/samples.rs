@@ -15,6 +15,30 @@ pub struct Sample {
 }
 
 impl Sample {
+    /// The same sample moved by `(dx, dy)` pixels.
+    pub fn translated(&self, dx: f64, dy: f64) -> Sample {
+        Sample {
+            class: self.class.clone(),
+            polygon: self
+                .polygon
+                .iter()
+                .map(|p| [p[0] + dx, p[1] + dy])
+                .collect(),
+        }
+    }
+
+    /// Centre of the polygon's bounding box.
+    pub fn centre(&self) -> [f64; 2] {
+        let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+        for p in &self.polygon {
+            for k in 0..2 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0]
+    }
+
     /// Whether the point lies inside the polygon (even–odd rule).
     pub fn contains(&self, x: f64, y: f64) -> bool {
         let p = &self.polygon;

@@ -21,7 +21,7 @@ use crate::{Error, Result};
 use rayon::prelude::*;
 
 /// Side of the tiles split in parallel (a power of two).
-const TILE: usize = 64;
+pub(crate) const TILE: usize = 64;
 const TILE_LEVELS: usize = TILE.trailing_zeros() as usize + 1;
 
 /// Thresholds of the homogeneity predicate and of the final clean-up.
@@ -109,6 +109,17 @@ pub struct SegmentSteps {
     pub small_regions_ms: f64,
     /// Numbering and describing the regions.
     pub describe_ms: f64,
+}
+
+impl SegmentSteps {
+    /// Add another segmentation's times (tiles of one image).
+    pub fn add(&mut self, other: &SegmentSteps) {
+        self.split_ms += other.split_ms;
+        self.adjacency_ms += other.adjacency_ms;
+        self.merge_ms += other.merge_ms;
+        self.small_regions_ms += other.small_regions_ms;
+        self.describe_ms += other.describe_ms;
+    }
 }
 
 /// Count, sums and sums of squares of the opponent channels of some pixels.

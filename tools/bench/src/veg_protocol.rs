@@ -1,0 +1,228 @@
+//! The cross-image protocol for vegetation extraction: tune the options on
+//! one annotated image, report on the other with those options, both ways;
+//! then the shipped defaults on both, and on contrast-changed copies.
+//!
+//! Tuning is a grid search over the options people would reach for first
+//! (the two split-and-merge thresholds, the neighbours a class distance
+//! averages, the crown spacing); the best F1 on the tuning image wins, ties
+//! going to the grid point nearest the shipped defaults.
+
+use crate::bench::emit;
+use anyhow::Result;
+use relevo_core::veg::eval::{self, Evaluation};
+use relevo_core::veg::pipeline::{extract, VegImage, VegOptions};
+use relevo_core::veg::samples::{read_file as read_samples, Sample};
+use relevo_core::veg::Image;
+use serde_json::json;
+use std::path::Path;
+
+/// An annotated image with the samples a user marked on it.
+struct Annotated {
+    name: &'static str,
+    image: VegImage,
+    samples: Vec<Sample>,
+    truth: Vec<[f64; 4]>,
+}
+
+impl Annotated {
+    fn score(&self, options: &VegOptions) -> Result<Evaluation> {
+        score(&self.image, &self.samples, &self.truth, options)
+    }
+}
+
+fn score(
+    image: &VegImage,
+    samples: &[Sample],
+    truth: &[[f64; 4]],
+    options: &VegOptions,
+) -> Result<Evaluation> {
+    let found = extract(image, samples, options)?;
+    let points: Vec<(f64, f64, f32)> = found.objects.iter().map(|o| (o.x, o.y, o.score)).collect();
+    Ok(eval::evaluate(&points, truth))
+}
+
+/// The NEON crops of the shared `trees/` folder with their committed samples.
+fn annotated(repo: &Path, data: &Path) -> Result<Vec<Annotated>> {
+    let crops = [
+        (
+            "yellowstone",
+            "trees/2019_YELL_2_541000_4977000_image_crop",
+            "data/trees/yellowstone_samples.csv",
+        ),
+        (
+            "soap_061",
+            "trees/SOAP_061",
+            "data/trees/soap_061_samples.csv",
+        ),
+    ];
+    crops
+        .into_iter()
+        .map(|(name, stem, samples)| {
+            let image = relevo::veg_io::read_image(
+                &data.join(format!("{stem}.png")),
+                None,
+                None,
+                Some(0.1),
+            )?;
+            let (w, h) = (image.image.width, image.image.height);
+            let samples = read_samples(&repo.join(samples), None, w, h)?;
+            let truth = eval::bounds(&eval::parse_voc(&std::fs::read_to_string(
+                data.join(format!("{stem}.xml")),
+            )?)?);
+            Ok(Annotated {
+                name,
+                image,
+                samples,
+                truth,
+            })
+        })
+        .collect()
+}
+
+/// The grid the tuning searches, each point with its distance to the
+/// defaults in grid steps.
+fn grid() -> Vec<(VegOptions, usize)> {
+    let defaults = VegOptions::default();
+    let brightness = [0.12f32, 0.15, 0.18, 0.21, 0.24];
+    let chroma = [0.025f32, 0.03, 0.035, 0.04, 0.045, 0.05];
+    let neighbours = [1usize, 3, 5];
+    let spacing = [2.0f64, 2.5, 3.0];
+    // Grid steps between `v` and `default` along `values`.
+    let steps = |values: &[f64], v: f64, default: f64| {
+        let at = |x: f64| {
+            values
+                .iter()
+                .position(|&y| (y - x).abs() < 1e-6)
+                .unwrap_or(values.len())
+        };
+        at(v).abs_diff(at(default))
+    };
+    let mut points = Vec::new();
+    for &b in &brightness {
+        for &c in &chroma {
+            for &n in &neighbours {
+                for &s in &spacing {
+                    let options = VegOptions {
+                        brightness_std: b,
+                        chroma_std: c,
+                        neighbours: n,
+                        crown_spacing_m: s,
+                        ..defaults.clone()
+                    };
+                    let distance =
+                        steps(
+                            &brightness.map(f64::from),
+                            b as f64,
+                            defaults.brightness_std as f64,
+                        ) + steps(&chroma.map(f64::from), c as f64, defaults.chroma_std as f64)
+                            + steps(
+                                &neighbours.map(|n| n as f64),
+                                n as f64,
+                                defaults.neighbours as f64,
+                            )
+                            + steps(&spacing, s, defaults.crown_spacing_m);
+                    points.push((options, distance));
+                }
+            }
+        }
+    }
+    points
+}
+
+/// `v' = gain·v + offset`, clipped to 0..255, on every band.
+fn contrast_changed(image: &VegImage, gain: f32, offset: f32) -> Result<VegImage> {
+    let i = &image.image;
+    let pixels = i
+        .pixels
+        .iter()
+        .map(|&v| (gain * v as f32 + offset).round().clamp(0.0, 255.0) as u8)
+        .collect();
+    Ok(VegImage {
+        image: Image::new(i.width, i.height, i.bands, pixels)?,
+        crs_wkt: image.crs_wkt.clone(),
+        geotransform: image.geotransform,
+        pixel_m: image.pixel_m,
+        valid: image.valid.clone(),
+    })
+}
+
+pub fn run(repo: &Path, data: &Path, json_lines: bool) -> Result<()> {
+    let images = annotated(repo, data)?;
+    let grid = grid();
+    let describe = |o: &VegOptions| {
+        format!(
+            "brightness {:.3}, chroma {:.3}, neighbours {}, spacing {:.1} m",
+            o.brightness_std, o.chroma_std, o.neighbours, o.crown_spacing_m
+        )
+    };
+    // Every grid point on every image, once.
+    let mut f1 = vec![vec![0.0f64; grid.len()]; images.len()];
+    for (i, image) in images.iter().enumerate() {
+        for (g, (options, _)) in grid.iter().enumerate() {
+            f1[i][g] = image.score(options)?.f1;
+            if json_lines {
+                emit(
+                    true,
+                    json!({"bench": "veg-protocol-grid", "image": image.name, "f1": f1[i][g],
+                           "brightness_std": options.brightness_std, "chroma_std": options.chroma_std,
+                           "neighbours": options.neighbours, "crown_spacing_m": options.crown_spacing_m}),
+                    String::new(),
+                );
+            }
+        }
+    }
+    for (t, tuned_on) in images.iter().enumerate() {
+        let best = (0..grid.len())
+            .max_by(|&a, &b| {
+                f1[t][a]
+                    .total_cmp(&f1[t][b])
+                    .then(grid[b].1.cmp(&grid[a].1))
+            })
+            .unwrap_or(0);
+        let options = &grid[best].0;
+        for (r, reported_on) in images.iter().enumerate() {
+            if r == t {
+                continue;
+            }
+            let e = reported_on.score(options)?;
+            // How much of the grid would have done as well on the held-out image.
+            let share_at_least =
+                f1[r].iter().filter(|&&v| v >= 0.6).count() as f64 / grid.len() as f64;
+            emit(
+                json_lines,
+                json!({"bench": "veg-protocol", "tuned_on": tuned_on.name, "tuned_f1": f1[t][best],
+                       "reported_on": reported_on.name, "held_out": e,
+                       "options": {"brightness_std": options.brightness_std, "chroma_std": options.chroma_std,
+                                   "neighbours": options.neighbours, "crown_spacing_m": options.crown_spacing_m},
+                       "grid_points": grid.len(), "grid_share_f1_at_least_0_6_on_held_out": share_at_least}),
+                format!(
+                    "veg protocol: tuned on {} (F1 {:.3} with {}), reported on {}: P {:.3} R {:.3} F1 {:.3} | {:.0} % of the {} grid points reach F1 0.6 on {}",
+                    tuned_on.name, f1[t][best], describe(options), reported_on.name,
+                    e.precision, e.recall, e.f1, share_at_least * 100.0, grid.len(), reported_on.name
+                ),
+            );
+        }
+    }
+    // The shipped defaults, on each image and on contrast-changed copies:
+    // a dull one (half the contrast) and a stretched one (1.4×, clipped).
+    let defaults = VegOptions::default();
+    for image in &images {
+        let e = image.score(&defaults)?;
+        let mut copies = Vec::new();
+        for (what, gain, offset) in [("dull", 0.5f32, 64.0f32), ("stretched", 1.4, -40.0)] {
+            let copy = contrast_changed(&image.image, gain, offset)?;
+            let c = score(&copy, &image.samples, &image.truth, &defaults)?;
+            copies.push((what, c));
+        }
+        emit(
+            json_lines,
+            json!({"bench": "veg-defaults", "image": image.name, "defaults": e,
+                   "dull": copies[0].1, "stretched": copies[1].1}),
+            format!(
+                "veg defaults on {}: P {:.3} R {:.3} F1 {:.3} | dull copy F1 {:.3}, stretched copy F1 {:.3}",
+                image.name, e.precision, e.recall, e.f1, copies[0].1.f1, copies[1].1.f1
+            ),
+        );
+    }
+    Ok(())
+}
