@@ -245,7 +245,7 @@ impl SamplesTab {
                 self.samples.remove(i);
             }
             ui.add(
-                egui::Slider::new(&mut self.options.brightness_std, 0.03..=0.4)
+                egui::Slider::new(&mut self.options.brightness_std, 4.0..=64.0)
                     .text("segmentation threshold"),
             );
             ui.horizontal(|ui| {

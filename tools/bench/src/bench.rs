@@ -384,7 +384,7 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
     use relevo::veg_io::read_image;
     use relevo_core::veg::pipeline::{extract, VegImage, VegOptions};
     use relevo_core::veg::samples::read_file as read_samples;
-    use relevo_core::veg::{baseline, eval, segment};
+    use relevo_core::veg::{baseline, eval};
 
     let options = VegOptions::default();
     let crops = [
@@ -441,14 +441,16 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
             ),
         );
         if name == "yellowstone" {
-            yellowstone = Some((image, samples));
+            yellowstone = Some((image, samples, truth));
         }
     }
 
-    // Speed: the Yellowstone crop, and the crop mirrored into larger tiles.
-    let (crop, samples) = yellowstone.context("no Yellowstone crop")?;
+    // Speed: the Yellowstone crop, and the crop mirrored into larger
+    // images, with its truth boxes mirrored the same way.
+    let (crop, samples, crop_truth) = yellowstone.context("no Yellowstone crop")?;
     let scratch = tempfile_dir()?;
     let script = repo.join("tools/py/felzenszwalb_bench.py");
+    let relevo = relevo_binary()?;
     let mut sides = vec![0usize];
     sides.extend(
         [2500usize, 5000, 10000]
@@ -456,10 +458,13 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
             .filter(|&s| s <= max_side),
     );
     for side in sides {
-        let image = if side == 0 {
-            crop.image.clone()
+        let (image, truth) = if side == 0 {
+            (crop.image.clone(), crop_truth.clone())
         } else {
-            mirror_tile(&crop.image, side)?
+            (
+                mirror_tile(&crop.image, side)?,
+                mirror_boxes(&crop_truth, crop.image.width, crop.image.height, side),
+            )
         };
         let (w, h) = (image.width, image.height);
         let mpx = (w * h) as f64 / 1e6;
@@ -470,40 +475,50 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
             pixel_m: 0.1,
             valid: None,
         };
-        let params = options.segment_params(veg_image.image.brightness_span());
-        let mut steps = Vec::new();
-        let segment_ms = median_ms(runs, || {
-            steps.push(segment::segment(&veg_image.image, &params)?.steps);
-            Ok(())
-        })?;
-        // The phases of the run whose total is nearest the median.
-        let total = |s: &segment::SegmentSteps| {
-            s.split_ms + s.adjacency_ms + s.merge_ms + s.small_regions_ms + s.describe_ms
-        };
-        let steps = *steps
-            .iter()
-            .min_by(|a, b| {
-                (total(a) - segment_ms)
-                    .abs()
-                    .total_cmp(&(total(b) - segment_ms).abs())
-            })
-            .context("no run")?;
-        let mut detect_ms = Vec::new();
-        let mut classify_ms = Vec::new();
-        let mut place_ms = Vec::new();
-        let mut total_ms = Vec::new();
-        let mut objects = 0;
+        let mut runs_done = Vec::new();
         for _ in 0..runs {
             let start = Instant::now();
             let r = extract(&veg_image, &samples, &options)?;
-            total_ms.push(start.elapsed().as_secs_f64() * 1e3);
-            detect_ms.push(r.report.classify_ms + r.report.detect_ms);
-            classify_ms.push(r.report.classify_ms);
-            place_ms.push(r.report.detect_ms);
-            objects = r.objects.len();
+            runs_done.push((start.elapsed().as_secs_f64() * 1e3, r));
         }
-        let (detect_ms, total_ms) = (median(&detect_ms), median(&total_ms));
-        let (classify_ms, place_ms) = (median(&classify_ms), median(&place_ms));
+        runs_done.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let (total_ms, tiled) = runs_done.swap_remove(runs_done.len() / 2);
+        drop(runs_done);
+        let report = &tiled.report;
+        let steps = tiled.segmentation.steps;
+        let points = |e: &relevo_core::veg::pipeline::Extraction| -> Vec<(f64, f64, f32)> {
+            e.objects.iter().map(|o| (o.x, o.y, o.score)).collect()
+        };
+        let tiled_f1 = eval::evaluate(&points(&tiled), &truth);
+        // The same image analysed whole (one tile), up to 25 Mpx: how far
+        // the tiled result is from it.
+        let whole = if report.tiles > 1 && mpx <= 25.0 {
+            let whole_options = VegOptions {
+                tile_px: w.max(h),
+                ..options.clone()
+            };
+            let start = Instant::now();
+            let r = extract(&veg_image, &samples, &whole_options)?;
+            let ms = start.elapsed().as_secs_f64() * 1e3;
+            let again = r
+                .objects
+                .iter()
+                .filter(|o| {
+                    tiled
+                        .objects
+                        .iter()
+                        .any(|t| (t.x - o.x).abs() <= 1.0 && (t.y - o.y).abs() <= 1.0)
+                })
+                .count();
+            Some(
+                json!({"ms": ms, "objects": r.objects.len(), "found_again_by_tiles": again,
+                        "f1": eval::evaluate(&points(&r), &truth).f1}),
+            )
+        } else {
+            None
+        };
+        // The command itself on the image as a file: wall time and peak memory.
+        let cli = relevo_detect(&relevo, &scratch, &veg_image.image, repo)?;
         // felzenszwalb runs at about 0.3 Mpx/s here: once above 2 Mpx, and
         // not at all above 25 Mpx (it would take minutes per run).
         let fz_runs = if mpx > 2.0 { 1 } else { runs.min(3) };
@@ -529,28 +544,148 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
         emit(
             json_lines,
             json!({"bench": "veg-speed", "width": w, "height": h, "mpx": mpx,
-                   "threads": rayon::current_num_threads(),
-                   "segment_ms": segment_ms, "segment_mpx_s": mpx / segment_ms * 1e3,
-                   "segment_steps": steps,
-                   "detect_ms": detect_ms, "detect_mpx_s": mpx / detect_ms * 1e3,
-                   "learn_classify_ms": classify_ms, "place_ms": place_ms,
-                   "total_ms": total_ms, "objects": objects,
+                   "threads": rayon::current_num_threads(), "tiles": report.tiles,
+                   "total_ms": total_ms, "total_mpx_s": mpx / total_ms * 1e3,
+                   "segment_ms_summed": report.segment_ms, "classify_ms_summed": report.classify_ms,
+                   "place_ms_summed": report.detect_ms, "segment_steps_summed": steps,
+                   "objects": report.objects, "f1": tiled_f1.f1, "whole": whole,
+                   "cli": cli,
                    "felzenszwalb": felzenszwalb,
                    "felzenszwalb_mpx_s": fz_ms.map(|ms| mpx / ms * 1e3)}),
             format!(
-                "veg speed {w}×{h} ({mpx:.1} Mpx): split-and-merge {segment_ms:.0} ms ({:.1} Mpx/s), classify+place {detect_ms:.0} ms ({:.1} Mpx/s; {classify_ms:.0} + {place_ms:.0}), whole detection {total_ms:.0} ms, {objects} objects | split-and-merge phases: split {:.0}, adjacency+sort {:.0}, merge {:.0}, small regions {:.0}, describe {:.0} ms | skimage felzenszwalb {}",
-                mpx / segment_ms * 1e3,
-                mpx / detect_ms * 1e3,
+                "veg speed {w}×{h} ({mpx:.1} Mpx, {} tile(s)): extraction {total_ms:.0} ms ({:.1} Mpx/s), {} objects, F1 {:.3} | summed over tiles: split-and-merge {:.0} (split {:.0}, adjacency {:.0}, merge {:.0}, small regions {:.0}, describe {:.0}), classify {:.0}, place {:.0} ms | whole image: {} | relevo veg detect: {:.0} ms, peak {:.0} MB | skimage felzenszwalb {}",
+                report.tiles,
+                mpx / total_ms * 1e3,
+                report.objects,
+                tiled_f1.f1,
+                report.segment_ms,
                 steps.split_ms,
                 steps.adjacency_ms,
                 steps.merge_ms,
                 steps.small_regions_ms,
                 steps.describe_ms,
+                report.classify_ms,
+                report.detect_ms,
+                whole.as_ref().map_or("—".into(), |v| format!(
+                    "{:.0} ms, {} objects ({} found again by the tiles), F1 {:.3}",
+                    v["ms"].as_f64().unwrap_or(0.0), v["objects"], v["found_again_by_tiles"],
+                    v["f1"].as_f64().unwrap_or(0.0)
+                )),
+                cli["ms"].as_f64().unwrap_or(0.0),
+                cli["peak_mb"].as_f64().unwrap_or(0.0),
                 fz_ms.map_or("not run (above 25 Mpx, or scikit-image not installed)".into(), |ms| format!("{ms:.0} ms ({:.1} Mpx/s)", mpx / ms * 1e3)),
             ),
         );
     }
     Ok(())
+}
+
+/// The `relevo` binary beside this one (`cargo build --release` builds both).
+fn relevo_binary() -> Result<PathBuf> {
+    let path = std::env::current_exe()?
+        .parent()
+        .context("no folder for the bench binary")?
+        .join("relevo");
+    anyhow::ensure!(
+        path.exists(),
+        "{} is missing: build it first (cargo build --release -p relevo)",
+        path.display()
+    );
+    Ok(path)
+}
+
+/// `relevo veg detect` on `image` written as a raw ENVI file with the
+/// Yellowstone samples: its wall time (reading included) and its peak
+/// resident memory (the kernel's high-water mark, polled while it runs).
+fn relevo_detect(
+    relevo: &Path,
+    scratch: &Path,
+    image: &relevo_core::veg::Image,
+    repo: &Path,
+) -> Result<serde_json::Value> {
+    let raw = scratch.join("image.raw");
+    std::fs::write(&raw, &image.pixels)?;
+    std::fs::write(
+        scratch.join("image.hdr"),
+        format!(
+            "ENVI\nsamples = {}\nlines = {}\nbands = {}\nheader offset = 0\nfile type = ENVI Standard\ndata type = 1\ninterleave = bip\nbyte order = 0\n",
+            image.width, image.height, image.bands
+        ),
+    )?;
+    let start = Instant::now();
+    let mut child = Command::new(relevo)
+        .args([
+            "veg",
+            "detect",
+            "-q",
+            "--force",
+            "--pixel-size",
+            "0.1",
+            "--samples",
+        ])
+        .arg(repo.join("data/trees/yellowstone_samples.csv"))
+        .arg("--out")
+        .arg(scratch.join("objects.csv"))
+        .arg(&raw)
+        .stdout(std::process::Stdio::null())
+        .spawn()?;
+    let status_path = format!("/proc/{}/status", child.id());
+    let mut peak_kib = 0u64;
+    let status = loop {
+        if let Ok(text) = std::fs::read_to_string(&status_path) {
+            let hwm = text
+                .lines()
+                .find_map(|l| l.strip_prefix("VmHWM:"))
+                .and_then(|v| v.split_whitespace().next()?.parse::<u64>().ok());
+            peak_kib = peak_kib.max(hwm.unwrap_or(0));
+        }
+        if let Some(status) = child.try_wait()? {
+            break status;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    };
+    let ms = start.elapsed().as_secs_f64() * 1e3;
+    let _ = std::fs::remove_file(&raw);
+    anyhow::ensure!(
+        status.success(),
+        "relevo veg detect failed on the {}×{} image",
+        image.width,
+        image.height
+    );
+    Ok(json!({"ms": ms, "peak_mb": peak_kib as f64 / 1024.0}))
+}
+
+/// Truth boxes of a `w`×`h` image repeated as [`mirror_tile`] repeats it.
+fn mirror_boxes(boxes: &[[f64; 4]], w: usize, h: usize, side: usize) -> Vec<[f64; 4]> {
+    let (w, h) = (w as f64, h as f64);
+    let mut out = Vec::new();
+    for ty in 0..side.div_ceil(h as usize) {
+        for tx in 0..side.div_ceil(w as usize) {
+            let (ox, oy) = (tx as f64 * w, ty as f64 * h);
+            for b in boxes {
+                let (x0, x1) = if tx % 2 == 1 {
+                    (w - b[2], w - b[0])
+                } else {
+                    (b[0], b[2])
+                };
+                let (y0, y1) = if ty % 2 == 1 {
+                    (h - b[3], h - b[1])
+                } else {
+                    (b[1], b[3])
+                };
+                let clipped = [
+                    ox + x0,
+                    oy + y0,
+                    (ox + x1).min(side as f64),
+                    (oy + y1).min(side as f64),
+                ];
+                if clipped[0] < side as f64 && clipped[1] < side as f64 {
+                    out.push(clipped);
+                }
+            }
+        }
+    }
+    out
 }
 
 /// A `side`×`side` image tiled from `image`, every other copy mirrored so

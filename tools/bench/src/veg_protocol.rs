@@ -83,8 +83,8 @@ fn annotated(repo: &Path, data: &Path) -> Result<Vec<Annotated>> {
 /// defaults in grid steps.
 fn grid() -> Vec<(VegOptions, usize)> {
     let defaults = VegOptions::default();
-    let brightness = [0.12f32, 0.15, 0.18, 0.21, 0.24];
-    let chroma = [0.025f32, 0.03, 0.035, 0.04, 0.045, 0.05];
+    let brightness = [20.0f32, 24.0, 28.0, 32.0, 36.0];
+    let chroma = [4.0f32, 5.0, 6.0, 7.0, 8.0, 9.0];
     let neighbours = [1usize, 3, 5];
     let spacing = [2.0f64, 2.5, 3.0];
     // Grid steps between `v` and `default` along `values`.
@@ -151,7 +151,7 @@ pub fn run(repo: &Path, data: &Path, json_lines: bool) -> Result<()> {
     let grid = grid();
     let describe = |o: &VegOptions| {
         format!(
-            "brightness {:.3}, chroma {:.3}, neighbours {}, spacing {:.1} m",
+            "brightness {:.0}, chroma {:.0}, neighbours {}, spacing {:.1} m",
             o.brightness_std, o.chroma_std, o.neighbours, o.crown_spacing_m
         )
     };

@@ -12,7 +12,7 @@ use gdal::spatial_ref::SpatialRef;
 use gdal::vector::{Feature, FieldValue, Geometry, LayerAccess, LayerOptions, OGRFieldType};
 use gdal::DriverManager;
 use relevo_core::geo::GeoTransform;
-use relevo_core::raster::stretch::{stretch_or_default, to_interleaved_u8};
+use relevo_core::raster::stretch::{stretch_or_default, stretch_ranges, to_u8};
 use relevo_core::raster::Raster;
 use relevo_core::veg::db::VegObject;
 use relevo_core::veg::pipeline::{Extraction, VegImage};
@@ -20,8 +20,16 @@ use relevo_core::veg::samples::Sample;
 use relevo_core::veg::Image;
 use std::path::Path;
 
+/// Rows read at a time.
+const STRIP_ROWS: usize = 256;
+
+/// Most cells of the view stretch percentiles are taken from.
+const STRETCH_VIEW_CELLS: usize = 1 << 22;
+
 /// Read `bands` (1-based) of `path`; 8-bit data is kept, deeper data is
-/// stretched between the `stretch` percentiles (default 2, 98) to 8 bits.
+/// stretched between the `stretch` percentiles (default 2, 98) to 8 bits
+/// (percentiles of the whole image, or of a view decimated to about 4 M
+/// cells when it is larger).
 /// `pixel_m` sets the pixel size of an image that is not georeferenced.
 pub fn read_image(
     path: &Path,
@@ -49,34 +57,47 @@ pub fn read_image(
             source.bands
         );
     }
-    // The bands as f64 and 8-bit, the opponent colours, the segmentation's
-    // labels and quadtree, the Haar signatures' working rows: about 64
-    // bytes per pixel.
+    // Kept whole: the 8-bit bands, the valid mask and the region label of
+    // every pixel; the extraction checks its tiles' working memory itself.
+    let (w, h) = (source.width, source.height);
     relevo_core::memory::check(
         &format!(
-            "{}: vegetation extraction on {}×{} pixels",
-            path.display(),
-            source.width,
-            source.height
+            "{}: vegetation extraction on {w}×{h} pixels",
+            path.display()
         ),
-        (source.width as u64).saturating_mul(source.height as u64),
-        64,
+        (w as u64).saturating_mul(h as u64),
+        bands.len() as u64 + 5,
         "crop the image first (gdal_translate -srcwin)",
     )?;
-    let selected = source.read_window(
-        0,
-        0,
-        source.width,
-        source.height,
-        Some(&bands),
-        source.nodata,
-    )?;
+    // Stretch ranges from a view of the whole image decimated to at most
+    // STRETCH_VIEW_CELLS (the whole image when smaller); then the pixels in
+    // strips of rows, so the f64 copy never holds more than a strip.
     let stretch = stretch_or_default(stretch, source.band_type == GdalDataType::UInt8);
-    let pixels = to_interleaved_u8(&selected, stretch);
-    let mask = selected.valid_mask();
-    let valid = mask.contains(&false).then_some(mask);
-    let image = Image::new(selected.width, selected.height, bands.len(), pixels)
-        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    let ranges = match stretch {
+        None => vec![(0.0, 255.0); bands.len()],
+        Some(_) => {
+            let factor = ((w * h) as f64 / STRETCH_VIEW_CELLS as f64).sqrt().max(1.0);
+            let view = (
+                ((w as f64 / factor).ceil() as usize).max(1),
+                ((h as f64 / factor).ceil() as usize).max(1),
+            );
+            let decimated = source.read_window_as(0, 0, w, h, view, Some(&bands), source.nodata)?;
+            stretch_ranges(&decimated, stretch)
+        }
+    };
+    let mut pixels = Vec::with_capacity(w * h * bands.len());
+    let mut valid = Vec::with_capacity(w * h);
+    for row in (0..h).step_by(STRIP_ROWS) {
+        let rows = STRIP_ROWS.min(h - row);
+        let strip = source.read_window(0, row, w, rows, Some(&bands), source.nodata)?;
+        for i in 0..strip.cells() {
+            pixels.extend((0..bands.len()).map(|b| to_u8(strip.band(b)[i], ranges[b])));
+            valid.push(strip.is_valid(i));
+        }
+    }
+    let valid = valid.contains(&false).then_some(valid);
+    let image =
+        Image::new(w, h, bands.len(), pixels).map_err(|e| anyhow!("{}: {e}", path.display()))?;
     let crs_wkt = match &source.srs {
         Some(srs) => crs::to_wkt(srs)?,
         None => String::new(),

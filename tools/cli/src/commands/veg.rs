@@ -75,12 +75,10 @@ pub struct VegDetectArgs {
     /// Ground size of a pixel in metres, for images that are not georeferenced.
     #[arg(long, allow_negative_numbers = true)]
     pub pixel_size: Option<f64>,
-    /// Largest brightness standard deviation in a region, as a share of the
-    /// image's brightness span (1st to 99th percentile), e.g. 0.18.
+    /// Largest brightness standard deviation in a region (8-bit units).
     #[arg(long, allow_negative_numbers = true)]
     pub brightness_std: Option<f32>,
-    /// Largest standard deviation of each chroma channel in a region, as a
-    /// share of the image's brightness span, e.g. 0.04.
+    /// Largest chroma standard deviation in a region (8-bit units).
     #[arg(long, allow_negative_numbers = true)]
     pub chroma_std: Option<f32>,
     /// Regions smaller than this (pixels) join their most similar neighbour.

@@ -122,27 +122,44 @@ impl Source {
         bands: Option<&[usize]>,
         nodata: Option<f64>,
     ) -> Result<Raster> {
+        self.read_window_as(col, row, width, height, (width, height), bands, nodata)
+    }
+
+    /// [`Source::read_window`] resampled by GDAL (nearest) to `size` cells,
+    /// e.g. a decimated view of a whole image.
+    #[allow(clippy::too_many_arguments)]
+    pub fn read_window_as(
+        &self,
+        col: usize,
+        row: usize,
+        width: usize,
+        height: usize,
+        size: (usize, usize),
+        bands: Option<&[usize]>,
+        nodata: Option<f64>,
+    ) -> Result<Raster> {
+        let (out_w, out_h) = size;
         let all: Vec<usize> = (1..=self.bands).collect();
         let bands = bands.unwrap_or(&all);
         // The f64 copy and GDAL's buffer of one band.
         relevo_core::memory::check(
             &format!(
-                "{}: reading {width}×{height} cells, {} band(s),",
+                "{}: reading {out_w}×{out_h} cells, {} band(s),",
                 self.path.display(),
                 bands.len()
             ),
-            (width as u64).saturating_mul(height as u64),
+            (out_w as u64).saturating_mul(out_h as u64),
             8 * bands.len() as u64 + 8,
             "crop the raster first (gdal_translate -srcwin)",
         )?;
-        let mut data = Vec::with_capacity(width * height * bands.len());
+        let mut data = Vec::with_capacity(out_w * out_h * bands.len());
         for &b in bands {
             let band = self.dataset.rasterband(b)?;
             let buffer: Buffer<f64> = band
                 .read_as(
                     (col as isize, row as isize),
                     (width, height),
-                    (width, height),
+                    (out_w, out_h),
                     None,
                 )
                 .map_err(|_| {
@@ -180,7 +197,7 @@ impl Source {
                 _ => v,
             }));
         }
-        Ok(Raster::from_data(width, height, bands.len(), data))
+        Ok(Raster::from_data(out_w, out_h, bands.len(), data))
     }
 }
 

@@ -59,20 +59,6 @@ pub fn to_rgba8(raster: &Raster, stretch: Option<[f64; 2]>) -> Vec<u8> {
     out
 }
 
-/// The chosen bands (0-based) interleaved as 8-bit pixels with
-/// [`stretch_ranges`], for vegetation analysis.
-pub fn to_interleaved_u8(raster: &Raster, stretch: Option<[f64; 2]>) -> Vec<u8> {
-    let ranges = stretch_ranges(raster, stretch);
-    let bands = raster.bands;
-    let mut pixels = vec![0u8; raster.cells() * bands];
-    for (b, &range) in ranges.iter().enumerate() {
-        for (i, v) in raster.band(b).iter().enumerate() {
-            pixels[i * bands + b] = to_u8(*v, range);
-        }
-    }
-    pixels
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
