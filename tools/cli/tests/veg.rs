@@ -899,7 +899,7 @@ fn a_large_image_streams_in_tiles_under_a_memory_limit() {
     )
     .unwrap();
     drop(pixels);
-    let samples = repo().join("data/trees/yellowstone_samples.csv");
+    let samples = repo("data/trees/yellowstone_samples.csv");
     let out = dir.path().join("objects.csv");
     let result = std::process::Command::new("prlimit")
         .arg(format!("--as={}", 2u64 << 30))
