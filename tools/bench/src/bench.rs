@@ -381,32 +381,13 @@ fn mesh_bound(
 /// images up to `max_side`² beside scikit-image's felzenszwalb (when Python
 /// with scikit-image is installed).
 pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: bool) -> Result<()> {
-    use relevo::veg_io::read_image;
     use relevo_core::veg::pipeline::{extract, VegImage, VegOptions};
-    use relevo_core::veg::samples::read_file as read_samples;
     use relevo_core::veg::{baseline, eval};
 
     let options = VegOptions::default();
-    let crops = [
-        (
-            "yellowstone",
-            "trees/2019_YELL_2_541000_4977000_image_crop",
-            "data/trees/yellowstone_samples.csv",
-        ),
-        (
-            "soap_061",
-            "trees/SOAP_061",
-            "data/trees/soap_061_samples.csv",
-        ),
-    ];
     let mut yellowstone = None;
-    for (name, stem, samples) in crops {
-        let image = read_image(&data.join(format!("{stem}.png")), None, None, Some(0.1))?;
-        let (w, h) = (image.image.width, image.image.height);
-        let samples = read_samples(&repo.join(samples), None, w, h)?;
-        let truth = eval::bounds(&eval::parse_voc(&std::fs::read_to_string(
-            data.join(format!("{stem}.xml")),
-        )?)?);
+    for crop in crate::veg_protocol::annotated(repo, data)? {
+        let (name, image, samples, truth) = (crop.name, crop.image, crop.samples, crop.truth);
         let result = extract(&image, &samples, &options)?;
         let ours: Vec<(f64, f64, f32)> =
             result.objects.iter().map(|o| (o.x, o.y, o.score)).collect();

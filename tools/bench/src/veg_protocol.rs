@@ -17,11 +17,11 @@ use serde_json::json;
 use std::path::Path;
 
 /// An annotated image with the samples a user marked on it.
-struct Annotated {
-    name: &'static str,
-    image: VegImage,
-    samples: Vec<Sample>,
-    truth: Vec<[f64; 4]>,
+pub struct Annotated {
+    pub name: &'static str,
+    pub image: VegImage,
+    pub samples: Vec<Sample>,
+    pub truth: Vec<[f64; 4]>,
 }
 
 impl Annotated {
@@ -42,7 +42,7 @@ fn score(
 }
 
 /// The NEON crops of the shared `trees/` folder with their committed samples.
-fn annotated(repo: &Path, data: &Path) -> Result<Vec<Annotated>> {
+pub fn annotated(repo: &Path, data: &Path) -> Result<Vec<Annotated>> {
     let crops = [
         (
             "yellowstone",

@@ -634,21 +634,42 @@ fn analyse_tile(
         width: context_width,
         ..
     } = segmentation;
-    if whole {
-        return Ok(TileResult {
-            core_labels: context_labels,
-            regions: context_regions,
-            labels,
-            objects,
-            leaves,
-            steps,
-            segment_ms,
-            classify_ms,
-            detect_ms,
-        });
-    }
-    // Keep the regions the core holds, in index order, described by their
-    // pixels in the core (their colour statistics stay the context's).
+    let (core_labels, regions, labels) = if whole {
+        (context_labels, context_regions, labels)
+    } else {
+        keep_core(
+            tile,
+            context_labels,
+            context_width,
+            context_regions,
+            &labels,
+        )
+    };
+    Ok(TileResult {
+        core_labels,
+        regions,
+        labels,
+        objects,
+        leaves,
+        steps,
+        segment_ms,
+        classify_ms,
+        detect_ms,
+    })
+}
+
+/// The core of a tile's segmentation: its labels, renumbered among the
+/// regions the core holds (kept in index order, with their classes), each
+/// described by its pixels in the core (colour statistics stay the
+/// context's).
+fn keep_core(
+    tile: &Tile,
+    context_labels: Vec<u32>,
+    context_width: usize,
+    context_regions: Vec<Region>,
+    labels: &[Label],
+) -> (Vec<u32>, Vec<Region>, Vec<Label>) {
+    let [x0, y0, ..] = tile.context;
     let [cx0, cy0, cx1, cy1] = tile.core;
     let mut index = vec![u32::MAX; context_regions.len()];
     let mut core_labels = Vec::with_capacity((cx1 - cx0) * (cy1 - cy0));
@@ -694,17 +715,7 @@ fn analyse_tile(
         let n = region.pixels as f64;
         region.centroid = [(sums[0] / n) as f32, (sums[1] / n) as f32];
     }
-    Ok(TileResult {
-        core_labels,
-        regions: kept_regions,
-        labels: kept_labels,
-        objects,
-        leaves,
-        steps,
-        segment_ms,
-        classify_ms,
-        detect_ms,
-    })
+    (core_labels, kept_regions, kept_labels)
 }
 
 /// An RGBA picture for people: the image, vegetation regions tinted by class,
