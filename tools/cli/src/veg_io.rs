@@ -87,8 +87,18 @@ pub fn read_image(
     };
     let mut pixels = Vec::with_capacity(w * h * bands.len());
     let mut valid = Vec::with_capacity(w * h);
+    let all_bytes = bands.iter().all(|&b| {
+        source
+            .dataset
+            .rasterband(b)
+            .is_ok_and(|band| band.band_type() == GdalDataType::UInt8)
+    });
     for row in (0..h).step_by(STRIP_ROWS) {
         let rows = STRIP_ROWS.min(h - row);
+        if all_bytes && stretch.is_none() {
+            read_byte_strip(&source, row, rows, &bands, &mut pixels, &mut valid)?;
+            continue;
+        }
         let strip = source.read_window(0, row, w, rows, Some(&bands), source.nodata)?;
         for i in 0..strip.cells() {
             pixels.extend((0..bands.len()).map(|b| to_u8(strip.band(b)[i], ranges[b])));
@@ -130,6 +140,57 @@ pub fn read_image(
         pixel_m,
         valid,
     })
+}
+
+/// Append `rows` rows from `row` of 8-bit `bands` to `pixels`
+/// (interleaved) and their validity (every band differs from the no-data
+/// value) to `valid`: the values as they are, without a detour through f64.
+fn read_byte_strip(
+    source: &gdalio::Source,
+    row: usize,
+    rows: usize,
+    bands: &[usize],
+    pixels: &mut Vec<u8>,
+    valid: &mut Vec<bool>,
+) -> Result<()> {
+    let cells = source.width * rows;
+    let start = pixels.len();
+    pixels.resize(start + cells * bands.len(), 0);
+    let strip = &mut pixels[start..];
+    let nodata = source
+        .nodata
+        .filter(|v| (0.0..=255.0).contains(v) && v.fract() == 0.0);
+    let valid_start = valid.len();
+    valid.resize(valid_start + cells, true);
+    let mut band_values = vec![0u8; cells];
+    for (k, &b) in bands.iter().enumerate() {
+        source
+            .dataset
+            .rasterband(b)?
+            .read_into_slice(
+                (0, row as isize),
+                (source.width, rows),
+                (source.width, rows),
+                &mut band_values,
+                None,
+            )
+            .map_err(|_| {
+                anyhow!(
+                    "{}: cannot read band {b} ({})",
+                    source.path.display(),
+                    gdalio::last_error("read failed")
+                )
+            })?;
+        for (px, &v) in strip.chunks_exact_mut(bands.len()).zip(&band_values) {
+            px[k] = v;
+        }
+        if let Some(nd) = nodata {
+            for (ok, &v) in valid[valid_start..].iter_mut().zip(&band_values) {
+                *ok &= v as f64 != nd;
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Write the objects as points of a GeoPackage layer `vegetation` (QGIS,

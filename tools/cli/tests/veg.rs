@@ -625,7 +625,8 @@ fn densities_finer_than_a_pixel_are_refused() {
 
 /// Pixels without image data — here a 20-pixel no-data collar warped
 /// around the Landsat scene — belong to no region and no class in the
-/// label GeoTIFF (no-data 0), while every pixel with data keeps both.
+/// label GeoTIFF (no-data 0), while every pixel with data keeps both; read
+/// without a stretch, the bytes and the no-data mask are GDAL's.
 #[test]
 fn the_labels_leave_a_no_data_collar_without_a_class() {
     let dir = tempfile::tempdir().unwrap();
@@ -693,6 +694,21 @@ fn the_labels_leave_a_no_data_collar_without_a_class() {
     let l = read(&labels);
     assert_eq!(l.nodata, Some(0.0));
     let image = read(&collar);
+    // Unstretched 8-bit bands are read as bytes: the values GDAL has, in
+    // the order asked for, and no data where any band is 0.
+    let bytes = relevo::veg_io::read_image(&collar, Some(&[3, 2, 1]), None, Some(28.5)).unwrap();
+    let valid = bytes.valid.as_ref().expect("the collar has no data");
+    for i in 0..image.width * image.height {
+        let px = &bytes.image.pixels[i * 3..i * 3 + 3];
+        for (k, b) in [2, 1, 0].into_iter().enumerate() {
+            assert_eq!(px[k] as f64, image.bands[b][i], "pixel {i} band {}", b + 1);
+        }
+        assert_eq!(
+            valid[i],
+            image.bands.iter().all(|b| b[i] != 0.0),
+            "pixel {i}"
+        );
+    }
     let (mut collar_px, mut data_px) = (0, 0);
     for i in 0..l.width * l.height {
         let has_data = image.bands.iter().all(|b| b[i] != 0.0);

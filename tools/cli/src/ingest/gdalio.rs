@@ -30,7 +30,7 @@ pub fn init() {
 }
 
 /// GDAL's last error message, or `fallback`.
-fn last_error(fallback: &str) -> String {
+pub(crate) fn last_error(fallback: &str) -> String {
     // SAFETY: CPLGetLastErrorMsg returns a pointer to a thread-local string.
     let message = unsafe { std::ffi::CStr::from_ptr(gdal_sys::CPLGetLastErrorMsg()) }
         .to_string_lossy()

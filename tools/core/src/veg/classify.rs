@@ -68,8 +68,12 @@ pub struct Classifier {
     pub classes: Vec<String>,
     /// Per feature: 1 / spread over all learnt signatures.
     inverse_scale: Vec<f32>,
-    /// (class index, standardised signature).
-    examples: Vec<(usize, Vec<f32>)>,
+    /// Class index of every learnt signature.
+    example_class: Vec<usize>,
+    /// The standardised learnt signatures, feature-major: feature `f` of
+    /// signature `e` at `f · examples + e`, so one feature's values for all
+    /// signatures are contiguous and their distances accumulate in lanes.
+    example_features: Vec<f32>,
     /// Smallest window side a signature is taken over (pixels).
     window_px: u32,
     /// How many nearest signatures of each class its distance averages.
@@ -118,19 +122,18 @@ impl Classifier {
                 1.0 / var.sqrt().max(1e-3)
             })
             .collect();
-        let examples = raw
-            .into_iter()
-            .map(|(c, s)| {
-                (
-                    c,
-                    s.iter().zip(&inverse_scale).map(|(v, k)| v * k).collect(),
-                )
+        let example_class = raw.iter().map(|(c, _)| *c).collect();
+        let example_features = (0..features)
+            .flat_map(|f| {
+                let scale = inverse_scale[f];
+                raw.iter().map(move |(_, s)| s[f] * scale)
             })
             .collect();
         Ok(Classifier {
             classes,
             inverse_scale,
-            examples,
+            example_class,
+            example_features,
             window_px,
             neighbours,
         })
@@ -139,8 +142,8 @@ impl Classifier {
     /// Number of learnt signatures per class.
     pub fn signatures_per_class(&self) -> Vec<usize> {
         let mut counts = vec![0; self.classes.len()];
-        for (c, _) in &self.examples {
-            counts[*c] += 1;
+        for &c in &self.example_class {
+            counts[c] += 1;
         }
         counts
     }
@@ -152,28 +155,39 @@ impl Classifier {
     /// rectangle, from claiming everything that resembles it. Distances are
     /// Euclidean over features standardised by their spread in the samples.
     pub fn classify(&self, signature: &[f32]) -> Label {
+        self.classify_with(signature, &mut Vec::new())
+    }
+
+    /// [`Classifier::classify`] with a buffer for the squared distances to
+    /// every learnt signature, reused between calls.
+    fn classify_with(&self, signature: &[f32], distances: &mut Vec<f32>) -> Label {
+        // Squared distances, feature by feature over all signatures (each
+        // signature's sum still runs in feature order).
+        let examples = self.example_class.len();
+        distances.clear();
+        distances.resize(examples, 0.0);
+        for ((value, scale), column) in signature
+            .iter()
+            .zip(&self.inverse_scale)
+            .zip(self.example_features.chunks_exact(examples))
+        {
+            let standard = value * scale;
+            for (d, e) in distances.iter_mut().zip(column) {
+                *d += (e - standard) * (e - standard);
+            }
+        }
         // The `k` smallest distances per class, kept sorted by insertion.
         let k = self.neighbours.max(1);
         let mut smallest = vec![f32::INFINITY; self.classes.len() * k];
         let mut found = vec![0usize; self.classes.len()];
-        let standard: Vec<f32> = signature
-            .iter()
-            .zip(&self.inverse_scale)
-            .map(|(s, scale)| s * scale)
-            .collect();
-        for (class, example) in &self.examples {
-            let d = example
-                .iter()
-                .zip(&standard)
-                .map(|(e, s)| (e - s) * (e - s))
-                .sum::<f32>();
+        for (&class, &d) in self.example_class.iter().zip(distances.iter()) {
             let list = &mut smallest[class * k..(class + 1) * k];
             if d < list[k - 1] {
                 let at = list.partition_point(|&v| v <= d);
                 list.copy_within(at..k - 1, at + 1);
                 list[at] = d;
             }
-            found[*class] += 1;
+            found[class] += 1;
         }
         let nearest: Vec<f32> = (0..self.classes.len())
             .map(|c| {
@@ -208,11 +222,12 @@ impl Classifier {
 
     /// Classify every region of a segmentation.
     pub fn classify_regions(&self, image: &Image, segmentation: &Segmentation) -> Vec<Label> {
-        segmentation
-            .regions
-            .par_iter()
-            .enumerate()
-            .map(|(k, _)| self.classify(&region_signature(image, segmentation, k, self.window_px)))
+        (0..segmentation.regions.len())
+            .into_par_iter()
+            .map_init(Vec::new, |distances, k| {
+                let signature = region_signature(image, segmentation, k, self.window_px);
+                self.classify_with(&signature, distances)
+            })
             .collect()
     }
 }

@@ -115,6 +115,10 @@ impl Image {
     }
 }
 
+/// √(k(k+1)) for k = 0..MAX_BANDS: the norms of the Helmert rows (k ≥ 1),
+/// as f32 (the nearest f32 of each root, as `f32::sqrt` gives it).
+const HELMERT_NORM: [f32; MAX_BANDS] = [0.0, std::f32::consts::SQRT_2, 2.449_489_8, 3.464_101_6];
+
 /// Map band values to an opponent colour space: channel 0 is the mean of the
 /// bands (brightness, in band units); channels 1.. are the normalised Helmert
 /// contrasts between bands (for R, G, B: (R−G)/√2 and (R+G−2B)/√6), an
@@ -134,8 +138,7 @@ pub fn opponent(bands: &[u8]) -> [f32; MAX_BANDS] {
         let v = v as f32;
         if k > 0 {
             // Helmert row k: (v_0 + … + v_{k−1} − k·v_k) / √(k(k+1)).
-            let kf = k as f32;
-            out[k] = (prefix - kf * v) / (kf * (kf + 1.0)).sqrt();
+            out[k] = (prefix - k as f32 * v) / HELMERT_NORM[k];
         }
         prefix += v;
     }
@@ -166,6 +169,14 @@ mod tests {
             let chroma2: f32 = (1..3).map(|k| (c[k] - base[k]).powi(2)).sum();
             let mean_part = (c[0] - base[0]).powi(2) * 3.0;
             assert!((chroma2 + mean_part - 1.0).abs() < 1e-4);
+        }
+    }
+
+    #[test]
+    fn helmert_norms_are_the_roots() {
+        for (k, &norm) in HELMERT_NORM.iter().enumerate() {
+            let kf = k as f32;
+            assert_eq!(norm, (kf * (kf + 1.0)).sqrt());
         }
     }
 
