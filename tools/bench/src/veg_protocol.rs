@@ -1,6 +1,7 @@
 //! The cross-image protocol for vegetation extraction: tune the options on
 //! one annotated image, report on the other with those options, both ways;
-//! then the shipped defaults on both, and on contrast-changed copies.
+//! then the shipped defaults on both, and on contrast-changed copies, with
+//! absolute thresholds and with thresholds scaled to the samples' contrast.
 //!
 //! Tuning is a grid search over the options people would reach for first
 //! (the two split-and-merge thresholds, the neighbours a class distance
@@ -10,7 +11,7 @@
 use crate::bench::emit;
 use anyhow::Result;
 use relevo_core::veg::eval::{self, Evaluation};
-use relevo_core::veg::pipeline::{extract, VegImage, VegOptions};
+use relevo_core::veg::pipeline::{extract, Contrast, VegImage, VegOptions};
 use relevo_core::veg::samples::{read_file as read_samples, Sample};
 use relevo_core::veg::Image;
 use serde_json::json;
@@ -204,25 +205,31 @@ pub fn run(repo: &Path, data: &Path, json_lines: bool) -> Result<()> {
         }
     }
     // The shipped defaults, on each image and on contrast-changed copies:
-    // a dull one (half the contrast) and a stretched one (1.4×, clipped).
-    let defaults = VegOptions::default();
-    for image in &images {
-        let e = image.score(&defaults)?;
-        let mut copies = Vec::new();
-        for (what, gain, offset) in [("dull", 0.5f32, 64.0f32), ("stretched", 1.4, -40.0)] {
-            let copy = contrast_changed(&image.image, gain, offset)?;
-            let c = score(&copy, &image.samples, &image.truth, &defaults)?;
-            copies.push((what, c));
+    // a dull one (half the contrast) and a stretched one (1.4×, clipped);
+    // with absolute thresholds and with thresholds scaled to the samples.
+    for contrast in [Contrast::Absolute, Contrast::Samples] {
+        let options = VegOptions {
+            contrast,
+            ..VegOptions::default()
+        };
+        for image in &images {
+            let e = image.score(&options)?;
+            let mut copies = Vec::new();
+            for (what, gain, offset) in [("dull", 0.5f32, 64.0f32), ("stretched", 1.4, -40.0)] {
+                let copy = contrast_changed(&image.image, gain, offset)?;
+                let c = score(&copy, &image.samples, &image.truth, &options)?;
+                copies.push((what, c));
+            }
+            emit(
+                json_lines,
+                json!({"bench": "veg-defaults", "image": image.name, "contrast": contrast, "defaults": e,
+                       "dull": copies[0].1, "stretched": copies[1].1}),
+                format!(
+                    "veg defaults ({contrast:?} thresholds) on {}: P {:.3} R {:.3} F1 {:.3} | dull copy F1 {:.3}, stretched copy F1 {:.3}",
+                    image.name, e.precision, e.recall, e.f1, copies[0].1.f1, copies[1].1.f1
+                ),
+            );
         }
-        emit(
-            json_lines,
-            json!({"bench": "veg-defaults", "image": image.name, "defaults": e,
-                   "dull": copies[0].1, "stretched": copies[1].1}),
-            format!(
-                "veg defaults on {}: P {:.3} R {:.3} F1 {:.3} | dull copy F1 {:.3}, stretched copy F1 {:.3}",
-                image.name, e.precision, e.recall, e.f1, copies[0].1.f1, copies[1].1.f1
-            ),
-        );
     }
     Ok(())
 }

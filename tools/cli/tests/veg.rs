@@ -87,6 +87,45 @@ fn detection_reaches_the_recorded_f1_on_annotated_crowns() {
     }
 }
 
+/// `--contrast samples` scales the split-and-merge thresholds by the marked
+/// samples' contrast over the reference 30 (the Yellowstone crop's eight
+/// samples: the upper median of their brightness spreads is 38.7 → 1.29)
+/// and says so; a copy at half the
+/// contrast gets half the scale; the default keeps them absolute (1).
+#[test]
+fn the_contrast_flag_scales_the_thresholds_to_the_samples() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = shared(&format!("{YELLOWSTONE}.png"));
+    let dull = dir.path().join("dull.tif");
+    common::gdal_tool(
+        "gdal_translate",
+        &[
+            "-q",
+            "-scale",
+            "0",
+            "255",
+            "64",
+            "191.5",
+            png.to_str().unwrap(),
+            dull.to_str().unwrap(),
+        ],
+    );
+    let samples = repo("data/trees/yellowstone_samples.csv");
+    let out = dir.path().join("db.csv");
+    let gain = |image: &Path, extra: &[&str]| {
+        let mut args = vec!["--pixel-size", "0.1", "--force", "--json"];
+        args.extend(extra);
+        let json = veg_detect_ok(image, &samples, &out, &args);
+        let report: serde_json::Value = serde_json::from_str(&json).unwrap();
+        report["threshold_gain"].as_f64().unwrap()
+    };
+    let scaled = gain(&png, &["--contrast", "samples"]);
+    assert!((scaled - 38.7 / 30.0).abs() < 0.01, "{scaled}");
+    let dull_scaled = gain(&dull, &["--contrast", "samples"]);
+    assert!((dull_scaled / scaled - 0.5).abs() < 0.02, "{dull_scaled}");
+    assert_eq!(gain(&png, &[]), 1.0);
+}
+
 /// SOAP_061's truth names Alive and Dead trees: `veg eval` reports each
 /// class's recall, the confusion, and writes the matches as GeoJSON.
 #[test]
@@ -730,7 +769,9 @@ fn the_labels_leave_a_no_data_collar_without_a_class() {
 /// land-cover polygons beside the Landsat scene: every class is reported,
 /// with as many labelled pixels as GDAL's own rasterisation of that class
 /// (pixel centres inside, the same rule), and the vegetation counts agree
-/// with the classes' counts.
+/// with the classes' counts. With the samples marked on the imagery, at
+/// least 80 % of the tree polygon is found and at most 10 % of the crop,
+/// town and water polygons is called vegetation.
 #[test]
 fn land_cover_labels_score_the_classified_pixels() {
     let dir = tempfile::tempdir().unwrap();
@@ -818,6 +859,12 @@ fn land_cover_labels_score_the_classified_pixels() {
                 .map_or(0, |v| v.as_u64().unwrap()),
             "{class}"
         );
+        let share = vegetation as f64 / pixels as f64;
+        if class == "tree" {
+            assert!(share >= 0.8, "{class}: {share:.3} found");
+        } else {
+            assert!(share <= 0.1, "{class}: {share:.3} called vegetation");
+        }
     }
 }
 

@@ -7,7 +7,7 @@ use crate::veg_io;
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 use relevo_core::raster::png::encode_rgba;
-use relevo_core::veg::pipeline::{self, Mode, VegOptions};
+use relevo_core::veg::pipeline::{self, Contrast, Mode, VegOptions};
 use relevo_core::veg::{db, eval, samples};
 use std::path::{Path, PathBuf};
 
@@ -113,6 +113,11 @@ pub struct VegDetectArgs {
     /// tiles use less memory.
     #[arg(long)]
     pub tile: Option<usize>,
+    /// Split-and-merge thresholds in 8-bit units as given (absolute, the
+    /// default), or scaled by the marked samples' contrast (samples: a
+    /// duller or harsher image is cut into the same regions).
+    #[arg(long, value_enum)]
+    pub contrast: Option<ContrastArg>,
     /// The database (semicolon CSV).
     #[arg(long, short)]
     pub out: PathBuf,
@@ -157,8 +162,21 @@ impl VegDetectArgs {
         if let Some(mode) = self.mode {
             o.mode = mode.into();
         }
+        if let Some(contrast) = self.contrast {
+            o.contrast = match contrast {
+                ContrastArg::Absolute => Contrast::Absolute,
+                ContrastArg::Samples => Contrast::Samples,
+            };
+        }
         o
     }
+}
+
+/// How the split-and-merge thresholds meet the image's contrast.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum ContrastArg {
+    Absolute,
+    Samples,
 }
 
 /// Crowns (fine imagery) or fill (coarse imagery).
@@ -254,6 +272,12 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
             a.image.display(), r.width, r.height, r.pixel_m, r.leaves, r.regions, r.objects,
             r.segment_ms, r.classify_ms, r.detect_ms
         );
+        if r.threshold_gain != 1.0 {
+            println!(
+                "  thresholds scaled by {:.2} to the samples' contrast",
+                r.threshold_gain
+            );
+        }
         for c in &r.classes {
             println!(
                 "  {:<12} {:>10} signatures {:>4}  regions {:>7}  pixels {:>10}  objects {:>7}",

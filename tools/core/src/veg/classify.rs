@@ -11,17 +11,11 @@ use rayon::prelude::*;
 
 /// The region covering most pixel centres of a sample (lowest index on ties).
 fn dominant_region(segmentation: &Segmentation, sample: &Sample) -> Option<usize> {
-    let (xs, ys): (Vec<f64>, Vec<f64>) = sample.polygon.iter().map(|p| (p[0], p[1])).unzip();
-    let lo = |v: &[f64], n: usize| {
-        (v.iter().cloned().fold(f64::MAX, f64::min).floor().max(0.0) as usize).min(n)
-    };
-    let hi = |v: &[f64], n: usize| {
-        (v.iter().cloned().fold(f64::MIN, f64::max).ceil().max(0.0) as usize).min(n)
-    };
-    let (w, h) = (segmentation.width, segmentation.height);
+    let w = segmentation.width;
+    let [x0, y0, x1, y1] = sample.pixel_bounds(w, segmentation.height);
     let mut counts = std::collections::BTreeMap::new();
-    for y in lo(&ys, h)..hi(&ys, h) {
-        for x in lo(&xs, w)..hi(&xs, w) {
+    for y in y0..y1 {
+        for x in x0..x1 {
             if sample.contains(x as f64 + 0.5, y as f64 + 0.5) {
                 *counts
                     .entry(segmentation.labels[y * w + x] as usize)
@@ -61,6 +55,9 @@ pub fn sample_signatures(
         .collect()
 }
 
+/// A class's distance averages at most one in this many of its signatures.
+const NEIGHBOURS_SHARE: usize = 3;
+
 /// Signatures learnt per class, standardised per feature.
 #[derive(Debug, Clone)]
 pub struct Classifier {
@@ -76,8 +73,9 @@ pub struct Classifier {
     example_features: Vec<f32>,
     /// Smallest window side a signature is taken over (pixels).
     window_px: u32,
-    /// How many nearest signatures of each class its distance averages.
-    neighbours: usize,
+    /// How many nearest signatures of each class its distance averages:
+    /// the `neighbours` option, capped at a third of the class's signatures.
+    class_neighbours: Vec<usize>,
 }
 
 /// A region's class and how clearly it won, in `[0.5, 1]`: `d₂ / (d₁ + d₂)`
@@ -122,7 +120,13 @@ impl Classifier {
                 1.0 / var.sqrt().max(1e-3)
             })
             .collect();
-        let example_class = raw.iter().map(|(c, _)| *c).collect();
+        let example_class: Vec<usize> = raw.iter().map(|(c, _)| *c).collect();
+        let class_neighbours = (0..classes.len())
+            .map(|c| {
+                let signatures = example_class.iter().filter(|&&e| e == c).count();
+                (signatures / NEIGHBOURS_SHARE).clamp(1, neighbours.max(1))
+            })
+            .collect();
         let example_features = (0..features)
             .flat_map(|f| {
                 let scale = inverse_scale[f];
@@ -135,7 +139,7 @@ impl Classifier {
             example_class,
             example_features,
             window_px,
-            neighbours,
+            class_neighbours,
         })
     }
 
@@ -150,10 +154,15 @@ impl Classifier {
 
     /// Class of one signature: the class whose `neighbours` nearest learnt
     /// signatures are nearest on average (a local-mean nearest-neighbour
-    /// rule; with one neighbour, plain nearest neighbour). Averaging a few
-    /// keeps one stray sample region, such as a shadow inside a crown's
-    /// rectangle, from claiming everything that resembles it. Distances are
-    /// Euclidean over features standardised by their spread in the samples.
+    /// rule, Mitani & Hamamoto 2006; with one neighbour, plain nearest
+    /// neighbour). Averaging a few keeps one stray sample region, such as a
+    /// shadow inside a crown's rectangle, from claiming everything that
+    /// resembles it. A class with few signatures averages fewer (at most a
+    /// third of them): uniform canopy in coarse imagery merges into a few
+    /// large regions, and averaging over most of those would bring in the
+    /// odd clearing its rectangles also hold, so that a densely sampled
+    /// class wins by numbers alone. Distances are Euclidean over features
+    /// standardised by their spread in the samples.
     pub fn classify(&self, signature: &[f32]) -> Label {
         self.classify_with(signature, &mut Vec::new())
     }
@@ -177,7 +186,7 @@ impl Classifier {
             }
         }
         // The `k` smallest distances per class, kept sorted by insertion.
-        let k = self.neighbours.max(1);
+        let k = self.class_neighbours.iter().copied().max().unwrap_or(1);
         let mut smallest = vec![f32::INFINITY; self.classes.len() * k];
         let mut found = vec![0usize; self.classes.len()];
         for (&class, &d) in self.example_class.iter().zip(distances.iter()) {
@@ -191,7 +200,7 @@ impl Classifier {
         }
         let nearest: Vec<f32> = (0..self.classes.len())
             .map(|c| {
-                let n = found[c].min(k).max(1);
+                let n = found[c].min(self.class_neighbours[c]).max(1);
                 smallest[c * k..c * k + n]
                     .iter()
                     .map(|d| d.sqrt())
@@ -229,5 +238,34 @@ impl Classifier {
                 self.classify_with(&signature, distances)
             })
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A class marked by two signatures (its canopy and a clearing in the
+    /// same rectangle) against one marked by nine: averaging the sparse
+    /// class's two would let the clearing lose it the canopy it was marked
+    /// on; capped at a third of its signatures it averages one and wins.
+    #[test]
+    fn a_sparsely_marked_class_averages_fewer_neighbours() {
+        let mut marked = vec![
+            ("forest".to_string(), vec![0.0, 0.0]),
+            ("forest".to_string(), vec![10.0, 0.0]),
+        ];
+        marked.extend((-4..=4).map(|y| ("other".to_string(), vec![2.0, y as f32])));
+        let classifier = Classifier::learn(marked, 8, 3).unwrap();
+        assert_eq!(classifier.class_neighbours, [1, 3]);
+        assert_eq!(classifier.classify(&[0.5, 0.0]).class, 0);
+        assert_eq!(classifier.classify(&[2.2, 0.5]).class, 1);
+        // Without the cap (both classes averaging up to three), the
+        // clearing drags the forest's distance past the other class's.
+        let uncapped = Classifier {
+            class_neighbours: vec![3, 3],
+            ..classifier
+        };
+        assert_eq!(uncapped.classify(&[0.5, 0.0]).class, 1);
     }
 }

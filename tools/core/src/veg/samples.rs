@@ -2,6 +2,7 @@
 //! (`class;xmin;ymin;xmax;ymax`, pixel coordinates) or GeoJSON polygons with
 //! a `class` property (coordinates in the image CRS).
 
+use super::Image;
 use crate::geo::GeoTransform;
 use crate::{Error, Result};
 use std::path::Path;
@@ -29,6 +30,12 @@ impl Sample {
 
     /// Centre of the polygon's bounding box.
     pub fn centre(&self) -> [f64; 2] {
+        let [x0, y0, x1, y1] = self.bounds();
+        [(x0 + x1) / 2.0, (y0 + y1) / 2.0]
+    }
+
+    /// Bounding box `[x0, y0, x1, y1]` of the polygon, in pixels.
+    pub fn bounds(&self) -> [f64; 4] {
         let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
         for p in &self.polygon {
             for k in 0..2 {
@@ -36,7 +43,34 @@ impl Sample {
                 hi[k] = hi[k].max(p[k]);
             }
         }
-        [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0]
+        [lo[0], lo[1], hi[0], hi[1]]
+    }
+
+    /// The whole pixels `[x0, y0, x1, y1)` of `width`×`height` that the
+    /// bounding box touches.
+    pub fn pixel_bounds(&self, width: usize, height: usize) -> [usize; 4] {
+        let [x0, y0, x1, y1] = self.bounds();
+        let lo = |v: f64, n: usize| (v.floor().max(0.0) as usize).min(n);
+        let hi = |v: f64, n: usize| (v.ceil().max(0.0) as usize).min(n);
+        [lo(x0, width), lo(y0, height), hi(x1, width), hi(y1, height)]
+    }
+
+    /// Standard deviation of brightness (the mean of the bands, 8-bit
+    /// units) over the pixels whose centre lies inside; `None` below two.
+    pub fn brightness_std(&self, image: &Image) -> Option<f32> {
+        let [x0, y0, x1, y1] = self.pixel_bounds(image.width, image.height);
+        let (mut n, mut sum, mut sum_sq) = (0.0f64, 0.0f64, 0.0f64);
+        for y in y0..y1 {
+            for x in x0..x1 {
+                if self.contains(x as f64 + 0.5, y as f64 + 0.5) {
+                    let b = image.colour(x, y)[0] as f64;
+                    n += 1.0;
+                    sum += b;
+                    sum_sq += b * b;
+                }
+            }
+        }
+        (n >= 2.0).then(|| (sum_sq / n - (sum / n).powi(2)).max(0.0).sqrt() as f32)
     }
 
     /// Whether the point lies inside the polygon (even–odd rule).
@@ -60,6 +94,19 @@ const CSV_COLUMNS: [&str; 5] = ["class", "xmin", "ymin", "xmax", "ymax"];
 /// Parse the CSV form. Blank lines and lines starting with `#` are skipped;
 /// a header line, if present, must name exactly the five columns. Every box
 /// must lie within the `width`×`height` image.
+/// The samples' contrast: the median over samples of the standard deviation
+/// of brightness inside each (8-bit units), `None` without a sample of two
+/// pixels. The median keeps one uniform rectangle (water) or one busy one
+/// (a road edge) from setting it.
+pub fn contrast(image: &Image, samples: &[Sample]) -> Option<f32> {
+    let mut spreads: Vec<f32> = samples
+        .iter()
+        .filter_map(|s| s.brightness_std(image))
+        .collect();
+    spreads.sort_by(f32::total_cmp);
+    spreads.get(spreads.len() / 2).copied()
+}
+
 pub fn parse_csv(text: &str, width: usize, height: usize) -> Result<Vec<Sample>> {
     let mut samples = Vec::new();
     let mut first = true;
