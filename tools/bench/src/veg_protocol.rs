@@ -80,14 +80,14 @@ pub fn annotated(repo: &Path, data: &Path) -> Result<Vec<Annotated>> {
         .collect()
 }
 
-/// The grid the tuning searches, each point with its distance to the
-/// defaults in grid steps.
-fn grid() -> Vec<(VegOptions, usize)> {
+/// The grid the tuning searches over `spacings` (`None`: learnt from the
+/// marked crowns), each point with its distance to the defaults in grid
+/// steps.
+fn grid(spacings: &[Option<f64>]) -> Vec<(VegOptions, usize)> {
     let defaults = VegOptions::default();
     let brightness = [20.0f32, 24.0, 28.0, 32.0, 36.0];
     let chroma = [4.0f32, 5.0, 6.0, 7.0, 8.0, 9.0];
     let neighbours = [1usize, 3, 5];
-    let spacing = [2.0f64, 2.5, 3.0];
     // Grid steps between `v` and `default` along `values`.
     let steps = |values: &[f64], v: f64, default: f64| {
         let at = |x: f64| {
@@ -102,7 +102,7 @@ fn grid() -> Vec<(VegOptions, usize)> {
     for &b in &brightness {
         for &c in &chroma {
             for &n in &neighbours {
-                for &s in &spacing {
+                for &s in spacings {
                     let options = VegOptions {
                         brightness_std: b,
                         chroma_std: c,
@@ -121,7 +121,7 @@ fn grid() -> Vec<(VegOptions, usize)> {
                                 n as f64,
                                 defaults.neighbours as f64,
                             )
-                            + steps(&spacing, s, defaults.crown_spacing_m);
+                            + usize::from(s != defaults.crown_spacing_m);
                     points.push((options, distance));
                 }
             }
@@ -149,11 +149,24 @@ fn contrast_changed(image: &VegImage, gain: f32, offset: f32) -> Result<VegImage
 
 pub fn run(repo: &Path, data: &Path, json_lines: bool) -> Result<()> {
     let images = annotated(repo, data)?;
-    let grid = grid();
+    // The crown spacing learnt from the samples (the default), then also
+    // tuned by hand.
+    for spacings in [vec![None], vec![Some(2.0), Some(2.5), Some(3.0)]] {
+        protocol(&images, &grid(&spacings), json_lines)?;
+    }
+    defaults(&images, json_lines)
+}
+
+/// Tune on each image over `grid`, report on the other.
+fn protocol(images: &[Annotated], grid: &[(VegOptions, usize)], json_lines: bool) -> Result<()> {
     let describe = |o: &VegOptions| {
         format!(
-            "brightness {:.0}, chroma {:.0}, neighbours {}, spacing {:.1} m",
-            o.brightness_std, o.chroma_std, o.neighbours, o.crown_spacing_m
+            "brightness {:.0}, chroma {:.0}, neighbours {}, spacing {}",
+            o.brightness_std,
+            o.chroma_std,
+            o.neighbours,
+            o.crown_spacing_m
+                .map_or("learnt".into(), |s| format!("{s:.1} m"))
         )
     };
     // Every grid point on every image, once.
@@ -204,6 +217,11 @@ pub fn run(repo: &Path, data: &Path, json_lines: bool) -> Result<()> {
             );
         }
     }
+    Ok(())
+}
+
+/// The shipped defaults, on each image and on contrast-changed copies.
+fn defaults(images: &[Annotated], json_lines: bool) -> Result<()> {
     // The shipped defaults, on each image and on contrast-changed copies:
     // a dull one (half the contrast) and a stretched one (1.4×, clipped);
     // with absolute thresholds and with thresholds scaled to the samples.
@@ -212,7 +230,7 @@ pub fn run(repo: &Path, data: &Path, json_lines: bool) -> Result<()> {
             contrast,
             ..VegOptions::default()
         };
-        for image in &images {
+        for image in images {
             let e = image.score(&options)?;
             let mut copies = Vec::new();
             for (what, gain, offset) in [("dull", 0.5f32, 64.0f32), ("stretched", 1.4, -40.0)] {

@@ -99,7 +99,8 @@ pub struct VegDetectArgs {
     /// Crowns (fine imagery) or fill (coarse imagery); auto picks by pixel size.
     #[arg(long, value_enum)]
     pub mode: Option<ModeArg>,
-    /// Smallest distance between crown centres, metres.
+    /// Smallest distance between crown centres, metres (default: learnt
+    /// from the marked crowns, 1 to 3 m).
     #[arg(long, allow_negative_numbers = true)]
     pub crown_spacing: Option<f64>,
     /// Smallest crown radius kept, metres.
@@ -157,10 +158,12 @@ impl VegDetectArgs {
         }
         set!(brightness_std => brightness_std, chroma_std => chroma_std,
              min_region => min_region_px, min_block => min_block_px, window => window_px, neighbours => neighbours, negative => negative_class,
-             crown_spacing => crown_spacing_m,
              crown_min_radius => crown_min_radius_m, density => density_per_ha, tile => tile_px);
         if let Some(mode) = self.mode {
             o.mode = mode.into();
+        }
+        if self.crown_spacing.is_some() {
+            o.crown_spacing_m = self.crown_spacing;
         }
         if let Some(contrast) = self.contrast {
             o.contrast = match contrast {

@@ -10,6 +10,7 @@
 //! - [`samples`]: marked samples (semicolon CSV rectangles, GeoJSON polygons).
 //! - [`classify`]: nearest-signature classifier with a score.
 //! - [`detect`]: vegetation objects from classified regions.
+//! - [`spacing`]: the crown spacing learnt from the marked crowns.
 //! - [`db`]: the `id;x;y;class;size;score` database.
 //! - [`eval`]: precision, recall and F1 against truth boxes.
 //! - [`tiles`]: cutting a large image into tiles with a margin of context.
@@ -26,6 +27,7 @@ pub mod haar;
 pub mod pipeline;
 pub mod samples;
 pub mod segment;
+pub mod spacing;
 pub mod tiles;
 
 use crate::{Error, Result};

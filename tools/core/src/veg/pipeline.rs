@@ -8,6 +8,7 @@ use super::db::VegObject;
 use super::detect::{detect, Object, Placement};
 use super::samples::Sample;
 use super::segment::{segment, Region, SegmentParams, SegmentSteps, Segmentation};
+use super::spacing::{self, MarkedCrown, CROWN_SPACINGS_M};
 use super::tiles::{Tile, Tiling};
 use super::Image;
 use crate::geo::GeoTransform;
@@ -36,8 +37,9 @@ pub struct VegOptions {
     pub negative_class: String,
     /// How regions become objects.
     pub mode: Mode,
-    /// Crowns: smallest distance between crown centres (m).
-    pub crown_spacing_m: f64,
+    /// Crowns: smallest distance between crown centres (m); unset, it is
+    /// learnt from the marked crowns (see [`super::spacing`]).
+    pub crown_spacing_m: Option<f64>,
     /// Crowns: smallest crown radius kept (m).
     pub crown_min_radius_m: f64,
     /// Fill: objects per hectare of vegetation.
@@ -61,7 +63,7 @@ impl Default for VegOptions {
             neighbours: 3,
             negative_class: "other".into(),
             mode: Mode::Auto,
-            crown_spacing_m: 2.5,
+            crown_spacing_m: None,
             crown_min_radius_m: 0.5,
             density_per_ha: 100.0,
             tile_px: super::tiles::CORE_PX,
@@ -144,10 +146,14 @@ impl VegOptions {
         Ok(Tiling::for_placement(placement, self.tile_px))
     }
 
-    /// The placement for pixels of `pixel_m` metres.
+    /// The placement for pixels of `pixel_m` metres; with a spacing to be
+    /// learnt, the largest it may become.
     pub fn placement(&self, pixel_m: f64) -> Result<Placement> {
+        let spacing_m = self
+            .crown_spacing_m
+            .unwrap_or(CROWN_SPACINGS_M[CROWN_SPACINGS_M.len() - 1]);
         for (name, v) in [
-            ("crown_spacing_m", self.crown_spacing_m),
+            ("crown_spacing_m", spacing_m),
             ("crown_min_radius_m", self.crown_min_radius_m),
             ("density_per_ha", self.density_per_ha),
         ] {
@@ -163,10 +169,9 @@ impl VegOptions {
         // Crowns closer than a pixel cannot be told apart in the image, and
         // filled objects denser than one per square metre are not
         // vegetation; either would make the object count grow without bound.
-        if crowns && self.crown_spacing_m < pixel_m {
+        if crowns && spacing_m < pixel_m {
             return Err(Error::Input(format!(
-                "crown_spacing_m: crowns {:.3} m apart are closer than one {pixel_m:.3} m pixel",
-                self.crown_spacing_m
+                "crown_spacing_m: crowns {spacing_m:.3} m apart are closer than one {pixel_m:.3} m pixel"
             )));
         }
         if !crowns && self.density_per_ha > MAX_DENSITY_PER_HA {
@@ -178,7 +183,7 @@ impl VegOptions {
         }
         Ok(if crowns {
             Placement::Crowns {
-                spacing_px: (self.crown_spacing_m / pixel_m) as f32,
+                spacing_px: (spacing_m / pixel_m) as f32,
                 min_radius_px: (self.crown_min_radius_m / pixel_m) as f32,
             }
         } else {
@@ -416,6 +421,9 @@ pub fn extract_tiled(
     let owners: Vec<usize> = samples.iter().map(owner).collect();
     let mut marked: Vec<Vec<Vec<f32>>> = vec![Vec::new(); samples.len()];
     let mut learn_segment_ms = 0.0;
+    let learn_spacing =
+        matches!(placement, Placement::Crowns { .. }) && options.crown_spacing_m.is_none();
+    let mut marked_crowns = Vec::new();
     let whole = tiles.len() == 1;
     // A whole image's segmentation serves learning and classification.
     let mut whole_segmentation = None;
@@ -433,6 +441,16 @@ pub fn extract_tiled(
                 let local = sample.translated(-(x0 as f64), -(y0 as f64));
                 marked[k] =
                     sample_signatures(context.image(), &segmentation, &local, options.window_px);
+                if learn_spacing && sample.class != options.negative_class {
+                    marked_crowns.push(MarkedCrown::cut(
+                        context.image(),
+                        context.valid(image),
+                        &segmentation,
+                        &local,
+                        spacing::margin_px(image.pixel_m),
+                        options.window_px,
+                    ));
+                }
             }
         }
         if whole {
@@ -456,6 +474,22 @@ pub fn extract_tiled(
             options.negative_class
         )));
     }
+    let placement = match placement {
+        Placement::Crowns { min_radius_px, .. } if learn_spacing => {
+            let spacing_m = spacing::learn_spacing_m(
+                &marked_crowns,
+                &classifier,
+                &vegetation,
+                image.pixel_m,
+                min_radius_px,
+            );
+            Placement::Crowns {
+                spacing_px: (spacing_m / image.pixel_m) as f32,
+                min_radius_px,
+            }
+        }
+        placement => placement,
+    };
     let learn_ms = start.elapsed().as_secs_f64() * 1e3;
     watch.step_done()?;
 

@@ -1,0 +1,212 @@
+//! The crown spacing learnt from the marked crowns. A person marks single
+//! crowns, so the distance kept between crown centres should be the
+//! smallest at which no marked crown yields two centres: smaller, one crown
+//! with several bright branches (a dead crown, a broadleaf) splits; larger,
+//! neighbouring crowns merge. Each marked crown is cut with its
+//! neighbourhood from the segmentation it was learnt on, classified with the
+//! learnt classifier, and crowns are placed on it at every candidate spacing.
+
+use super::classify::{Classifier, Label};
+use super::detect::{detect, Placement};
+use super::haar::region_signature;
+use super::samples::Sample;
+use super::segment::{SegmentSteps, Segmentation};
+use super::Image;
+
+/// The spacings tried (m), in increasing order.
+pub const CROWN_SPACINGS_M: [f64; 5] = [1.0, 1.5, 2.0, 2.5, 3.0];
+
+/// A marked crown with the neighbourhood crown placement looks at.
+pub struct MarkedCrown {
+    image: Image,
+    valid: Option<Vec<bool>>,
+    /// Index of every pixel's region among `signatures`.
+    labels: Vec<u32>,
+    /// The signature of each region the neighbourhood holds.
+    signatures: Vec<Vec<f32>>,
+    /// The mark, in the neighbourhood's pixels.
+    sample: Sample,
+}
+
+impl MarkedCrown {
+    /// Cut `sample` (in the pixels of `image`) with `margin_px` around it
+    /// from `image`, its validity and its `segmentation`; region signatures
+    /// over windows of at least `window_px` (as the classifier takes them).
+    pub fn cut(
+        image: &Image,
+        valid: Option<&[bool]>,
+        segmentation: &Segmentation,
+        sample: &Sample,
+        margin_px: usize,
+        window_px: u32,
+    ) -> MarkedCrown {
+        let (w, h) = (image.width, image.height);
+        let [x0, y0, x1, y1] = sample.pixel_bounds(w, h);
+        let (x0, y0) = (x0.saturating_sub(margin_px), y0.saturating_sub(margin_px));
+        let (x1, y1) = ((x1 + margin_px).min(w), (y1 + margin_px).min(h));
+        let mut regions: Vec<u32> = Vec::new();
+        let mut local_of = std::collections::HashMap::new();
+        let mut labels = Vec::with_capacity((x1 - x0) * (y1 - y0));
+        let mut window_valid = valid.map(|_| Vec::with_capacity(labels.capacity()));
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let region = segmentation.labels[y * w + x];
+                let local = *local_of.entry(region).or_insert_with(|| {
+                    regions.push(region);
+                    regions.len() as u32 - 1
+                });
+                labels.push(local);
+                if let (Some(out), Some(v)) = (window_valid.as_mut(), valid) {
+                    out.push(v[y * w + x]);
+                }
+            }
+        }
+        let signatures = regions
+            .iter()
+            .map(|&r| region_signature(image, segmentation, r as usize, window_px))
+            .collect();
+        MarkedCrown {
+            image: image.window([x0, y0, x1, y1]),
+            valid: window_valid,
+            labels,
+            signatures,
+            sample: sample.translated(-(x0 as f64), -(y0 as f64)),
+        }
+    }
+
+    /// Crown centres placed inside the mark.
+    fn centres(&self, classes: &[Label], vegetation: &[bool], placement: Placement) -> usize {
+        let segmentation = Segmentation {
+            width: self.image.width,
+            height: self.image.height,
+            labels: self.labels.clone(),
+            regions: Vec::new(),
+            leaves: 0,
+            steps: SegmentSteps::default(),
+        };
+        detect(
+            &self.image,
+            &segmentation,
+            classes,
+            vegetation,
+            self.valid.as_deref(),
+            placement,
+            [0, 0],
+        )
+        .iter()
+        .filter(|o| self.sample.contains(o.x, o.y))
+        .count()
+    }
+}
+
+/// The smallest of [`CROWN_SPACINGS_M`], at least a pixel of `pixel_m`, at
+/// which no marked crown holds two centres; the largest when every one
+/// splits a crown (and when nothing was marked).
+pub fn learn_spacing_m(
+    crowns: &[MarkedCrown],
+    classifier: &Classifier,
+    vegetation: &[bool],
+    pixel_m: f64,
+    min_radius_px: f32,
+) -> f64 {
+    let largest = CROWN_SPACINGS_M[CROWN_SPACINGS_M.len() - 1];
+    let classes: Vec<Vec<Label>> = crowns
+        .iter()
+        .map(|c| {
+            c.signatures
+                .iter()
+                .map(|s| classifier.classify(s))
+                .collect()
+        })
+        .collect();
+    CROWN_SPACINGS_M
+        .into_iter()
+        .filter(|&s| s >= pixel_m)
+        .find(|&spacing_m| {
+            let placement = Placement::Crowns {
+                spacing_px: (spacing_m / pixel_m) as f32,
+                min_radius_px,
+            };
+            crowns
+                .iter()
+                .zip(&classes)
+                .all(|(crown, classes)| crown.centres(classes, vegetation, placement) <= 1)
+        })
+        .unwrap_or(largest)
+}
+
+/// Pixels of neighbourhood a marked crown is cut with: placement at the
+/// largest spacing looks this far (smoothing, the window a centre must top,
+/// the disc of vegetation around it).
+pub fn margin_px(pixel_m: f64) -> usize {
+    (3.0 * CROWN_SPACINGS_M[CROWN_SPACINGS_M.len() - 1] / pixel_m).ceil() as usize
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testdata;
+    use crate::veg::pipeline::{extract, VegImage, VegOptions};
+    use crate::veg::samples;
+
+    /// On SOAP_061 a marked dead crown (several bright branches) holds
+    /// three centres at 2 m and one at 2.5 m: the spacing learnt is 2.5 m;
+    /// a spacing given is used as it is.
+    #[test]
+    fn the_spacing_is_the_smallest_that_keeps_each_marked_crown_whole() {
+        let image = VegImage {
+            image: testdata::soap_061(),
+            crs_wkt: String::new(),
+            geotransform: None,
+            pixel_m: 0.1,
+            valid: None,
+        };
+        let marks = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("../../data/trees/soap_061_samples.csv");
+        let samples = samples::read_file(&marks, None, 400, 400).unwrap();
+        let spacing_of = |options: &VegOptions| match extract(&image, &samples, options)
+            .unwrap()
+            .report
+            .placement
+        {
+            Placement::Crowns { spacing_px, .. } => spacing_px as f64 * 0.1,
+            other => panic!("{other:?}"),
+        };
+        assert!((spacing_of(&VegOptions::default()) - 2.5).abs() < 1e-6);
+        let at = |spacing_m: f64| {
+            extract(
+                &image,
+                &samples,
+                &VegOptions {
+                    crown_spacing_m: Some(spacing_m),
+                    ..VegOptions::default()
+                },
+            )
+            .unwrap()
+        };
+        for (spacing_m, most) in [(2.0, 3), (2.5, 1)] {
+            let found = at(spacing_m);
+            assert!(
+                (spacing_of(&VegOptions {
+                    crown_spacing_m: Some(spacing_m),
+                    ..VegOptions::default()
+                }) - spacing_m)
+                    .abs()
+                    < 1e-6
+            );
+            let in_marked_crowns = samples
+                .iter()
+                .filter(|s| s.class != "other")
+                .map(|s| {
+                    found
+                        .objects
+                        .iter()
+                        .filter(|o| s.contains(o.x, o.y))
+                        .count()
+                })
+                .max()
+                .unwrap();
+            assert_eq!(in_marked_crowns, most, "{spacing_m} m");
+        }
+    }
+}
