@@ -275,6 +275,14 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
             a.image.display(), r.width, r.height, r.pixel_m, r.leaves, r.regions, r.objects,
             r.segment_ms, r.classify_ms, r.detect_ms
         );
+        if let (relevo_core::veg::detect::Placement::Crowns { spacing_px, .. }, None) =
+            (r.placement, options.crown_spacing_m)
+        {
+            println!(
+                "  crowns at least {:.1} m apart, learnt from the marked crowns",
+                spacing_px as f64 * r.pixel_m
+            );
+        }
         if r.threshold_gain != 1.0 {
             println!(
                 "  thresholds scaled by {:.2} to the samples' contrast",
