@@ -67,6 +67,25 @@ pub fn soap_061() -> Image {
     Image::new(w, h, 3, rgb).unwrap()
 }
 
+/// SOAP_061 as the vegetation pipeline takes it (0.1 m pixels, not
+/// georeferenced), with its ten committed samples.
+pub fn soap_061_marked() -> (
+    crate::veg::pipeline::VegImage,
+    Vec<crate::veg::samples::Sample>,
+) {
+    let image = crate::veg::pipeline::VegImage {
+        image: soap_061(),
+        crs_wkt: String::new(),
+        geotransform: None,
+        pixel_m: 0.1,
+        valid: None,
+    };
+    let marks =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../data/trees/soap_061_samples.csv");
+    let samples = crate::veg::samples::read_file(&marks, None, 400, 400).unwrap();
+    (image, samples)
+}
+
 /// A deterministic pseudo-random sequence in [0, 1).
 pub struct Lcg(pub u64);
 

@@ -874,22 +874,7 @@ pub fn overlay(image: &VegImage, extraction: &Extraction, negative: &str) -> Vec
 mod tests {
     use super::*;
     use crate::testdata;
-    use crate::veg::{eval, samples};
-
-    /// The NEON crop at 0.1 m with its ten marked samples.
-    fn soap_061() -> (VegImage, Vec<Sample>) {
-        let image = VegImage {
-            image: testdata::soap_061(),
-            crs_wkt: String::new(),
-            geotransform: None,
-            pixel_m: 0.1,
-            valid: None,
-        };
-        let marks = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("../../data/trees/soap_061_samples.csv");
-        let samples = samples::read_file(&marks, None, 400, 400).unwrap();
-        (image, samples)
-    }
+    use crate::veg::eval;
 
     /// F1 of an extraction against SOAP_061's annotated crowns.
     fn soap_061_f1(found: &Extraction) -> f64 {
@@ -907,7 +892,7 @@ mod tests {
 
     #[test]
     fn crowns_found_on_a_real_image_score_against_its_annotations() {
-        let (image, samples) = soap_061();
+        let (image, samples) = testdata::soap_061_marked();
         let options = VegOptions::default();
         let found = extract(&image, &samples, &options).unwrap();
         // Regression floor under the recorded 0.627 (docs/benchmarks.md).
@@ -935,7 +920,7 @@ mod tests {
     /// thresholds are half the image's.
     #[test]
     fn thresholds_scaled_to_the_samples_follow_the_contrast() {
-        let (image, samples) = soap_061();
+        let (image, samples) = testdata::soap_061_marked();
         let options = VegOptions {
             contrast: Contrast::Samples,
             ..VegOptions::default()
@@ -981,7 +966,7 @@ mod tests {
     /// found again within a pixel, 26 in all, F1 0.627 → 0.635.
     #[test]
     fn a_tiled_extraction_agrees_with_the_whole_image() {
-        let (image, samples) = soap_061();
+        let (image, samples) = testdata::soap_061_marked();
         let options = VegOptions::default();
         let whole = extract(&image, &samples, &options).unwrap();
         let tiled_options = VegOptions {
@@ -1035,7 +1020,7 @@ mod tests {
 
     #[test]
     fn only_counter_examples_are_refused() {
-        let (image, samples) = soap_061();
+        let (image, samples) = testdata::soap_061_marked();
         let others: Vec<Sample> = samples.into_iter().filter(|s| s.class == "other").collect();
         let error = extract(&image, &others, &VegOptions::default()).err();
         assert!(error.is_some_and(|e| e.to_string().contains("mark some vegetation")));
@@ -1043,7 +1028,7 @@ mod tests {
 
     #[test]
     fn a_watch_follows_the_stages_and_cancels_at_the_next() {
-        let (image, samples) = soap_061();
+        let (image, samples) = testdata::soap_061_marked();
         let watch = Watch::default();
         let whole = extract_watched(&image, &samples, &VegOptions::default(), &watch).unwrap();
         assert_eq!(watch.fraction(), 1.0);

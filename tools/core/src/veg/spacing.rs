@@ -146,24 +146,14 @@ pub fn margin_px(pixel_m: f64) -> usize {
 mod tests {
     use super::*;
     use crate::testdata;
-    use crate::veg::pipeline::{extract, VegImage, VegOptions};
-    use crate::veg::samples;
+    use crate::veg::pipeline::{extract, VegOptions};
 
     /// On SOAP_061 a marked dead crown (several bright branches) holds
     /// three centres at 2 m and one at 2.5 m: the spacing learnt is 2.5 m;
     /// a spacing given is used as it is.
     #[test]
     fn the_spacing_is_the_smallest_that_keeps_each_marked_crown_whole() {
-        let image = VegImage {
-            image: testdata::soap_061(),
-            crs_wkt: String::new(),
-            geotransform: None,
-            pixel_m: 0.1,
-            valid: None,
-        };
-        let marks = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("../../data/trees/soap_061_samples.csv");
-        let samples = samples::read_file(&marks, None, 400, 400).unwrap();
+        let (image, samples) = testdata::soap_061_marked();
         let spacing_of = |options: &VegOptions| match extract(&image, &samples, options)
             .unwrap()
             .report
