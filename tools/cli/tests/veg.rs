@@ -811,9 +811,10 @@ fn the_labels_leave_a_no_data_collar_without_a_class() {
 /// land-cover polygons beside the Landsat scene: every class is reported,
 /// with as many labelled pixels as GDAL's own rasterisation of that class
 /// (pixel centres inside, the same rule), and the vegetation counts agree
-/// with the classes' counts. With the samples marked on the imagery, at
-/// least 80 % of the tree polygon is found and at most 10 % of the crop,
-/// town and water polygons is called vegetation.
+/// with the classes' counts; the excess-green baseline is scored on the
+/// same pixels. With the samples marked on the imagery, at least 80 % of
+/// the tree polygon is found and at most 10 % of the crop, town and water
+/// polygons is called vegetation.
 #[test]
 fn land_cover_labels_score_the_classified_pixels() {
     let dir = tempfile::tempdir().unwrap();
@@ -901,6 +902,14 @@ fn land_cover_labels_score_the_classified_pixels() {
                 .map_or(0, |v| v.as_u64().unwrap()),
             "{class}"
         );
+        // The excess-green baseline is scored on the same labelled pixels.
+        let baseline = report["land_cover_excess_green"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|b| b["class"] == class)
+            .unwrap();
+        assert_eq!(baseline["pixels"].as_u64().unwrap(), pixels, "{class}");
         let share = vegetation as f64 / pixels as f64;
         if class == "tree" {
             assert!(share >= 0.8, "{class}: {share:.3} found");

@@ -8,7 +8,7 @@ use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 use relevo_core::raster::png::encode_rgba;
 use relevo_core::veg::pipeline::{self, Contrast, Mode, VegOptions};
-use relevo_core::veg::{db, eval, samples};
+use relevo_core::veg::{baseline, db, eval, samples};
 use std::path::{Path, PathBuf};
 
 #[derive(Subcommand, Debug)]
@@ -251,22 +251,36 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
         let png = encode_rgba(&rgba, image.image.width, image.image.height)?;
         output::write_atomic(path, &png)?;
     }
+    // The classified pixels against the labels, and the excess-green
+    // baseline's (R, G, B bands) beside them.
     let land_cover = match &land_cover_labels {
         Some(labels) => {
             let names: Vec<(&str, bool)> = class_kinds(&extraction).collect();
             let seg = &extraction.segmentation;
             let valid = |i: usize| image.valid.as_ref().is_none_or(|v| v[i]);
-            Some(eval::land_cover(labels, seg.width, seg.height, |i| {
+            let ours = eval::land_cover(labels, seg.width, seg.height, |i| {
                 valid(i).then(|| names[extraction.labels[seg.labels[i] as usize].class])
-            }))
+            });
+            let baseline = (image.image.bands >= 3).then(|| {
+                let green = baseline::excess_green_mask(&image.image);
+                eval::land_cover(labels, seg.width, seg.height, |i| {
+                    valid(i).then_some(if green[i] {
+                        ("excess green", true)
+                    } else {
+                        ("not green", false)
+                    })
+                })
+            });
+            Some((ours, baseline))
         }
         None => None,
     };
     let r = &extraction.report;
     if a.json {
         let mut report = serde_json::to_value(r)?;
-        if let Some(figures) = &land_cover {
+        if let Some((figures, baseline)) = &land_cover {
             report["land_cover"] = serde_json::to_value(figures)?;
+            report["land_cover_excess_green"] = serde_json::to_value(baseline)?;
         }
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -304,16 +318,20 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
                 c.objects
             );
         }
-        if let Some(figures) = &land_cover {
-            println!("  land cover       pixels  called vegetation  by class");
-            for f in figures {
+        if let Some((figures, baseline)) = &land_cover {
+            println!("  land cover       pixels  called vegetation  excess green  by class");
+            for (k, f) in figures.iter().enumerate() {
                 let by: Vec<String> = f.by_class.iter().map(|(c, n)| format!("{c} {n}")).collect();
+                let green = baseline.as_ref().map_or("—".into(), |b| {
+                    format!("{:>5.1} %", 100.0 * b[k].vegetation_share)
+                });
                 println!(
-                    "  {:<12} {:>10}  {:>8} ({:>5.1} %)  {}",
+                    "  {:<12} {:>10}  {:>8} ({:>5.1} %)  {:>12}  {}",
                     f.class,
                     f.pixels,
                     f.vegetation,
                     100.0 * f.vegetation_share,
+                    green,
                     by.join(", ")
                 );
             }

@@ -9,21 +9,8 @@ use super::Image;
 /// 4-connected component of at least `min_area` pixels whose ExG exceeds the
 /// Otsu threshold; score is the component's area. Bands must be R, G, B.
 pub fn excess_green(image: &Image, min_area: usize) -> Vec<(f64, f64, f32)> {
-    assert!(image.bands >= 3, "excess green needs R, G, B");
     let (w, h) = (image.width, image.height);
-    // ExG ∈ [−1, 2] mapped to 256 bins.
-    let bins: Vec<u8> = image
-        .pixels
-        .chunks_exact(image.bands)
-        .map(|p| {
-            let (r, g, b) = (p[0] as f32, p[1] as f32, p[2] as f32);
-            let sum = (r + g + b).max(1.0);
-            let exg = (2.0 * g - r - b) / sum;
-            (((exg + 1.0) / 3.0) * 255.0).round().clamp(0.0, 255.0) as u8
-        })
-        .collect();
-    let threshold = otsu(&bins);
-    let mut seen: Vec<bool> = bins.iter().map(|&v| v <= threshold).collect();
+    let mut seen: Vec<bool> = excess_green_mask(image).iter().map(|&v| !v).collect();
     let mut objects = Vec::new();
     let mut stack = Vec::new();
     for start in 0..w * h {
@@ -49,6 +36,25 @@ pub fn excess_green(image: &Image, min_area: usize) -> Vec<(f64, f64, f32)> {
         }
     }
     objects
+}
+
+/// Per pixel, row-major: whether its ExG exceeds the image's Otsu threshold
+/// (the pixels the baseline calls vegetation). Bands must be R, G, B.
+pub fn excess_green_mask(image: &Image) -> Vec<bool> {
+    assert!(image.bands >= 3, "excess green needs R, G, B");
+    // ExG ∈ [−1, 2] mapped to 256 bins.
+    let bins: Vec<u8> = image
+        .pixels
+        .chunks_exact(image.bands)
+        .map(|p| {
+            let (r, g, b) = (p[0] as f32, p[1] as f32, p[2] as f32);
+            let sum = (r + g + b).max(1.0);
+            let exg = (2.0 * g - r - b) / sum;
+            (((exg + 1.0) / 3.0) * 255.0).round().clamp(0.0, 255.0) as u8
+        })
+        .collect();
+    let threshold = otsu(&bins);
+    bins.iter().map(|&v| v > threshold).collect()
 }
 
 /// Otsu's threshold of 8-bit values: the level maximising between-class variance.
