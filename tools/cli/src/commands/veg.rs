@@ -25,7 +25,9 @@ Examples:
   relevo veg detect ortho.tif --samples marks.csv --out trees.csv --gpkg trees.gpkg
   relevo veg detect crop.png --pixel-size 0.1 --samples marks.csv --out trees.csv --overlay check.png
   relevo veg detect landsat.tif --bands 3,2,1 --stretch 1,99 --samples forest.geojson \\
-      --density 150 --labels regions.tif --out forest.csv"
+      --density 150 --labels regions.tif --out forest.csv
+  relevo veg detect dull.tif --pixel-size 0.1 --contrast samples --samples marks.csv --out trees.csv
+  relevo veg detect rgb.vrt --samples marks.csv --out forest.csv --land-cover labels.gpkg"
     )]
     Detect(Box<VegDetectArgs>),
     /// Precision, recall and F1 of detections against truth boxes (pixels).
