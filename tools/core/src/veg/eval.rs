@@ -264,10 +264,7 @@ pub fn land_cover<'a>(
                 vegetation_share: 0.0,
                 by_class: BTreeMap::new(),
             });
-        let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
-        for &[x, y] in &label.polygon {
-            (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
-        }
+        let [x0, y0, x1, y1] = label.bounds();
         let clamp = |v: f64, n: usize| v.floor().clamp(0.0, n as f64) as usize;
         let (c0, c1) = (clamp(x0, width), clamp(x1 + 1.0, width));
         let (r0, r1) = (clamp(y0, height), clamp(y1 + 1.0, height));

@@ -8,7 +8,7 @@ use super::db::VegObject;
 use super::detect::{detect, Object, Placement};
 use super::samples::Sample;
 use super::segment::{segment, Region, SegmentParams, SegmentSteps, Segmentation};
-use super::spacing::{self, MarkedCrown, CROWN_SPACINGS_M};
+use super::spacing::{self, MarkedCrown, MAX_CROWN_SPACING_M};
 use super::tiles::{Tile, Tiling};
 use super::Image;
 use crate::geo::GeoTransform;
@@ -149,9 +149,7 @@ impl VegOptions {
     /// The placement for pixels of `pixel_m` metres; with a spacing to be
     /// learnt, the largest it may become.
     pub fn placement(&self, pixel_m: f64) -> Result<Placement> {
-        let spacing_m = self
-            .crown_spacing_m
-            .unwrap_or(CROWN_SPACINGS_M[CROWN_SPACINGS_M.len() - 1]);
+        let spacing_m = self.crown_spacing_m.unwrap_or(MAX_CROWN_SPACING_M);
         for (name, v) in [
             ("crown_spacing_m", spacing_m),
             ("crown_min_radius_m", self.crown_min_radius_m),

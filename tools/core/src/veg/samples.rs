@@ -89,11 +89,6 @@ impl Sample {
     }
 }
 
-const CSV_COLUMNS: [&str; 5] = ["class", "xmin", "ymin", "xmax", "ymax"];
-
-/// Parse the CSV form. Blank lines and lines starting with `#` are skipped;
-/// a header line, if present, must name exactly the five columns. Every box
-/// must lie within the `width`×`height` image.
 /// The samples' contrast: the median over samples of the standard deviation
 /// of brightness inside each (8-bit units), `None` without a sample of two
 /// pixels. The median keeps one uniform rectangle (water) or one busy one
@@ -107,6 +102,11 @@ pub fn contrast(image: &Image, samples: &[Sample]) -> Option<f32> {
     spreads.get(spreads.len() / 2).copied()
 }
 
+const CSV_COLUMNS: [&str; 5] = ["class", "xmin", "ymin", "xmax", "ymax"];
+
+/// Parse the CSV form. Blank lines and lines starting with `#` are skipped;
+/// a header line, if present, must name exactly the five columns. Every box
+/// must lie within the `width`×`height` image.
 pub fn parse_csv(text: &str, width: usize, height: usize) -> Result<Vec<Sample>> {
     let mut samples = Vec::new();
     let mut first = true;

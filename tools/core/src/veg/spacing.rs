@@ -16,12 +16,17 @@ use super::Image;
 /// The spacings tried (m), in increasing order.
 pub const CROWN_SPACINGS_M: [f64; 5] = [1.0, 1.5, 2.0, 2.5, 3.0];
 
+/// The largest spacing that may be learnt (m): tiles take their margins
+/// from it before it is known.
+pub const MAX_CROWN_SPACING_M: f64 = CROWN_SPACINGS_M[CROWN_SPACINGS_M.len() - 1];
+
 /// A marked crown with the neighbourhood crown placement looks at.
 pub struct MarkedCrown {
     image: Image,
     valid: Option<Vec<bool>>,
-    /// Index of every pixel's region among `signatures`.
-    labels: Vec<u32>,
+    /// Every pixel's region as an index into `signatures` (no region
+    /// descriptions: placement needs only the labels).
+    segmentation: Segmentation,
     /// The signature of each region the neighbourhood holds.
     signatures: Vec<Vec<f32>>,
     /// The mark, in the neighbourhood's pixels.
@@ -68,7 +73,14 @@ impl MarkedCrown {
         MarkedCrown {
             image: image.window([x0, y0, x1, y1]),
             valid: window_valid,
-            labels,
+            segmentation: Segmentation {
+                width: x1 - x0,
+                height: y1 - y0,
+                labels,
+                regions: Vec::new(),
+                leaves: 0,
+                steps: SegmentSteps::default(),
+            },
             signatures,
             sample: sample.translated(-(x0 as f64), -(y0 as f64)),
         }
@@ -76,17 +88,9 @@ impl MarkedCrown {
 
     /// Crown centres placed inside the mark.
     fn centres(&self, classes: &[Label], vegetation: &[bool], placement: Placement) -> usize {
-        let segmentation = Segmentation {
-            width: self.image.width,
-            height: self.image.height,
-            labels: self.labels.clone(),
-            regions: Vec::new(),
-            leaves: 0,
-            steps: SegmentSteps::default(),
-        };
         detect(
             &self.image,
-            &segmentation,
+            &self.segmentation,
             classes,
             vegetation,
             self.valid.as_deref(),
@@ -109,7 +113,6 @@ pub fn learn_spacing_m(
     pixel_m: f64,
     min_radius_px: f32,
 ) -> f64 {
-    let largest = CROWN_SPACINGS_M[CROWN_SPACINGS_M.len() - 1];
     let classes: Vec<Vec<Label>> = crowns
         .iter()
         .map(|c| {
@@ -132,14 +135,14 @@ pub fn learn_spacing_m(
                 .zip(&classes)
                 .all(|(crown, classes)| crown.centres(classes, vegetation, placement) <= 1)
         })
-        .unwrap_or(largest)
+        .unwrap_or(MAX_CROWN_SPACING_M)
 }
 
 /// Pixels of neighbourhood a marked crown is cut with: placement at the
 /// largest spacing looks this far (smoothing, the window a centre must top,
 /// the disc of vegetation around it).
 pub fn margin_px(pixel_m: f64) -> usize {
-    (3.0 * CROWN_SPACINGS_M[CROWN_SPACINGS_M.len() - 1] / pixel_m).ceil() as usize
+    (3.0 * MAX_CROWN_SPACING_M / pixel_m).ceil() as usize
 }
 
 #[cfg(test)]
@@ -154,36 +157,22 @@ mod tests {
     #[test]
     fn the_spacing_is_the_smallest_that_keeps_each_marked_crown_whole() {
         let (image, samples) = testdata::soap_061_marked();
-        let spacing_of = |options: &VegOptions| match extract(&image, &samples, options)
-            .unwrap()
-            .report
-            .placement
-        {
-            Placement::Crowns { spacing_px, .. } => spacing_px as f64 * 0.1,
-            other => panic!("{other:?}"),
+        let extract_at = |crown_spacing_m: Option<f64>| {
+            let options = VegOptions {
+                crown_spacing_m,
+                ..VegOptions::default()
+            };
+            let found = extract(&image, &samples, &options).unwrap();
+            let spacing_m = match found.report.placement {
+                Placement::Crowns { spacing_px, .. } => spacing_px as f64 * image.pixel_m,
+                other => panic!("{other:?}"),
+            };
+            (found, spacing_m)
         };
-        assert!((spacing_of(&VegOptions::default()) - 2.5).abs() < 1e-6);
-        let at = |spacing_m: f64| {
-            extract(
-                &image,
-                &samples,
-                &VegOptions {
-                    crown_spacing_m: Some(spacing_m),
-                    ..VegOptions::default()
-                },
-            )
-            .unwrap()
-        };
+        assert!((extract_at(None).1 - 2.5).abs() < 1e-6);
         for (spacing_m, most) in [(2.0, 3), (2.5, 1)] {
-            let found = at(spacing_m);
-            assert!(
-                (spacing_of(&VegOptions {
-                    crown_spacing_m: Some(spacing_m),
-                    ..VegOptions::default()
-                }) - spacing_m)
-                    .abs()
-                    < 1e-6
-            );
+            let (found, used_m) = extract_at(Some(spacing_m));
+            assert!((used_m - spacing_m).abs() < 1e-6);
             let in_marked_crowns = samples
                 .iter()
                 .filter(|s| s.class != "other")
