@@ -17,7 +17,10 @@ use super::Slice;
 use std::cell::RefCell;
 
 /// Lines marched together.
-pub(super) const PACKET: usize = 16;
+pub(super) const PACKET: usize = 32;
+
+/// Slices tested together against the coarse heights before any is sampled.
+const CHUNK: usize = 8;
 
 /// A row-major colour and depth image, top row first, that tasks marching
 /// disjoint sets of lines write into at once: column j belongs to line j.
@@ -89,6 +92,14 @@ pub(super) trait Sampling: Sync {
     fn height(&self, p: Self::Position, subvoxel: bool) -> f64;
     /// Colour at `p` from colour level `level`.
     fn colour(&self, p: Self::Position, subvoxel: bool, level: usize) -> u32;
+    /// [`Sampling::height`] `s` metres along each lane's direction
+    /// (`dirs`: x components, then y).
+    #[inline(always)]
+    fn heights(&self, dirs: &[[f64; PACKET]; 2], s: f64, subvoxel: bool, out: &mut [f64; PACKET]) {
+        for k in 0..PACKET {
+            out[k] = self.height(self.position([dirs[0][k], dirs[1][k]], s), subvoxel);
+        }
+    }
 }
 
 /// Floating point throughout.
@@ -120,6 +131,17 @@ impl Sampling for FloatSampling<'_> {
     #[inline]
     fn colour(&self, [x, y]: [f64; 2], subvoxel: bool, level: usize) -> u32 {
         self.terrain.color(x, y, subvoxel, level)
+    }
+
+    #[inline(always)]
+    fn heights(&self, dirs: &[[f64; PACKET]; 2], s: f64, subvoxel: bool, out: &mut [f64; PACKET]) {
+        if subvoxel {
+            for k in 0..PACKET {
+                out[k] = self.height(self.position([dirs[0][k], dirs[1][k]], s), true);
+            }
+        } else {
+            self.terrain.nearest_heights(self.eye, dirs, s, out);
+        }
     }
 }
 
@@ -191,6 +213,8 @@ pub(super) struct Pass<'a> {
     /// Ground direction of each line, scaled so that `dir · s` advances the
     /// slice distance s.
     pub directions: &'a [[f64; 2]],
+    /// The eye, terrain-frame metres.
+    pub eye: [f64; 2],
     pub eye_z: f64,
     /// Depth A − B/z of a view distance z (eq. 5.11): [A, B].
     pub depth_terms: [f64; 2],
@@ -211,6 +235,14 @@ impl Pass<'_> {
         target: &Target,
     ) {
         PACKET_IMAGE.with_borrow_mut(|image| {
+            #[cfg(target_arch = "x86_64")]
+            if std::is_x86_feature_detected!("avx2") {
+                // SAFETY: the machine has AVX2 (checked just above).
+                unsafe { self.paint_avx2(sampling, first, count, image) };
+            } else {
+                self.paint(sampling, first, count, image);
+            }
+            #[cfg(not(target_arch = "x86_64"))]
             self.paint(sampling, first, count, image);
             let needed = &self.screen.rows_needed[first..first + count];
             for r in 0..self.screen.height {
@@ -244,7 +276,30 @@ impl Pass<'_> {
         });
     }
 
+    /// [`Pass::paint`] compiled for AVX2, where the lanes' positions and
+    /// indices take four at a time.
+    ///
+    /// # Safety
+    /// The machine must have AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn paint_avx2<S: Sampling>(
+        &self,
+        sampling: &S,
+        first: usize,
+        count: usize,
+        image: &mut PacketImage,
+    ) {
+        self.paint(sampling, first, count, image);
+    }
+
     /// March lines `first..first + count` into the packet's own image.
+    ///
+    /// Every slice samples all [`PACKET`] lanes without branching (lanes
+    /// past `count`, or done, sample too and cover nothing), compares each
+    /// rise with the lane's horizon — the rise per metre its next unpainted
+    /// row needs — and only the lanes whose sample covers a row paint.
+    #[inline(always)]
     fn paint<S: Sampling>(
         &self,
         sampling: &S,
@@ -252,66 +307,92 @@ impl Pass<'_> {
         count: usize,
         image: &mut PacketImage,
     ) {
-        let lines = first..first + count;
-        let dirs = &self.directions[lines.clone()];
-        let needed = &self.screen.rows_needed[lines];
         let slope = &self.screen.slope[..];
         let forward_per_depth = &self.screen.forward_per_depth[..];
         let [depth_a, depth_b] = self.depth_terms;
         image.colour.resize(self.screen.height * PACKET, 0);
         image.depth.resize(self.screen.height * PACKET, 0.0);
-        // Next unpainted row of each line, and the row its work ends at.
+        // Per lane: its ground direction, next unpainted row, the row its
+        // work ends at, and the slope a sample must rise above to cover the
+        // next row (∞ for a lane with nothing left to paint).
+        let mut dirs = [[0.0; PACKET]; 2];
         let mut row = [0usize; PACKET];
         let mut end = [0usize; PACKET];
+        let mut horizon = [f64::INFINITY; PACKET];
         for k in 0..count {
-            end[k] = needed[k][1];
-        }
-        let mut busy = (0..count).filter(|&k| end[k] > 0).count();
-        let mut position = [S::Position::default(); PACKET];
-        let mut rise = [f64::NAN; PACKET];
-        for slice in self.slices {
-            let s = slice.distance_m;
-            // All loads first, then the comparisons.
-            for k in 0..count {
-                rise[k] = f64::NAN;
-                if row[k] < end[k] {
-                    position[k] = sampling.position(dirs[k], s);
-                    rise[k] = sampling.height(position[k], slice.subvoxel) - self.eye_z;
-                }
+            [dirs[0][k], dirs[1][k]] = self.directions[first + k];
+            end[k] = self.screen.rows_needed[first + k][1];
+            if end[k] > 0 {
+                horizon[k] = slope[0];
             }
-            for k in 0..count {
+        }
+        let mut busy = horizon.iter().filter(|h| h.is_finite()).count();
+        let (first_dir, last_dir) = (self.directions[first], self.directions[first + count - 1]);
+        for chunk in self.slices.chunks(CHUNK) {
+            // Empty-space skipping: the packet's samples over this chunk lie
+            // between its outer lines and its nearest and farthest slices;
+            // if no terrain there rises above any lane's horizon, none of
+            // them paints (and the horizons stay as they are).
+            let (near, far) = (chunk[0].distance_m, chunk[chunk.len() - 1].distance_m);
+            let at = |dir: [f64; 2], s: f64| [self.eye[0] + dir[0] * s, self.eye[1] + dir[1] * s];
+            let highest_rise = self.terrain.highest_near(&[
+                at(first_dir, near),
+                at(last_dir, near),
+                at(first_dir, far),
+                at(last_dir, far),
+            ]) - self.eye_z;
+            if !(0..count).any(|k| highest_rise > (near * horizon[k]).min(far * horizon[k])) {
+                continue;
+            }
+            for slice in chunk {
+                let s = slice.distance_m;
                 // A NaN rise (no data) covers nothing.
-                if row[k] >= end[k] || rise[k].is_nan() || rise[k] <= s * slope[row[k]] {
-                    continue;
+                let mut height = [0.0; PACKET];
+                sampling.heights(&dirs, s, slice.subvoxel, &mut height);
+                let mut covering = 0u32;
+                for k in 0..PACKET {
+                    covering |= u32::from(height[k] - self.eye_z > s * horizon[k]) << k;
                 }
-                let level = slice.level(self.terrain, self.eye_z, rise[k] + self.eye_z);
-                let colour = sampling.colour(position[k], slice.subvoxel, level);
-                let depth_over = depth_b / s;
-                if !self.screen.pitched {
-                    // Level: one depth for the slice, and the slices end
-                    // before the far plane.
-                    let depth = (depth_a - depth_over) as f32;
-                    while row[k] < end[k] && rise[k] > s * slope[row[k]] {
-                        image.colour[row[k] * PACKET + k] = colour;
-                        image.depth[row[k] * PACKET + k] = depth;
-                        row[k] += 1;
+                while covering != 0 {
+                    let k = covering.trailing_zeros() as usize;
+                    covering &= covering - 1;
+                    let position = sampling.position([dirs[0][k], dirs[1][k]], s);
+                    let rise = height[k] - self.eye_z;
+                    let level = slice.level(self.terrain, self.eye_z, rise + self.eye_z);
+                    let colour = sampling.colour(position, slice.subvoxel, level);
+                    let depth_over = depth_b / s;
+                    let (r, end) = (&mut row[k], end[k]);
+                    if !self.screen.pitched {
+                        // Level: one depth for the slice, and the slices end
+                        // before the far plane.
+                        let depth = (depth_a - depth_over) as f32;
+                        while *r < end && rise > s * slope[*r] {
+                            image.colour[*r * PACKET + k] = colour;
+                            image.depth[*r * PACKET + k] = depth;
+                            *r += 1;
+                        }
                     }
-                }
-                while row[k] < end[k] && rise[k] > s * slope[row[k]] {
-                    let r = row[k];
-                    // Beyond the far plane for this row's rays: sky (only a
-                    // pitched camera's rows differ).
-                    let (c, depth) = if s > self.far_m * forward_per_depth[r] {
-                        (self.sky, 1.0)
+                    while *r < end && rise > s * slope[*r] {
+                        // Beyond the far plane for this row's rays: sky (only a
+                        // pitched camera's rows differ).
+                        let (c, depth) = if s > self.far_m * forward_per_depth[*r] {
+                            (self.sky, 1.0)
+                        } else {
+                            (
+                                colour,
+                                (depth_a - depth_over * forward_per_depth[*r]) as f32,
+                            )
+                        };
+                        image.colour[*r * PACKET + k] = c;
+                        image.depth[*r * PACKET + k] = depth;
+                        *r += 1;
+                    }
+                    if *r < end {
+                        horizon[k] = slope[*r];
                     } else {
-                        (colour, (depth_a - depth_over * forward_per_depth[r]) as f32)
-                    };
-                    image.colour[r * PACKET + k] = c;
-                    image.depth[r * PACKET + k] = depth;
-                    row[k] += 1;
-                }
-                if row[k] >= end[k] {
-                    busy -= 1;
+                        horizon[k] = f64::INFINITY;
+                        busy -= 1;
+                    }
                 }
             }
             if busy == 0 {

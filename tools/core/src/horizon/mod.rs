@@ -336,12 +336,13 @@ impl Renderer {
             slices: &self.slices,
             screen,
             directions: &self.directions,
+            eye: [camera.position.x, camera.position.y],
             eye_z: camera.position.z,
             depth_terms: camera.depth_terms(),
             far_m: camera.far_m,
             sky: u32::from_le_bytes(opts.sky),
         };
-        let eye = [camera.position.x, camera.position.y];
+        let eye = pass.eye;
         let packets = screen.lines.div_ceil(march::PACKET);
         let march_packet = |p: usize| {
             let first = p * march::PACKET;

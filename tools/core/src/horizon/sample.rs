@@ -149,6 +149,57 @@ fn heights_beside_data(heights: &[f32], mask: &[u8], side: usize) -> Option<Vec<
     Some(out)
 }
 
+/// Where the vertex nearest a terrain-frame point is kept in the march's
+/// tiles; off the grid, the element past them (NaN height). Branch-free
+/// 32-bit arithmetic on constants copied out of the terrain, so that the
+/// march computes many lanes at once in SIMD registers (mask not checked:
+/// masked heights are NaN).
+#[derive(Clone, Copy)]
+struct VertexIndex {
+    inv_cell: f64,
+    /// side − 1, as f64.
+    last: f64,
+    tiles_across: u32,
+    off_grid: u32,
+}
+
+impl VertexIndex {
+    #[inline(always)]
+    fn of(terrain: &Terrain) -> Self {
+        VertexIndex {
+            inv_cell: terrain.inv_cell,
+            last: terrain.last,
+            tiles_across: terrain.tiles_across as u32,
+            off_grid: terrain.off_grid,
+        }
+    }
+
+    #[inline(always)]
+    fn nearest(self, x: f64, y: f64) -> u32 {
+        let c = x * self.inv_cell + 0.5;
+        let r = self.last - y * self.inv_cell + 0.5;
+        let side = self.last + 1.0;
+        let on_grid = (c >= 0.0) & (r >= 0.0) & (c < side) & (r < side);
+        // SAFETY: clamped onto the grid (NaN to 0), so finite and in
+        // [0, side − 1], which fits an i32.
+        let (column, row) = unsafe {
+            (
+                c.max(0.0).min(self.last).to_int_unchecked::<i32>() as u32,
+                r.max(0.0).min(self.last).to_int_unchecked::<i32>() as u32,
+            )
+        };
+        let tile = TILE as u32;
+        let index = ((row / tile) * self.tiles_across + column / tile) * tile * tile
+            + (row % tile) * tile
+            + column % tile;
+        if on_grid {
+            index
+        } else {
+            self.off_grid
+        }
+    }
+}
+
 /// The terrain the raycaster reads.
 pub struct Terrain<'a> {
     pub side: usize,
@@ -173,6 +224,13 @@ pub struct Terrain<'a> {
     /// The highest and lowest heights with data, metres (∓∞ without data).
     pub(super) highest_m: f64,
     pub(super) lowest_m: f64,
+    /// Per tile of `tiled`, the highest height with data in it, metres
+    /// (−∞ for a tile without data): the coarse level of a max-height
+    /// pyramid, which lets the march skip slices that cannot rise above
+    /// the horizon.
+    tile_highest: Vec<f32>,
+    /// The index of the NaN past the tiles.
+    off_grid: u32,
     /// Heights in 16.16 fixed point, built on the first fixed-point render.
     heights_fixed: std::sync::OnceLock<Vec<i32>>,
     mask: Cow<'a, [u8]>,
@@ -198,7 +256,11 @@ impl<'a> Terrain<'a> {
         assert_eq!(heights.len(), side * side);
         assert_eq!(mask.len(), side * side);
         let tiles_across = side.div_ceil(TILE);
-        let mut tiled = vec![f32::NAN; tiles_across * tiles_across * TILE * TILE];
+        // The march indexes the tiles (and one more) with 32 bits.
+        assert!(tiles_across * tiles_across * TILE * TILE < u32::MAX as usize);
+        // One NaN past the tiles: where samples off the grid read (see
+        // `nearest_index`).
+        let mut tiled = vec![f32::NAN; tiles_across * tiles_across * TILE * TILE + 1];
         let (mut highest_m, mut lowest_m) = (f64::NEG_INFINITY, f64::INFINITY);
         for r in 0..side {
             for c in 0..side {
@@ -210,6 +272,15 @@ impl<'a> Terrain<'a> {
                 }
             }
         }
+        let tile_highest = tiled
+            .chunks_exact(TILE * TILE)
+            .map(|tile| {
+                tile.iter()
+                    .copied()
+                    .filter(|z| !z.is_nan())
+                    .fold(f32::NEG_INFINITY, f32::max)
+            })
+            .collect();
         let edge_heights = heights_beside_data(&heights, &mask, side);
         let mut terrain = Terrain {
             side,
@@ -218,9 +289,11 @@ impl<'a> Terrain<'a> {
             edge_heights,
             tiled,
             tiles_across,
-            vertex_colours: vec![0; tiles_across * tiles_across * TILE * TILE],
+            vertex_colours: vec![0; tiles_across * tiles_across * TILE * TILE + 1],
             highest_m,
             lowest_m,
+            tile_highest,
+            off_grid: (tiles_across * tiles_across * TILE * TILE) as u32,
             heights_fixed: std::sync::OnceLock::new(),
             mask,
             color,
@@ -296,23 +369,49 @@ impl<'a> Terrain<'a> {
         }
     }
 
+    /// The highest height a sample can read — nearest vertex or bilinear
+    /// surface — anywhere in the box around `points` (terrain-frame metres),
+    /// from the tiles the box touches; −∞ where it holds no data.
+    pub(super) fn highest_near(&self, points: &[[f64; 2]]) -> f64 {
+        let (mut low, mut high) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for &[x, y] in points {
+            let (c, r) = self.grid(x, y);
+            low = [low[0].min(c), low[1].min(r)];
+            high = [high[0].max(c), high[1].max(r)];
+        }
+        // Two vertices of margin: the nearest vertex is half a cell away,
+        // the bilinear surface reads the next one, and the heights it
+        // gives masked vertices beside data come from their neighbours.
+        const MARGIN: f64 = 2.0;
+        if high[0] + MARGIN < 0.0
+            || high[1] + MARGIN < 0.0
+            || low[0] - MARGIN > self.last
+            || low[1] - MARGIN > self.last
+        {
+            return f64::NEG_INFINITY;
+        }
+        let tile = |v: f64| v.clamp(0.0, self.last) as usize / TILE;
+        let mut highest = f32::NEG_INFINITY;
+        for tile_row in tile(low[1] - MARGIN)..=tile(high[1] + MARGIN) {
+            let across = tile_row * self.tiles_across;
+            for tile_column in tile(low[0] - MARGIN)..=tile(high[0] + MARGIN) {
+                highest = highest.max(self.tile_highest[across + tile_column]);
+            }
+        }
+        highest as f64
+    }
+
     /// Grid position (column, row), fractional, of terrain-frame (x, y).
     #[inline]
     fn grid(&self, x: f64, y: f64) -> (f64, f64) {
         (x * self.inv_cell, self.last - y * self.inv_cell)
     }
 
-    /// Column and row of the vertex nearest (x, y), if on the grid (mask
-    /// not checked).
-    #[inline]
-    fn nearest_vertex(&self, x: f64, y: f64) -> Option<(usize, usize)> {
-        let c = x * self.inv_cell + 0.5;
-        let r = self.last - y * self.inv_cell + 0.5;
-        if !(c >= 0.0 && r >= 0.0) {
-            return None;
-        }
-        let (c, r) = (c as usize, r as usize);
-        (c < self.side && r < self.side).then_some((c, r))
+    /// Where the vertex nearest (x, y) is kept in `tiled` and
+    /// `vertex_colours` (see [`VertexIndex`]).
+    #[inline(always)]
+    fn nearest_index(&self, x: f64, y: f64) -> u32 {
+        VertexIndex::of(self).nearest(x, y)
     }
 
     /// Nearest vertex with data, if (c, r) is on the grid.
@@ -344,9 +443,28 @@ impl<'a> Terrain<'a> {
     /// where the mask is 0. The march's one memory access per sample.
     #[inline]
     pub(super) fn nearest_height(&self, x: f64, y: f64) -> f32 {
-        self.nearest_vertex(x, y).map_or(f32::NAN, |(c, r)| {
-            self.tiled[tile_index(self.tiles_across, c, r)]
-        })
+        self.tiled[self.nearest_index(x, y) as usize]
+    }
+
+    /// [`Terrain::nearest_height`] at `eye` + `dir`ₖ·`s` for every lane k
+    /// (directions one array per axis): the indices of all lanes first,
+    /// side by side, then the loads, all in flight together.
+    #[inline(always)]
+    pub(super) fn nearest_heights<const N: usize>(
+        &self,
+        eye: [f64; 2],
+        dirs: &[[f64; N]; 2],
+        s: f64,
+        out: &mut [f64; N],
+    ) {
+        let vertex_index = VertexIndex::of(self);
+        let mut index = [0u32; N];
+        for k in 0..N {
+            index[k] = vertex_index.nearest(eye[0] + dirs[0][k] * s, eye[1] + dirs[1][k] * s);
+        }
+        for k in 0..N {
+            out[k] = self.tiled[index[k] as usize] as f64;
+        }
     }
 
     /// Terrain height at (x, y), metres; `None` off the grid or over masked cells.
@@ -432,9 +550,7 @@ impl<'a> Terrain<'a> {
     #[inline]
     pub fn color(&self, x: f64, y: f64, subvoxel: bool, level: usize) -> u32 {
         match &self.color {
-            None => self.nearest_vertex(x, y).map_or(0, |(c, r)| {
-                self.vertex_colours[tile_index(self.tiles_across, c, r)]
-            }),
+            None => self.vertex_colours[self.nearest_index(x, y) as usize],
             Some(src) => self.image_color(src, x, y, subvoxel, level),
         }
     }
