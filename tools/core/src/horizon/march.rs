@@ -347,17 +347,17 @@ impl Pass<'_> {
             for slice in chunk {
                 let s = slice.distance_m;
                 // A NaN rise (no data) covers nothing.
-                let mut height = [0.0; PACKET];
-                sampling.heights(&dirs, s, slice.subvoxel, &mut height);
+                let mut ground = [0.0; PACKET];
+                sampling.heights(&dirs, s, slice.subvoxel, &mut ground);
                 let mut covering = 0u32;
                 for k in 0..PACKET {
-                    covering |= u32::from(height[k] - self.eye_z > s * horizon[k]) << k;
+                    covering |= u32::from(ground[k] - self.eye_z > s * horizon[k]) << k;
                 }
                 while covering != 0 {
                     let k = covering.trailing_zeros() as usize;
                     covering &= covering - 1;
                     let position = sampling.position([dirs[0][k], dirs[1][k]], s);
-                    let rise = height[k] - self.eye_z;
+                    let rise = ground[k] - self.eye_z;
                     let level = slice.level(self.terrain, self.eye_z, rise + self.eye_z);
                     let colour = sampling.colour(position, slice.subvoxel, level);
                     let depth_over = depth_b / s;

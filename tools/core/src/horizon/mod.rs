@@ -745,6 +745,109 @@ mod tests {
     /// in both arithmetics, with and without sub-voxel sampling, in both
     /// modes. (Bilinear samples beside the coast used to blend the padding
     /// in: a curtain along the data's edge.)
+    /// Real DEMs, one with a mask (Gironde's sea) so that masked vertices
+    /// beside data take their neighbours' heights.
+    fn masked_and_whole_dems() -> Vec<(crate::testdata::Dem, Vec<u8>)> {
+        ["gironde_257.f32", "srtm_ref_257.f32"]
+            .map(|name| {
+                let dem = crate::testdata::dem(name);
+                let mask = dem.heights.iter().map(|&z| u8::from(z >= 0.0)).collect();
+                (dem, mask)
+            })
+            .into()
+    }
+
+    #[test]
+    fn the_tiles_highest_heights_bound_every_sample() {
+        let mut random = crate::testdata::Lcg(7);
+        for (dem, mask) in masked_and_whole_dems() {
+            let terrain = Terrain::new(dem.side, dem.cell_size_m, &dem.heights, &mask, None);
+            let extent = (dem.side - 1) as f64 * dem.cell_size_m;
+            let mut checked = 0;
+            for _ in 0..2000 {
+                // A box of up to 40 cells anywhere on or beside the grid.
+                let corner = [0, 1].map(|_| (random.next() * 1.4 - 0.2) * extent);
+                let size = [0, 1].map(|_| random.next() * 40.0 * dem.cell_size_m);
+                let points = [
+                    corner,
+                    [corner[0] + size[0], corner[1]],
+                    [corner[0], corner[1] + size[1]],
+                    [corner[0] + size[0], corner[1] + size[1]],
+                ];
+                let highest = terrain.highest_near(&points);
+                for _ in 0..20 {
+                    let (x, y) = (
+                        corner[0] + random.next() * size[0],
+                        corner[1] + random.next() * size[1],
+                    );
+                    let to_fixed = 65536.0 / dem.cell_size_m;
+                    let (fx, fy) = ((x * to_fixed) as i64, (y * to_fixed) as i64);
+                    for subvoxel in [false, true] {
+                        let fixed = terrain
+                            .height_fixed(fx, fy, subvoxel)
+                            .map(|z| z as f64 / 65536.0);
+                        for z in [terrain.height(x, y, subvoxel), fixed]
+                            .into_iter()
+                            .flatten()
+                        {
+                            assert!(z <= highest, "{}: {z} above {highest}", dem.name);
+                            checked += 1;
+                        }
+                    }
+                }
+            }
+            assert!(checked > 20_000, "{}: {checked} samples", dem.name);
+        }
+    }
+
+    #[test]
+    fn skipping_empty_space_changes_no_pixel() {
+        for (dem, mask) in masked_and_whole_dems() {
+            let (side, cell) = (dem.side, dem.cell_size_m);
+            let terrain = Terrain::new(side, cell, &dem.heights, &mask, None);
+            let every_slice =
+                Terrain::new(side, cell, &dem.heights, &mask, None).without_skipping();
+            let extent = (side - 1) as f64 * cell;
+            let top = dem.heights.iter().copied().fold(f32::MIN, f32::max) as f64;
+            for (eye, heading, pitch) in [
+                ([0.5 * extent, 0.5 * extent, top + 100.0], 30.0, 0.0),
+                ([0.15 * extent, 0.1 * extent, top + 150.0], 35.0, -30.0),
+                ([-0.1 * extent, 0.5 * extent, top * 0.5], 90.0, 10.0),
+                ([1.1 * extent, 1.1 * extent, top + 300.0], 225.0, 0.0),
+            ] {
+                let mut cam = camera(240, 135, eye, heading, 90.0, 2.0 * extent);
+                cam.pitch_deg = pitch;
+                if pitch != 0.0 {
+                    cam.incl_px = 67.5;
+                }
+                for (arithmetic, subvoxel, grow_steps) in [
+                    (Arithmetic::Float, false, false),
+                    (Arithmetic::Float, true, true),
+                    (Arithmetic::Fixed, true, false),
+                ] {
+                    let options = RenderOptions {
+                        arithmetic,
+                        bands: vec![Band {
+                            until_m: f64::INFINITY,
+                            slices_per_cell: 1.0,
+                            subvoxel,
+                        }],
+                        grow_steps,
+                        ..Default::default()
+                    };
+                    let skipped = render(&terrain, &cam, &options).unwrap();
+                    let all = render(&every_slice, &cam, &options).unwrap();
+                    assert!(
+                        skipped.rgba == all.rgba && skipped.depth == all.depth,
+                        "{} from {eye:?} pitch {pitch}: {options:?}",
+                        dem.name
+                    );
+                    assert!(skipped.depth.iter().any(|&d| d < 1.0));
+                }
+            }
+        }
+    }
+
     #[test]
     fn padding_heights_never_show() {
         let dem = crate::testdata::dem("gironde_257.f32");
