@@ -2,14 +2,18 @@
 //! painting its rows bottom-up (seed 000, Algorithm 1 with depth, line 11A).
 //!
 //! A packet is [`PACKET`] neighbouring lines marched in lockstep: at each
-//! slice all their ground positions are computed and their heights loaded
-//! before any is compared, so the loads — neighbours on the ground, often in
-//! one cache line — are in flight together instead of one after another.
-//! The packet paints into a small image of its own, [`PACKET`] pixels a
-//! row (it stays in cache), and copies each row to the frame whole, so the
-//! frame is written once, in runs of 64 bytes. The packet ends when every
-//! line has painted the top row it is needed on (the horizon reached the top
-//! of the screen) or the slices run out.
+//! slice all their ground positions and vertex indices are computed side by
+//! side (SIMD lanes) and their heights loaded before any is compared, so the
+//! loads — neighbours on the ground, often in one cache line — are in
+//! flight together instead of one after another. Slices are taken
+//! [`CHUNK`] at a time, and a chunk where no terrain under the packet can
+//! rise above any line's horizon is skipped unsampled (empty-space
+//! skipping, from each tile's highest height). The packet paints into a
+//! small image of its own, [`PACKET`] pixels a row (it stays in cache), and
+//! copies each row to the frame whole, so the frame is written once, in
+//! runs of 128 bytes. The packet ends when every line has painted the top
+//! row it is needed on (the horizon reached the top of the screen) or the
+//! slices run out.
 
 use super::sample::Terrain;
 use super::screen::Screen;
@@ -346,6 +350,7 @@ impl Pass<'_> {
             }
             for slice in chunk {
                 let s = slice.distance_m;
+                let depth_over = depth_b / s;
                 // A NaN rise (no data) covers nothing.
                 let mut ground = [0.0; PACKET];
                 sampling.heights(&dirs, s, slice.subvoxel, &mut ground);
@@ -360,7 +365,6 @@ impl Pass<'_> {
                     let rise = ground[k] - self.eye_z;
                     let level = slice.level(self.terrain, self.eye_z, rise + self.eye_z);
                     let colour = sampling.colour(position, slice.subvoxel, level);
-                    let depth_over = depth_b / s;
                     let (r, end) = (&mut row[k], end[k]);
                     if !self.screen.pitched {
                         // Level: one depth for the slice, and the slices end
