@@ -57,8 +57,24 @@ enum BenchCommand {
     /// the full-resolution render, beside the classic voxel-space loop.
     #[command(after_help = "Examples:
   relevo-bench render
-  relevo-bench render --json --runs 3")]
-    Render(BenchArgs),
+  relevo-bench render --json --runs 3
+  relevo-bench render --grid srtm --size 1920x1080 --mode growing
+  RAYON_NUM_THREADS=1 perf record -- relevo-bench render --grid srtm --size 1920x1080 --mode raycast --runs 50")]
+    Render {
+        #[command(flatten)]
+        common: BenchArgs,
+        /// Only the grids whose name contains this (`fractal`, `srtm`).
+        #[arg(long)]
+        grid: Option<String>,
+        /// Only this frame size, WIDTHxHEIGHT (1920x1080 or 1280x720).
+        #[arg(long)]
+        size: Option<String>,
+        /// Only the configuration of this name (`raycast`), or those whose
+        /// name contains it (`growing`, `pitch`, `classic`, …); a reference
+        /// left out is still rendered for the others' PSNR, untimed.
+        #[arg(long)]
+        mode: Option<String>,
+    },
     /// Vegetation: F1 on the annotated crowns beside an excess-green baseline;
     /// split-and-merge and detection speed beside scikit-image's felzenszwalb.
     #[command(after_help = "Examples:
@@ -170,7 +186,19 @@ fn main() -> ExitCode {
             None => clusters::clusters(&a.repo, a.runs.max(1), max_objects, budget_mib, a.json),
         },
         BenchCommand::Ingest(a) => bench::ingest(&a.repo, &a.data, a.runs.max(1), a.json),
-        BenchCommand::Render(a) => render::render(&a.data, a.runs.max(1), a.json),
+        BenchCommand::Render {
+            common: a,
+            grid,
+            size,
+            mode,
+        } => render::render(
+            &a.data,
+            a.runs.max(1),
+            a.json,
+            grid.as_deref(),
+            size.as_deref(),
+            mode.as_deref(),
+        ),
         BenchCommand::Veg {
             common: a,
             max_side,

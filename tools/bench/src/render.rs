@@ -119,24 +119,54 @@ impl ClassicVoxelSpace {
 /// Raycast figures: each configuration at 1920×1080 and 1280×720, far 1024
 /// cells, the median over 8 headings × `runs`, with its PSNR against the
 /// full-resolution level or pitched render, beside the classic loop.
-pub fn render(data: &Path, runs: usize, json_lines: bool) -> Result<()> {
-    let srtm = srtm_padded(data)?;
-    let grids = [
-        Grid {
+/// `grid` keeps only the grids whose name contains it, `size` (e.g.
+/// `1920x1080`) only that frame size, `mode` only the configurations whose
+/// name contains it.
+pub fn render(
+    data: &Path,
+    runs: usize,
+    json_lines: bool,
+    grid: Option<&str>,
+    size: Option<&str>,
+    mode: Option<&str>,
+) -> Result<()> {
+    let sizes: Vec<[u32; 2]> = [[1920u32, 1080], [1280, 720]]
+        .into_iter()
+        .filter(|[w, h]| size.is_none_or(|s| s == format!("{w}x{h}")))
+        .collect();
+    if sizes.is_empty() {
+        anyhow::bail!(
+            "--size {}: the sizes are 1920x1080 and 1280x720",
+            size.unwrap_or("")
+        );
+    }
+    let wanted = |name: &str| grid.is_none_or(|part| name.contains(part));
+    let mut grids = Vec::new();
+    if wanted("fractal 4097²") {
+        grids.push(Grid {
             name: "fractal 4097²",
             side: 4097,
             heights: fractal_heights(4097, 1),
             mask: vec![1u8; 4097 * 4097],
             cell_m: 30.0,
-        },
-        Grid {
+        });
+    }
+    if wanted("srtm_ref 1025²") {
+        let srtm = srtm_padded(data)?;
+        grids.push(Grid {
             name: "srtm_ref 1025²",
             side: srtm.side,
-            heights: srtm.heights.clone(),
-            mask: srtm.mask.clone(),
+            heights: srtm.heights,
+            mask: srtm.mask,
             cell_m: 90.0,
-        },
-    ];
+        });
+    }
+    if grids.is_empty() {
+        anyhow::bail!(
+            "--grid {}: the grids are fractal and srtm",
+            grid.unwrap_or("")
+        );
+    }
     let band = |spc: f64, subvoxel: bool| {
         vec![Band {
             until_m: f64::INFINITY,
@@ -194,7 +224,7 @@ pub fn render(data: &Path, runs: usize, json_lines: bool) -> Result<()> {
         let terrain = Terrain::new(grid.side, grid.cell_m, &grid.heights, &grid.mask, None)
             .with_hillshade(315.0, 40.0);
         let shade = terrain_colours(&terrain, grid);
-        for size in [[1920u32, 1080], [1280, 720]] {
+        for &size in &sizes {
             let mut renderer = horizon::Renderer::default();
             // The reference frames of each heading and pitch.
             let mut references: Vec<(f64, Vec<Frame>)> = Vec::new();
@@ -202,11 +232,23 @@ pub fn render(data: &Path, runs: usize, json_lines: bool) -> Result<()> {
                 let mut times = Vec::new();
                 let mut quality = Vec::new();
                 let reference = references.iter().position(|(p, _)| p == pitch);
+                let shown = mode.is_none_or(|part| {
+                    // A whole name picks that one; otherwise a part of names.
+                    if configs.iter().any(|c| c.0 == part) {
+                        *name == part
+                    } else {
+                        name.contains(part)
+                    }
+                });
+                if !shown && reference.is_some() {
+                    continue;
+                }
                 let mut frames = Vec::new();
                 for k in 0..HEADINGS {
                     let cam = camera(grid, k, size, *pitch);
                     renderer.render(&terrain, &cam, options)?; // warm the buffers
-                    for _ in 0..runs {
+                                                               // A reference left out still gives the others their PSNR.
+                    for _ in 0..if shown { runs } else { 0 } {
                         let start = Instant::now();
                         renderer.render(&terrain, &cam, options)?;
                         times.push(start.elapsed().as_secs_f64() * 1e3);
@@ -219,6 +261,9 @@ pub fn render(data: &Path, runs: usize, json_lines: bool) -> Result<()> {
                 }
                 if reference.is_none() {
                     references.push((*pitch, frames));
+                }
+                if !shown {
+                    continue;
                 }
                 let ms = median(&times);
                 // The worst heading's PSNR (infinite: the same image).
@@ -244,6 +289,9 @@ pub fn render(data: &Path, runs: usize, json_lines: bool) -> Result<()> {
                 );
             }
             for threads in [1, 2] {
+                if mode.is_some_and(|part| !"classic voxel space".contains(part)) {
+                    continue;
+                }
                 let mut classic = ClassicVoxelSpace { strips: Vec::new() };
                 let mut times = Vec::new();
                 for k in 0..HEADINGS {
