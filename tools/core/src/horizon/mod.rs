@@ -820,12 +820,17 @@ mod tests {
                 if pitch != 0.0 {
                     cam.incl_px = 67.5;
                 }
-                for (arithmetic, subvoxel, grow_steps) in [
-                    (Arithmetic::Float, false, false),
-                    (Arithmetic::Float, true, true),
-                    (Arithmetic::Fixed, true, false),
+                for (mode, arithmetic, subvoxel, grow_steps) in [
+                    (Mode::Raycast, Arithmetic::Float, false, false),
+                    (Mode::Raycast, Arithmetic::Float, true, true),
+                    (Mode::Raycast, Arithmetic::Fixed, true, false),
+                    (Mode::Distorted, Arithmetic::Float, false, false),
                 ] {
+                    if mode == Mode::Distorted && pitch != 0.0 {
+                        continue;
+                    }
                     let options = RenderOptions {
+                        mode,
                         arithmetic,
                         bands: vec![Band {
                             until_m: f64::INFINITY,
