@@ -240,39 +240,33 @@ impl Pass<'_> {
     ) {
         PACKET_IMAGE.with_borrow_mut(|image| {
             #[cfg(target_arch = "x86_64")]
-            if std::is_x86_feature_detected!("avx2") {
+            let sky_from = if std::is_x86_feature_detected!("avx2") {
                 // SAFETY: the machine has AVX2 (checked just above).
-                unsafe { self.paint_avx2(sampling, first, count, image) };
+                unsafe { self.paint_avx2(sampling, first, count, image) }
             } else {
-                self.paint(sampling, first, count, image);
-            }
+                self.paint(sampling, first, count, image)
+            };
             #[cfg(not(target_arch = "x86_64"))]
-            self.paint(sampling, first, count, image);
+            let sky_from = self.paint(sampling, first, count, image);
             let needed = &self.screen.rows_needed[first..first + count];
+            let sky = ([self.sky; PACKET], [1.0f32; PACKET]);
             for r in 0..self.screen.height {
-                let at = r * PACKET;
+                let (colour, depth) = if r < sky_from {
+                    let at = r * PACKET;
+                    (&image.colour[at..at + count], &image.depth[at..at + count])
+                } else {
+                    (&sky.0[..count], &sky.1[..count])
+                };
                 let inside = |k: usize| (needed[k][0]..needed[k][1]).contains(&r);
                 if (0..count).all(inside) {
                     // SAFETY: these lines are ours (the caller's promise).
-                    unsafe {
-                        target.set_run(
-                            r,
-                            first,
-                            &image.colour[at..at + count],
-                            &image.depth[at..at + count],
-                        );
-                    }
+                    unsafe { target.set_run(r, first, colour, depth) };
                 } else {
                     // A pitched screen's outer lines need only some rows.
                     for k in (0..count).filter(|&k| inside(k)) {
                         // SAFETY: as above.
                         unsafe {
-                            target.set_run(
-                                r,
-                                first + k,
-                                &image.colour[at + k..at + k + 1],
-                                &image.depth[at + k..at + k + 1],
-                            );
+                            target.set_run(r, first + k, &colour[k..k + 1], &depth[k..k + 1]);
                         }
                     }
                 }
@@ -293,8 +287,8 @@ impl Pass<'_> {
         first: usize,
         count: usize,
         image: &mut PacketImage,
-    ) {
-        self.paint(sampling, first, count, image);
+    ) -> usize {
+        self.paint(sampling, first, count, image)
     }
 
     /// March lines `first..first + count` into the packet's own image.
@@ -310,7 +304,7 @@ impl Pass<'_> {
         first: usize,
         count: usize,
         image: &mut PacketImage,
-    ) {
+    ) -> usize {
         let slope = &self.screen.slope[..];
         let forward_per_depth = &self.screen.forward_per_depth[..];
         let [depth_a, depth_b] = self.depth_terms;
@@ -403,12 +397,15 @@ impl Pass<'_> {
                 break;
             }
         }
-        // Sky above each line's horizon.
+        // Sky above each line's horizon, up to the row from which every
+        // line shows sky (the copy writes those rows from constants).
+        let sky_from = row[..count].iter().copied().max().unwrap_or(0);
         for k in 0..count {
-            for r in row[k]..end[k] {
+            for r in row[k]..end[k].min(sky_from) {
                 image.colour[r * PACKET + k] = self.sky;
                 image.depth[r * PACKET + k] = 1.0;
             }
         }
+        sky_from
     }
 }
