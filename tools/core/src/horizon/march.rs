@@ -96,13 +96,26 @@ pub(super) trait Sampling: Sync {
     fn height(&self, p: Self::Position, subvoxel: bool) -> f64;
     /// Colour at `p` from colour level `level`.
     fn colour(&self, p: Self::Position, subvoxel: bool, level: usize) -> u32;
-    /// [`Sampling::height`] `s` metres along each lane's direction
-    /// (`dirs`: x components, then y).
+    /// Nearest-vertex heights `s` metres along each lane's direction
+    /// (`dirs`: x components, then y), all lanes at once where the sampling
+    /// can.
     #[inline(always)]
-    fn heights(&self, dirs: &[[f64; PACKET]; 2], s: f64, subvoxel: bool, out: &mut [f64; PACKET]) {
-        for k in 0..PACKET {
-            out[k] = self.height(self.position([dirs[0][k], dirs[1][k]], s), subvoxel);
-        }
+    fn nearest_heights(&self, dirs: &[[f64; PACKET]; 2], s: f64, out: &mut [f64; PACKET]) {
+        heights_one_by_one(self, dirs, s, false, out);
+    }
+}
+
+/// [`Sampling::height`] `s` metres along each lane's direction, lane by lane.
+#[inline(always)]
+fn heights_one_by_one<S: Sampling + ?Sized>(
+    sampling: &S,
+    dirs: &[[f64; PACKET]; 2],
+    s: f64,
+    subvoxel: bool,
+    out: &mut [f64; PACKET],
+) {
+    for k in 0..PACKET {
+        out[k] = sampling.height(sampling.position([dirs[0][k], dirs[1][k]], s), subvoxel);
     }
 }
 
@@ -138,14 +151,8 @@ impl Sampling for FloatSampling<'_> {
     }
 
     #[inline(always)]
-    fn heights(&self, dirs: &[[f64; PACKET]; 2], s: f64, subvoxel: bool, out: &mut [f64; PACKET]) {
-        if subvoxel {
-            for k in 0..PACKET {
-                out[k] = self.height(self.position([dirs[0][k], dirs[1][k]], s), true);
-            }
-        } else {
-            self.terrain.nearest_heights(self.eye, dirs, s, out);
-        }
+    fn nearest_heights(&self, dirs: &[[f64; PACKET]; 2], s: f64, out: &mut [f64; PACKET]) {
+        self.terrain.nearest_heights(self.eye, dirs, s, out);
     }
 }
 
@@ -347,7 +354,11 @@ impl Pass<'_> {
                 let depth_over = depth_b / s;
                 // A NaN rise (no data) covers nothing.
                 let mut ground = [0.0; PACKET];
-                sampling.heights(&dirs, s, slice.subvoxel, &mut ground);
+                if slice.subvoxel {
+                    heights_one_by_one(sampling, &dirs, s, true, &mut ground);
+                } else {
+                    sampling.nearest_heights(&dirs, s, &mut ground);
+                }
                 let mut covering = 0u32;
                 for k in 0..PACKET {
                     covering |= u32::from(ground[k] - self.eye_z > s * horizon[k]) << k;
