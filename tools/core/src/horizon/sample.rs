@@ -14,10 +14,12 @@ const DIVISIONS: usize = 8;
 /// tile is 1 KiB, four to a page.
 const TILE: usize = 16;
 
-/// Where vertex (`c`, `r`) lies in tiles of [`TILE`]² stored row by row.
-#[inline]
-fn tile_index(tiles_across: usize, c: usize, r: usize) -> usize {
-    ((r / TILE) * tiles_across + c / TILE) * TILE * TILE + (r % TILE) * TILE + c % TILE
+/// Where vertex (`c`, `r`) lies in tiles of [`TILE`]² stored row by row
+/// (32 bits, so that the march computes many at once in SIMD lanes).
+#[inline(always)]
+fn tile_index(tiles_across: u32, c: u32, r: u32) -> u32 {
+    let tile = TILE as u32;
+    ((r / tile) * tiles_across + c / tile) * tile * tile + (r % tile) * tile + c % tile
 }
 
 /// Bilinear weights of the four voxels around each of the DIVISIONS² sub-voxels,
@@ -170,7 +172,7 @@ impl VertexIndex {
             inv_cell: terrain.inv_cell,
             last: terrain.last,
             tiles_across: terrain.tiles_across as u32,
-            off_grid: terrain.off_grid,
+            off_grid: (terrain.tiled.len() - 1) as u32,
         }
     }
 
@@ -188,10 +190,7 @@ impl VertexIndex {
                 r.max(0.0).min(self.last).to_int_unchecked::<i32>() as u32,
             )
         };
-        let tile = TILE as u32;
-        let index = ((row / tile) * self.tiles_across + column / tile) * tile * tile
-            + (row % tile) * tile
-            + column % tile;
+        let index = tile_index(self.tiles_across, column, row);
         if on_grid {
             index
         } else {
@@ -229,8 +228,6 @@ pub struct Terrain<'a> {
     /// pyramid, which lets the march skip slices that cannot rise above
     /// the horizon.
     tile_highest: Vec<f32>,
-    /// The index of the NaN past the tiles.
-    off_grid: u32,
     /// Heights in 16.16 fixed point, built on the first fixed-point render.
     heights_fixed: std::sync::OnceLock<Vec<i32>>,
     mask: Cow<'a, [u8]>,
@@ -266,7 +263,8 @@ impl<'a> Terrain<'a> {
             for c in 0..side {
                 let i = r * side + c;
                 if mask[i] == 1 {
-                    tiled[tile_index(tiles_across, c, r)] = heights[i];
+                    tiled[tile_index(tiles_across as u32, c as u32, r as u32) as usize] =
+                        heights[i];
                     highest_m = highest_m.max(heights[i] as f64);
                     lowest_m = lowest_m.min(heights[i] as f64);
                 }
@@ -293,7 +291,6 @@ impl<'a> Terrain<'a> {
             highest_m,
             lowest_m,
             tile_highest,
-            off_grid: (tiles_across * tiles_across * TILE * TILE) as u32,
             heights_fixed: std::sync::OnceLock::new(),
             mask,
             color,
@@ -330,7 +327,8 @@ impl<'a> Terrain<'a> {
             let g = (80.0 + (self.heights[i] as f64 * 0.05).rem_euclid(150.0)).min(255.0);
             let light = self.shade.as_ref().map_or(1.0, |s| s[i] as f64);
             let v = (g * light).round().clamp(0.0, 255.0) as u8;
-            let at = tile_index(self.tiles_across, i % self.side, i / self.side);
+            let (c, r) = ((i % self.side) as u32, (i / self.side) as u32);
+            let at = tile_index(self.tiles_across as u32, c, r) as usize;
             self.vertex_colours[at] = u32::from_le_bytes([v, v, v, 255]);
         }
     }
