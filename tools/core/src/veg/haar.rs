@@ -27,10 +27,18 @@ pub const FEATURES_PER_CHANNEL: usize = 1 + 3 * LEVELS;
 /// Forward transform of the `n`×`n` row-major block in place (`n` a power of
 /// two, at most [`PATCH`]).
 pub fn forward(block: &mut [f32], n: usize) {
+    forward_from(block, n, n);
+}
+
+/// [`forward`] from the level whose low-pass quadrant is `size`×`size`
+/// (the top-left of the `n`×`n` block) down: the finer levels are taken as
+/// done.
+fn forward_from(block: &mut [f32], n: usize, size: usize) {
     assert!(n.is_power_of_two() && n <= PATCH && block.len() == n * n);
+    assert!(size.is_power_of_two() && size <= n);
     let mut scratch = [0.0f32; PATCH];
     let mut rows_out = [0.0f32; PATCH * PATCH];
-    let mut size = n;
+    let mut size = size;
     while size > 1 {
         for row in 0..size {
             step(&mut block[row * n..row * n + size], &mut scratch);
@@ -165,6 +173,54 @@ fn window(region: &Region, min_side: u32, width: usize, height: usize) -> [u32; 
 /// and cells without any take the region's mean: a region larger than the
 /// window is described by itself, not by its neighbours.
 pub fn signature(image: &Image, window: [u32; 4], only: Option<(&[u32], u32)>) -> Vec<f32> {
+    let (ww, wh) = (window[2] - window[0], window[3] - window[1]);
+    if only.is_none() && ww == wh && (PATCH as u32).is_multiple_of(ww) {
+        replicated_signature(image, window)
+    } else {
+        resampled_signature(image, window, only)
+    }
+}
+
+/// [`signature`] of a square window whose side divides [`PATCH`] (the
+/// default 8-pixel window of small regions): resampling repeats each pixel
+/// into a square of cells, so each of the transform's finest levels only
+/// finds zero details and scales the low-pass values. Those levels are
+/// applied to the pixels directly, with the same floating-point operations
+/// the full transform does on repeated pairs, and the transform goes on
+/// from the window's size: the result is bit for bit the resampled one, at
+/// a quarter of the work or less.
+fn replicated_signature(image: &Image, window: [u32; 4]) -> Vec<f32> {
+    let [x0, y0, x1, y1] = window.map(|v| v as usize);
+    let side = x1 - x0;
+    let repeat_levels = (PATCH / side).trailing_zeros();
+    // One level on a repeated pair (a, a): rows give (a + a)/√2, columns
+    // the same again; the details (a − a)/√2 are zero.
+    let coarsen = |mut v: f32| {
+        for _ in 0..repeat_levels {
+            let row = (v + v) * std::f32::consts::FRAC_1_SQRT_2;
+            v = (row + row) * std::f32::consts::FRAC_1_SQRT_2;
+        }
+        v
+    };
+    let mut out = Vec::with_capacity(image.bands * FEATURES_PER_CHANNEL);
+    let mut blocks = [[0.0f32; PATCH * PATCH]; MAX_BANDS];
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let colour = image.colour(x, y);
+            for (block, v) in blocks.iter_mut().zip(colour).take(image.bands) {
+                block[(y - y0) * PATCH + x - x0] = coarsen(v);
+            }
+        }
+    }
+    for block in blocks.iter_mut().take(image.bands) {
+        forward_from(block, PATCH, side);
+        channel_signature(block, &mut out);
+    }
+    out
+}
+
+/// [`signature`] by resampling the window to [`PATCH`]² cells.
+fn resampled_signature(image: &Image, window: [u32; 4], only: Option<(&[u32], u32)>) -> Vec<f32> {
     let [x0, y0, x1, y1] = window.map(|v| v as usize);
     let (ww, wh) = (x1 - x0, y1 - y0);
     let stride_x = (ww / (4 * PATCH)).max(1);
@@ -274,6 +330,23 @@ mod tests {
                 let dot: f32 = basis[i].iter().zip(&basis[j]).map(|(a, b)| a * b).sum();
                 let want = if i == j { 1.0 } else { 0.0 };
                 assert!((dot - want).abs() < 1e-5);
+            }
+        }
+    }
+
+    /// The shortcut for square windows dividing the patch gives the
+    /// resampled signature bit for bit, on a real image's windows.
+    #[test]
+    fn repeated_pixels_shortcut_equals_resampling() {
+        let image = crate::testdata::soap_061();
+        for side in [1u32, 2, 4, 8] {
+            for (x, y) in [(0u32, 0u32), (37, 91), (200, 13), (392, 392), (150, 301)] {
+                let (x, y) = (x.min(400 - side), y.min(400 - side));
+                let window = [x, y, x + side, y + side];
+                let shortcut = replicated_signature(&image, window);
+                let resampled = resampled_signature(&image, window, None);
+                let bits = |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&shortcut), bits(&resampled), "side {side} at {x},{y}");
             }
         }
     }
