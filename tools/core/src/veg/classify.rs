@@ -55,6 +55,24 @@ pub fn sample_signatures(
         .collect()
 }
 
+/// Learnt signatures whose distances are summed side by side.
+const LANES: usize = 8;
+
+/// Buffers of one classification, reused between regions.
+#[derive(Default)]
+struct Scratch {
+    /// The signature's features standardised.
+    standard: Vec<f32>,
+    /// Squared distance to every learnt signature (padded to [`LANES`]).
+    distances: Vec<f32>,
+    /// The smallest distances of each class, sorted.
+    smallest: Vec<f32>,
+    /// Learnt signatures per class.
+    found: Vec<usize>,
+    /// Mean distance to each class's nearest signatures.
+    nearest: Vec<f32>,
+}
+
 /// A class's distance averages at most one in this many of its signatures.
 const NEIGHBOURS_SHARE: usize = 3;
 
@@ -68,8 +86,10 @@ pub struct Classifier {
     /// Class index of every learnt signature.
     example_class: Vec<usize>,
     /// The standardised learnt signatures, feature-major: feature `f` of
-    /// signature `e` at `f · examples + e`, so one feature's values for all
-    /// signatures are contiguous and their distances accumulate in lanes.
+    /// signature `e` at `f · stride + e`, `stride` the number of signatures
+    /// rounded up to [`LANES`] (padded with zeros), so one feature's values
+    /// for all signatures are contiguous and their distances accumulate in
+    /// lanes.
     example_features: Vec<f32>,
     /// Smallest window side a signature is taken over (pixels).
     window_px: u32,
@@ -127,10 +147,13 @@ impl Classifier {
                 (signatures / NEIGHBOURS_SHARE).clamp(1, neighbours.max(1))
             })
             .collect();
+        let padding = raw.len().next_multiple_of(LANES) - raw.len();
         let example_features = (0..features)
             .flat_map(|f| {
                 let scale = inverse_scale[f];
-                raw.iter().map(move |(_, s)| s[f] * scale)
+                raw.iter()
+                    .map(move |(_, s)| s[f] * scale)
+                    .chain(std::iter::repeat_n(0.0, padding))
             })
             .collect();
         Ok(Classifier {
@@ -164,31 +187,50 @@ impl Classifier {
     /// class wins by numbers alone. Distances are Euclidean over features
     /// standardised by their spread in the samples.
     pub fn classify(&self, signature: &[f32]) -> Label {
-        self.classify_with(signature, &mut Vec::new())
+        self.classify_with(signature, &mut Scratch::default())
     }
 
-    /// [`Classifier::classify`] with a buffer for the squared distances to
-    /// every learnt signature, reused between calls.
-    fn classify_with(&self, signature: &[f32], distances: &mut Vec<f32>) -> Label {
-        // Squared distances, feature by feature over all signatures (each
-        // signature's sum still runs in feature order).
-        let examples = self.example_class.len();
+    /// [`Classifier::classify`] with buffers reused between calls.
+    fn classify_with(&self, signature: &[f32], scratch: &mut Scratch) -> Label {
+        let Scratch {
+            standard,
+            distances,
+            smallest,
+            found,
+            nearest,
+        } = scratch;
+        standard.clear();
+        standard.extend(
+            signature
+                .iter()
+                .zip(&self.inverse_scale)
+                .map(|(v, s)| v * s),
+        );
+        // Squared distances to LANES learnt signatures at a time, summed in
+        // registers in feature order.
+        let stride = self.example_class.len().next_multiple_of(LANES);
         distances.clear();
-        distances.resize(examples, 0.0);
-        for ((value, scale), column) in signature
-            .iter()
-            .zip(&self.inverse_scale)
-            .zip(self.example_features.chunks_exact(examples))
-        {
-            let standard = value * scale;
-            for (d, e) in distances.iter_mut().zip(column) {
-                *d += (e - standard) * (e - standard);
+        distances.resize(stride, 0.0);
+        for (group, out) in distances.chunks_exact_mut(LANES).enumerate() {
+            let mut sum = [0.0f32; LANES];
+            for (column, &value) in self
+                .example_features
+                .chunks_exact(stride)
+                .zip(standard.iter())
+            {
+                let lanes = &column[group * LANES..][..LANES];
+                for (acc, &e) in sum.iter_mut().zip(lanes) {
+                    *acc += (e - value) * (e - value);
+                }
             }
+            out.copy_from_slice(&sum);
         }
         // The `k` smallest distances per class, kept sorted by insertion.
         let k = self.class_neighbours.iter().copied().max().unwrap_or(1);
-        let mut smallest = vec![f32::INFINITY; self.classes.len() * k];
-        let mut found = vec![0usize; self.classes.len()];
+        smallest.clear();
+        smallest.resize(self.classes.len() * k, f32::INFINITY);
+        found.clear();
+        found.resize(self.classes.len(), 0);
         for (&class, &d) in self.example_class.iter().zip(distances.iter()) {
             let list = &mut smallest[class * k..(class + 1) * k];
             if d < list[k - 1] {
@@ -198,16 +240,15 @@ impl Classifier {
             }
             found[class] += 1;
         }
-        let nearest: Vec<f32> = (0..self.classes.len())
-            .map(|c| {
-                let n = found[c].min(self.class_neighbours[c]).max(1);
-                smallest[c * k..c * k + n]
-                    .iter()
-                    .map(|d| d.sqrt())
-                    .sum::<f32>()
-                    / n as f32
-            })
-            .collect();
+        nearest.clear();
+        nearest.extend((0..self.classes.len()).map(|c| {
+            let n = found[c].min(self.class_neighbours[c]).max(1);
+            smallest[c * k..c * k + n]
+                .iter()
+                .map(|d| d.sqrt())
+                .sum::<f32>()
+                / n as f32
+        }));
         let (best, d1) = nearest
             .iter()
             .enumerate()
@@ -233,9 +274,9 @@ impl Classifier {
     pub fn classify_regions(&self, image: &Image, segmentation: &Segmentation) -> Vec<Label> {
         (0..segmentation.regions.len())
             .into_par_iter()
-            .map_init(Vec::new, |distances, k| {
+            .map_init(Scratch::default, |scratch, k| {
                 let signature = region_signature(image, segmentation, k, self.window_px);
-                self.classify_with(&signature, distances)
+                self.classify_with(&signature, scratch)
             })
             .collect()
     }

@@ -272,7 +272,9 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
             .difference(&leaf_moments[e.1 as usize], &leaf_moments[e.2 as usize])
             .to_bits();
     });
-    edges.par_sort_unstable();
+    // The edges come in (a, b) order, so a stable sort by difference
+    // alone orders them by (difference, a, b).
+    radsort::sort_by_key(&mut edges, |e| e.0);
     let adjacency_ms = lap();
     let mut sets = DisjointSets::new(leaf_moments);
     for &(_, a, b) in &edges {
@@ -283,22 +285,30 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
     // only pixel counts: a compact forest over the merged regions keeps the
     // joins cache-friendly. Sets only grow, so edges between two large sets
     // are dropped first.
-    let min = params.min_region_px as f64;
+    let min = params.min_region_px;
     let merged = sets.roots();
     let moments = sets.data;
     let mut small = DisjointSets {
         parent: merged.clone(),
         data: moments.iter().map(|m| m.n as u32).collect(),
     };
+    // Each leaf's merged region and that region's size side by side, so the
+    // filter reads one small array rather than the moments.
+    let region_and_size: Vec<(u32, u32)> = merged
+        .par_iter()
+        .map(|&r| (r, small.data[r as usize]))
+        .collect();
     let edges: Vec<(u32, u32, u32)> = edges
         .into_par_iter()
         .filter(|&(_, a, b)| {
-            let (ra, rb) = (merged[a as usize] as usize, merged[b as usize] as usize);
-            ra != rb && (moments[ra].n < min || moments[rb].n < min)
+            let (ra, na) = region_and_size[a as usize];
+            let (rb, nb) = region_and_size[b as usize];
+            ra != rb && (na < min || nb < min)
         })
         .collect();
+    drop(region_and_size);
     for &(_, a, b) in &edges {
-        small.union_if(a, b, |x, y| (*x as f64) < min || (*y as f64) < min);
+        small.union_if(a, b, |x, y| *x < min || *y < min);
     }
     let small_regions_ms = lap();
 
@@ -568,8 +578,13 @@ fn paint(leaves: &[Leaf], cover: &[TileCover], tiles_x: usize, w: usize, h: usiz
     labels
 }
 
-/// Pairs of 4-adjacent leaves `(0, a, b)`, found along each leaf's right and
-/// bottom borders; runs of one neighbour along a border give one pair.
+/// Pairs of 4-adjacent leaves `(0, a, b)`, `a < b`, found along each leaf's
+/// right and bottom borders; runs of one neighbour along a border give one
+/// pair. Pairs come sorted by `(a, b)`: leaves are numbered in the
+/// quadtree's depth-first (Z) order, and a leaf's right or bottom neighbour
+/// always comes later in it (the two lie in the left and right, or top and
+/// bottom, children of their smallest common block), so `a` is the leaf
+/// whose border was walked; each leaf's own pairs are sorted by `b`.
 fn adjacency(leaves: &[Leaf], labels: &[u32], w: usize, h: usize) -> Vec<(u32, u32, u32)> {
     leaves
         .par_chunks(4096)
@@ -578,10 +593,11 @@ fn adjacency(leaves: &[Leaf], labels: &[u32], w: usize, h: usize) -> Vec<(u32, u
             let mut edges = Vec::new();
             for (k, leaf) in part.iter().enumerate() {
                 let id = (chunk * 4096 + k) as u32;
+                let first = edges.len();
                 let mut push = |other: u32, last: &mut u32| {
                     if other != *last {
                         *last = other;
-                        edges.push((0, id.min(other), id.max(other)));
+                        edges.push((0, id, other));
                     }
                 };
                 let (x1, y1) = ((leaf.x + leaf.w) as usize, (leaf.y + leaf.h) as usize);
@@ -597,6 +613,7 @@ fn adjacency(leaves: &[Leaf], labels: &[u32], w: usize, h: usize) -> Vec<(u32, u
                         push(labels[y1 * w + x], &mut last);
                     }
                 }
+                edges[first..].sort_unstable_by_key(|e| e.2);
             }
             edges
         })
@@ -827,6 +844,42 @@ mod tests {
             assert_partition(&s);
             assert!(s.regions.len() < s.leaves, "merging joined nothing");
             assert!(s.regions.iter().all(|r| r.pixels >= params.min_region_px));
+        }
+    }
+
+    /// The adjacency pairs of a real image's quadtree come in strictly
+    /// increasing `(a, b)` order with `a` the earlier leaf, which the stable
+    /// sort by difference relies on for its tie order.
+    #[test]
+    fn adjacent_pairs_come_in_leaf_order() {
+        let image = crate::testdata::soap_061();
+        for min_block_px in [1, 2, 8] {
+            let params = SegmentParams {
+                min_block_px,
+                ..Default::default()
+            };
+            let predicate = Predicate::new(&params, image.bands);
+            let (w, h) = (image.width, image.height);
+            let (tiles_x, tiles_y) = (w.div_ceil(TILE), h.div_ceil(TILE));
+            let mut scratch = TileScratch::new();
+            let tiles: Vec<TileSplit> = (0..tiles_x * tiles_y)
+                .map(|t| {
+                    scratch.split(
+                        &image,
+                        &predicate,
+                        (t % tiles_x) * TILE,
+                        (t / tiles_x) * TILE,
+                    )
+                })
+                .collect();
+            let (leaves, _, cover) = split_coarse(&tiles, tiles_x, tiles_y, w, h, &predicate);
+            let labels = paint(&leaves, &cover, tiles_x, w, h);
+            let edges = adjacency(&leaves, &labels, w, h);
+            assert!(edges.len() > leaves.len(), "{} edges", edges.len());
+            assert!(edges.iter().all(|e| e.1 < e.2));
+            assert!(edges
+                .windows(2)
+                .all(|p| (p[0].1, p[0].2) < (p[1].1, p[1].2)));
         }
     }
 
