@@ -36,27 +36,32 @@ pub fn forward(block: &mut [f32], n: usize) {
 fn forward_from(block: &mut [f32], n: usize, size: usize) {
     assert!(n.is_power_of_two() && n <= PATCH && block.len() == n * n);
     assert!(size.is_power_of_two() && size <= n);
-    let mut scratch = [0.0f32; PATCH];
-    let mut rows_out = [0.0f32; PATCH * PATCH];
+    // Rows go from the block to `rows`, columns from `rows` back to the block.
+    let mut rows = [0.0f32; PATCH * PATCH];
     let mut size = size;
     while size > 1 {
-        for row in 0..size {
-            step(&mut block[row * n..row * n + size], &mut scratch);
+        let half = size / 2;
+        for (source, out) in block
+            .chunks_exact(n)
+            .zip(rows.chunks_exact_mut(n))
+            .take(size)
+        {
+            let (sum, difference) = out[..size].split_at_mut(half);
+            for (i, pair) in source[..size].chunks_exact(2).enumerate() {
+                sum[i] = (pair[0] + pair[1]) * std::f32::consts::FRAC_1_SQRT_2;
+                difference[i] = (pair[0] - pair[1]) * std::f32::consts::FRAC_1_SQRT_2;
+            }
         }
         // Columns, on whole rows at once: the row pair (2i, 2i+1) gives
         // output rows i (sums) and half + i (differences).
-        let half = size / 2;
         for i in 0..half {
-            let (upper, lower) = block[2 * i * n..].split_at(n);
-            let (sum, rest) = rows_out[i * n..].split_at_mut(n);
+            let (upper, lower) = rows[2 * i * n..].split_at(n);
+            let (sum, rest) = block[i * n..].split_at_mut(n);
             let difference = &mut rest[(half - 1) * n..];
             for (col, (&a, &b)) in upper[..size].iter().zip(&lower[..size]).enumerate() {
                 sum[col] = (a + b) * std::f32::consts::FRAC_1_SQRT_2;
                 difference[col] = (a - b) * std::f32::consts::FRAC_1_SQRT_2;
             }
-        }
-        for row in 0..size {
-            block[row * n..row * n + size].copy_from_slice(&rows_out[row * n..row * n + size]);
         }
         size = half;
     }
@@ -85,17 +90,8 @@ pub fn inverse(block: &mut [f32], n: usize) {
     }
 }
 
-/// One level along a line: averages to the first half, details to the second.
-fn step(line: &mut [f32], scratch: &mut [f32]) {
-    let half = line.len() / 2;
-    for i in 0..half {
-        let (a, b) = (line[2 * i], line[2 * i + 1]);
-        scratch[i] = (a + b) * std::f32::consts::FRAC_1_SQRT_2;
-        scratch[half + i] = (a - b) * std::f32::consts::FRAC_1_SQRT_2;
-    }
-    line.copy_from_slice(&scratch[..line.len()]);
-}
-
+/// One inverse level along a line: averages in the first half and details
+/// in the second back to pairs.
 fn unstep(line: &mut [f32], scratch: &mut [f32]) {
     let half = line.len() / 2;
     for i in 0..half {
