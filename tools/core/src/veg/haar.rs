@@ -253,28 +253,37 @@ fn resampled_signature(image: &Image, window: [u32; 4], only: Option<(&[u32], u3
         std::array::from_fn(|c| (c * n / PATCH).min(n - 1) * PATCH / n)
     };
     let (source_x, source_y) = (source(ww), source(wh));
-    let total: u32 = counts.iter().sum();
+    let source_cell: [usize; PATCH * PATCH] = std::array::from_fn(|at| {
+        let (cx, cy) = (at % PATCH, at / PATCH);
+        if counts[at] == 0 && only.is_none() {
+            source_y[cy] * PATCH + source_x[cx]
+        } else {
+            at
+        }
+    });
+    // Cells left without pixels take the window's mean.
     let mut mean = [0.0f32; MAX_BANDS];
-    for cell in &sums {
-        for c in 0..MAX_BANDS {
-            mean[c] += cell[c] / total.max(1) as f32;
+    if source_cell.iter().any(|&at| counts[at] == 0) {
+        let total: u32 = counts.iter().sum();
+        for cell in &sums {
+            for c in 0..MAX_BANDS {
+                mean[c] += cell[c] / total.max(1) as f32;
+            }
         }
     }
+    let averages: [[f32; MAX_BANDS]; PATCH * PATCH] = std::array::from_fn(|at| {
+        let n = counts[at] as f32;
+        sums[at].map(|sum| sum / n)
+    });
     let mut out = Vec::with_capacity(image.bands * FEATURES_PER_CHANNEL);
     let mut block = [0.0f32; PATCH * PATCH];
     for c in 0..image.bands {
-        for cy in 0..PATCH {
-            for cx in 0..PATCH {
-                let mut at = cy * PATCH + cx;
-                if counts[at] == 0 && only.is_none() {
-                    at = source_y[cy] * PATCH + source_x[cx];
-                }
-                block[cy * PATCH + cx] = if counts[at] == 0 {
-                    mean[c]
-                } else {
-                    sums[at][c] / counts[at] as f32
-                };
-            }
+        for (value, &at) in block.iter_mut().zip(&source_cell) {
+            *value = if counts[at] == 0 {
+                mean[c]
+            } else {
+                averages[at][c]
+            };
         }
         forward(&mut block, PATCH);
         channel_signature(&block, &mut out);
