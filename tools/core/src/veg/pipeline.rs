@@ -198,6 +198,10 @@ impl VegOptions {
 /// (measured peak 82 bytes a pixel on a 100 Mpx image analysed whole).
 const TILE_BYTES_PER_PIXEL: u64 = 96;
 
+/// Memory of a segmentation kept between learning and its tile's analysis
+/// per pixel of the tile's context, bytes (labels and regions).
+const SEGMENTATION_BYTES_PER_PIXEL: u64 = 8;
+
 /// Smallest tile side, pixels.
 pub const MIN_TILE_PX: usize = 256;
 
@@ -390,41 +394,45 @@ pub fn extract_tiled(
     params.chroma_std *= threshold_gain;
     let (w, h) = (image.image.width, image.image.height);
     let tiles = tiling.plan(w, h);
-    // Tiles analysed at once, each its pixels, opponent colours, quadtree,
-    // adjacency and labels: about TILE_BYTES_PER_PIXEL bytes a pixel.
-    let at_once = rayon::current_num_threads().clamp(1, tiles.len());
-    let context_pixels = tiles
-        .iter()
-        .map(|t| t.context_size().0 * t.context_size().1)
-        .max()
-        .unwrap_or(0);
-    crate::memory::check(
-        &format!(
-            "vegetation extraction in {at_once} tile(s) of up to {context_pixels} pixels at once"
-        ),
-        (at_once * context_pixels) as u64,
-        TILE_BYTES_PER_PIXEL,
-        "use smaller tiles (tile_px, --tile)",
-    )?;
-    watch.start(1 + tiles.len());
-    let wall = Instant::now();
-
-    // Learn: each sample from the tile owning its centre, in marking order.
-    let start = Instant::now();
+    // Each sample is learnt from the tile owning its centre.
     let owner = |s: &Sample| {
         let [x, y] = s.centre();
         let (x, y) = (x.clamp(0.0, w as f64 - 0.5), y.clamp(0.0, h as f64 - 0.5));
         tiles.iter().position(|t| t.owns(x, y)).unwrap_or(0)
     };
     let owners: Vec<usize> = samples.iter().map(owner).collect();
+    let sample_tiles = (0..tiles.len()).filter(|t| owners.contains(t)).count();
+    // Tiles analysed at once, each its pixels, opponent colours, quadtree,
+    // adjacency and labels: about TILE_BYTES_PER_PIXEL bytes a pixel; and
+    // the segmentations made while learning, kept for their tiles.
+    let at_once = rayon::current_num_threads().clamp(1, tiles.len());
+    let context_pixels = tiles
+        .iter()
+        .map(|t| t.context_size().0 * t.context_size().1)
+        .max()
+        .unwrap_or(0) as u64;
+    crate::memory::check(
+        &format!(
+            "vegetation extraction in {at_once} tile(s) of up to {context_pixels} pixels at once"
+        ),
+        context_pixels
+            * (at_once as u64 * TILE_BYTES_PER_PIXEL
+                + sample_tiles as u64 * SEGMENTATION_BYTES_PER_PIXEL),
+        1,
+        "use smaller tiles (tile_px, --tile)",
+    )?;
+    watch.start(1 + tiles.len());
+    let wall = Instant::now();
+
+    // Learn: each sample from its tile, in marking order.
+    let start = Instant::now();
     let mut marked: Vec<Vec<Vec<f32>>> = vec![Vec::new(); samples.len()];
     let mut learn_segment_ms = 0.0;
     let learn_spacing =
         matches!(placement, Placement::Crowns { .. }) && options.crown_spacing_m.is_none();
     let mut marked_crowns = Vec::new();
-    let whole = tiles.len() == 1;
-    // A whole image's segmentation serves learning and classification.
-    let mut whole_segmentation = None;
+    // A tile's segmentation serves learning and then its own analysis.
+    let mut learnt: Vec<Option<Segmentation>> = tiles.iter().map(|_| None).collect();
     for (t, tile) in tiles.iter().enumerate() {
         if !owners.contains(&t) {
             continue;
@@ -451,9 +459,7 @@ pub fn extract_tiled(
                 }
             }
         }
-        if whole {
-            whole_segmentation = Some(segmentation);
-        }
+        learnt[t] = Some(segmentation);
     }
     let marked: Vec<(String, Vec<f32>)> = samples
         .iter()
@@ -492,7 +498,6 @@ pub fn extract_tiled(
     watch.step_done()?;
 
     // Classify and place, tile by tile, as many at once as threads.
-    let whole_segmentation = std::sync::Mutex::new(whole_segmentation);
     let mut labels_map = vec![0u32; w * h];
     let mut regions = Vec::new();
     let mut labels = Vec::new();
@@ -500,11 +505,12 @@ pub fn extract_tiled(
     let mut leaves = 0;
     let mut steps = SegmentSteps::default();
     let (mut segment_ms, mut classify_ms, mut detect_ms) = (0.0, 0.0, 0.0);
-    for batch in tiles.chunks(rayon::current_num_threads().max(1)) {
+    for (batch, segmented) in tiles.chunks(at_once).zip(learnt.chunks_mut(at_once)) {
+        let segmented: Vec<Option<Segmentation>> = segmented.iter_mut().map(Option::take).collect();
         let results: Vec<Result<TileResult>> = batch
             .par_iter()
-            .map(|tile| {
-                let segmented = whole_segmentation.lock().ok().and_then(|mut s| s.take());
+            .zip(segmented)
+            .map(|(tile, segmented)| {
                 let result = analyse_tile(
                     image,
                     tile,
@@ -669,8 +675,9 @@ struct TileResult {
     detect_ms: f64,
 }
 
-/// Segment (unless `segmented` is given: a whole image already segmented),
-/// classify and place on one tile's context; keep its core.
+/// Segment (unless `segmented` is given: the tile's context already
+/// segmented while learning), classify and place on one tile's context;
+/// keep its core.
 fn analyse_tile(
     image: &VegImage,
     tile: &Tile,
@@ -682,7 +689,7 @@ fn analyse_tile(
 ) -> Result<TileResult> {
     let context = TileImage::of(image, tile);
     let start = Instant::now();
-    let whole = segmented.is_some();
+    let whole = tile.context == tile.core;
     let segmentation = match segmented {
         Some(s) => s,
         None => segment(context.image(), params)?,
