@@ -16,6 +16,7 @@ use crate::{Error, Result};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::Mutex;
 use std::time::Instant;
 
 /// Every setting of vegetation extraction, as in REGION.toml's
@@ -497,21 +498,21 @@ pub fn extract_tiled(
     let learn_ms = start.elapsed().as_secs_f64() * 1e3;
     watch.step_done()?;
 
-    // Classify and place, tile by tile, as many at once as threads.
-    let mut labels_map = vec![0u32; w * h];
-    let mut regions = Vec::new();
-    let mut labels = Vec::new();
-    let mut found = Vec::new();
-    let mut leaves = 0;
-    let mut steps = SegmentSteps::default();
-    let (mut segment_ms, mut classify_ms, mut detect_ms) = (0.0, 0.0, 0.0);
-    for (batch, segmented) in tiles.chunks(at_once).zip(learnt.chunks_mut(at_once)) {
-        let segmented: Vec<Option<Segmentation>> = segmented.iter_mut().map(Option::take).collect();
-        let results: Vec<Result<TileResult>> = batch
-            .par_iter()
-            .zip(segmented)
-            .map(|(tile, segmented)| {
-                let result = analyse_tile(
+    // Classify and place, as many tiles at once as threads: each of
+    // `at_once` workers takes the next tile as soon as its last is done, and
+    // writes its core's labels (numbered within the tile) into the map.
+    let next_tile = AtomicUsize::new(0);
+    let learnt: Vec<Mutex<Option<Segmentation>>> = learnt.into_iter().map(Mutex::new).collect();
+    let labels_map = Mutex::new(vec![0u32; w * h]);
+    let done: Mutex<Vec<(usize, Result<TileResult>)>> = Mutex::new(Vec::new());
+    let lock_error = || Error::Input("a vegetation tile worker stopped".into());
+    rayon::scope(|scope| {
+        for _ in 0..at_once {
+            scope.spawn(|_| loop {
+                let t = next_tile.fetch_add(1, Ordering::Relaxed);
+                let Some(tile) = tiles.get(t) else { break };
+                let segmented = learnt[t].lock().ok().and_then(|mut s| s.take());
+                let mut result = analyse_tile(
                     image,
                     tile,
                     segmented,
@@ -519,31 +520,66 @@ pub fn extract_tiled(
                     &classifier,
                     &vegetation,
                     placement,
-                );
-                watch.step_done()?;
-                result
-            })
-            .collect();
-        for (tile, result) in batch.iter().zip(results) {
-            let r = result?;
-            let offset = regions.len() as u32;
-            let [x0, y0, x1, _] = tile.core;
-            let side = x1 - x0;
-            for (dy, row) in r.core_labels.chunks_exact(side).enumerate() {
-                let at = (y0 + dy) * w + x0;
-                for (out, &l) in labels_map[at..at + side].iter_mut().zip(row) {
-                    *out = l + offset;
+                )
+                .and_then(|r| watch.step_done().map(|()| r));
+                if let Ok(r) = &mut result {
+                    let core_labels = std::mem::take(&mut r.core_labels);
+                    let [x0, y0, x1, _] = tile.core;
+                    let side = x1 - x0;
+                    match labels_map.lock() {
+                        Ok(mut map) => {
+                            for (dy, row) in core_labels.chunks_exact(side).enumerate() {
+                                let at = (y0 + dy) * w + x0;
+                                map[at..at + side].copy_from_slice(row);
+                            }
+                        }
+                        Err(_) => result = Err(lock_error()),
+                    }
                 }
-            }
-            regions.extend(r.regions);
-            labels.extend(r.labels);
-            found.extend(r.objects);
-            leaves += r.leaves;
-            steps.add(&r.steps);
-            segment_ms += r.segment_ms;
-            classify_ms += r.classify_ms;
-            detect_ms += r.detect_ms;
+                if result.is_err() {
+                    // The other workers stop after their current tile.
+                    next_tile.store(tiles.len(), Ordering::Relaxed);
+                }
+                if let Ok(mut done) = done.lock() {
+                    done.push((t, result));
+                }
+            });
         }
+    });
+    let mut done = done.into_inner().map_err(|_| lock_error())?;
+    let mut labels_map = labels_map.into_inner().map_err(|_| lock_error())?;
+    if done.len() < tiles.len() {
+        if let Some((_, Err(e))) = done.into_iter().find(|(_, r)| r.is_err()) {
+            return Err(e);
+        }
+        return Err(lock_error());
+    }
+    // Number the regions in tile order.
+    done.sort_by_key(|(t, _)| *t);
+    let mut regions = Vec::new();
+    let mut labels = Vec::new();
+    let mut found = Vec::new();
+    let mut leaves = 0;
+    let mut steps = SegmentSteps::default();
+    let (mut segment_ms, mut classify_ms, mut detect_ms) = (0.0, 0.0, 0.0);
+    let mut offsets = Vec::with_capacity(tiles.len());
+    for (_, result) in done {
+        let r = result?;
+        offsets.push(regions.len() as u32);
+        regions.extend(r.regions);
+        labels.extend(r.labels);
+        found.extend(r.objects);
+        leaves += r.leaves;
+        steps.add(&r.steps);
+        segment_ms += r.segment_ms;
+        classify_ms += r.classify_ms;
+        detect_ms += r.detect_ms;
+    }
+    for (tile, offset) in tiles.iter().zip(offsets) {
+        let [x0, y0, x1, y1] = tile.core;
+        labels_map[y0 * w..y1 * w]
+            .par_chunks_mut(w)
+            .for_each(|row| row[x0..x1].iter_mut().for_each(|l| *l += offset));
     }
     found.sort_by(|a, b| a.y.total_cmp(&b.y).then(a.x.total_cmp(&b.x)));
     let segmentation = Segmentation {
