@@ -109,17 +109,20 @@ pub fn detect(
                 .map(|i| !is_vegetation(i % w, i / w))
                 .collect();
             // Sunlit tops: smoothed brightness, only inside vegetation.
-            let brightness: Vec<f32> = (0..w * h)
+            let mut value: Vec<f32> = (0..w * h)
                 .into_par_iter()
                 .map(|i| image.colour(i % w, i / w)[0])
                 .collect();
             let blur = (0.3 * spacing_px).round() as usize;
-            let smooth = box_blur(&box_blur(&brightness, w, h, blur), w, h, blur);
-            let value: Vec<f32> = smooth
-                .iter()
-                .zip(&outside)
-                .map(|(&v, &out)| if out { f32::MIN } else { v })
-                .collect();
+            let mut rows = vec![0.0f32; w * h];
+            box_blur(&mut value, &mut rows, w, h, blur);
+            box_blur(&mut value, &mut rows, w, h, blur);
+            drop(rows);
+            value.par_iter_mut().zip(&outside).for_each(|(v, &out)| {
+                if out {
+                    *v = f32::MIN;
+                }
+            });
             // Candidates: maxima of their (2r+1)² window (each is first a
             // 3×3 maximum, a cheap test that few pixels pass) with a disc of
             // vegetation of at least the smallest radius around them.
@@ -147,18 +150,19 @@ pub fn detect(
     objects
 }
 
-/// Mean over the `(2r+1)²` window around each cell, clipped at the edges
-/// (separable running sums).
-fn box_blur(values: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
-    let mut rows = vec![0.0f32; w * h];
+/// Replace each cell of `values` by the mean over the `(2r+1)²` window
+/// around it, clipped at the edges (separable running sums; `rows` holds the
+/// rows' means in between).
+fn box_blur(values: &mut [f32], rows: &mut [f32], w: usize, h: usize, r: usize) {
     rows.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
         let line = &values[y * w..(y + 1) * w];
         running_mean(|x| line[x], w, r, |x, v| out[x] = v);
     });
     // Columns: bands of rows, each with its own running column sums.
     const BAND: usize = 128;
-    let mut out = vec![0.0f32; w * h];
-    out.par_chunks_mut(BAND * w)
+    let rows = &*rows;
+    values
+        .par_chunks_mut(BAND * w)
         .enumerate()
         .for_each(|(band, block)| {
             let y0 = band * BAND;
@@ -185,7 +189,6 @@ fn box_blur(values: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
                     .for_each(|(o, s)| *o = (s / count) as f32);
             }
         });
-    out
 }
 
 /// Mean of `at(i−r ..= i+r)` clipped to `0..n`, for every `i`, in O(n).
@@ -364,7 +367,8 @@ mod tests {
     fn box_blur_is_the_clipped_window_mean() {
         let values: Vec<f32> = (0..20 * 9).map(|i| (i % 13) as f32).collect();
         let r = 2;
-        let blurred = box_blur(&values, 20, 9, r);
+        let mut blurred = values.clone();
+        box_blur(&mut blurred, &mut vec![0.0; 20 * 9], 20, 9, r);
         // At the left edge the row window is clipped to 3 values; the
         // column window is whole (5 rows).
         let (x, y) = (0usize, 4usize);
