@@ -280,13 +280,7 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
     radsort::sort_by_key(&mut edges, |e| e.0);
     let adjacency_ms = lap();
     let mut sets = DisjointSets::new(leaf_moments);
-    for (k, &(_, a, b)) in edges.iter().enumerate() {
-        if let Some(&(_, next_a, next_b)) = edges.get(k + PREFETCH_EDGES) {
-            sets.prefetch(next_a);
-            sets.prefetch(next_b);
-        }
-        sets.union_if(a, b, |x, y| predicate.homogeneous(&x.joined(y)));
-    }
+    sets.join_along(&edges, |x, y| predicate.homogeneous(&x.joined(y)));
     let merge_ms = lap();
     // Regions still too small join their most similar neighbour. This needs
     // only pixel counts: a compact forest over the merged regions keeps the
@@ -314,13 +308,7 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
         })
         .collect();
     drop(region_and_size);
-    for (k, &(_, a, b)) in edges.iter().enumerate() {
-        if let Some(&(_, next_a, next_b)) = edges.get(k + PREFETCH_EDGES) {
-            small.prefetch(next_a);
-            small.prefetch(next_b);
-        }
-        small.union_if(a, b, |x, y| *x < min || *y < min);
-    }
+    small.join_along(&edges, |x, y| *x < min || *y < min);
     let small_regions_ms = lap();
 
     // Number regions in leaf order and describe them; their moments are the
@@ -683,8 +671,21 @@ impl<T: SetData> DisjointSets<T> {
             .collect()
     }
 
-    /// Ask the cache for `x`'s parent and data, which a join soon reads
-    /// (joins follow the sorted edges, all over the leaves).
+    /// Join along `edges` `(_, a, b)` in order, where `accept` takes the two
+    /// sets' data. The edges are sorted by difference, so their leaves lie
+    /// all over the sets: each join asks the cache early for the leaves of
+    /// the edge [`PREFETCH_EDGES`] ahead.
+    fn join_along(&mut self, edges: &[(u32, u32, u32)], accept: impl Fn(&T, &T) -> bool) {
+        for (k, &(_, a, b)) in edges.iter().enumerate() {
+            if let Some(&(_, next_a, next_b)) = edges.get(k + PREFETCH_EDGES) {
+                self.prefetch(next_a);
+                self.prefetch(next_b);
+            }
+            self.union_if(a, b, &accept);
+        }
+    }
+
+    /// Ask the cache for `x`'s parent and data.
     fn prefetch(&self, x: u32) {
         #[cfg(target_arch = "x86_64")]
         {
