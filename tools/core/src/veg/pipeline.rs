@@ -1059,6 +1059,33 @@ mod tests {
         );
     }
 
+    /// Tiles go to workers as each finishes, so they finish in any order:
+    /// the regions, labels and objects must not depend on it.
+    #[test]
+    fn a_tiled_extraction_is_the_same_on_any_number_of_threads() {
+        let (image, samples) = testdata::soap_061_marked();
+        let options = VegOptions {
+            tile_px: MIN_TILE_PX,
+            ..Default::default()
+        };
+        let run = |threads| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| extract(&image, &samples, &options).unwrap())
+        };
+        let one = run(1);
+        assert_eq!(one.report.tiles, 4);
+        for threads in [2, 3, 5] {
+            let many = run(threads);
+            assert_eq!(one.segmentation.labels, many.segmentation.labels);
+            assert_eq!(one.segmentation.regions, many.segmentation.regions);
+            assert_eq!(one.labels, many.labels);
+            assert_eq!(one.objects, many.objects);
+        }
+    }
+
     #[test]
     fn only_counter_examples_are_refused() {
         let (image, samples) = testdata::soap_061_marked();
