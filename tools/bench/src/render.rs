@@ -247,7 +247,8 @@ pub fn render(
                 for k in 0..HEADINGS {
                     let cam = camera(grid, k, size, *pitch);
                     renderer.render(&terrain, &cam, options)?; // warm the buffers
-                                                               // A reference left out still gives the others their PSNR.
+                                                               // A reference left out still gives the others their
+                                                               // PSNR, untimed.
                     for _ in 0..if shown { runs } else { 0 } {
                         let start = Instant::now();
                         renderer.render(&terrain, &cam, options)?;

@@ -301,9 +301,10 @@ impl Pass<'_> {
     /// March lines `first..first + count` into the packet's own image.
     ///
     /// Every slice samples all [`PACKET`] lanes (nearest samples without
-    /// branching; lanes past `count`, or done, sample too and cover nothing), compares each
-    /// rise with the lane's horizon — the rise per metre its next unpainted
-    /// row needs — and only the lanes whose sample covers a row paint.
+    /// branching; lanes past `count`, or done, sample too and cover
+    /// nothing), compares each rise with the lane's horizon — the rise per
+    /// metre its next unpainted row needs — and only the lanes whose sample
+    /// covers a row paint.
     #[inline(always)]
     fn paint<S: Sampling>(
         &self,

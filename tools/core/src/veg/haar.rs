@@ -344,7 +344,7 @@ mod tests {
     #[test]
     fn repeated_pixels_shortcut_equals_resampling() {
         let image = crate::testdata::soap_061();
-        for side in [1u32, 2, 4, 8] {
+        for side in [1u32, 2, 4, 8, 16] {
             for (x, y) in [(0u32, 0u32), (37, 91), (200, 13), (392, 392), (150, 301)] {
                 let (x, y) = (x.min(400 - side), y.min(400 - side));
                 let window = [x, y, x + side, y + side];

@@ -16,7 +16,7 @@ use crate::{Error, Result};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::Mutex;
+use std::sync::{Mutex, PoisonError};
 use std::time::Instant;
 
 /// Every setting of vegetation extraction, as in REGION.toml's
@@ -501,17 +501,21 @@ pub fn extract_tiled(
     // Classify and place, as many tiles at once as threads: each of
     // `at_once` workers takes the next tile as soon as its last is done, and
     // writes its core's labels (numbered within the tile) into the map.
+    // A worker that panics ends the scope with its panic, so a poisoned
+    // lock is never read afterwards.
+    fn locked<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+        m.lock().unwrap_or_else(PoisonError::into_inner)
+    }
     let next_tile = AtomicUsize::new(0);
     let learnt: Vec<Mutex<Option<Segmentation>>> = learnt.into_iter().map(Mutex::new).collect();
     let labels_map = Mutex::new(vec![0u32; w * h]);
     let done: Mutex<Vec<(usize, Result<TileResult>)>> = Mutex::new(Vec::new());
-    let lock_error = || Error::Input("a vegetation tile worker stopped".into());
     rayon::scope(|scope| {
         for _ in 0..at_once {
             scope.spawn(|_| loop {
                 let t = next_tile.fetch_add(1, Ordering::Relaxed);
                 let Some(tile) = tiles.get(t) else { break };
-                let segmented = learnt[t].lock().ok().and_then(|mut s| s.take());
+                let segmented = locked(&learnt[t]).take();
                 let mut result = analyse_tile(
                     image,
                     tile,
@@ -522,39 +526,32 @@ pub fn extract_tiled(
                     placement,
                 )
                 .and_then(|r| watch.step_done().map(|()| r));
-                if let Ok(r) = &mut result {
-                    let core_labels = std::mem::take(&mut r.core_labels);
-                    let [x0, y0, x1, _] = tile.core;
-                    let side = x1 - x0;
-                    match labels_map.lock() {
-                        Ok(mut map) => {
-                            for (dy, row) in core_labels.chunks_exact(side).enumerate() {
-                                let at = (y0 + dy) * w + x0;
-                                map[at..at + side].copy_from_slice(row);
-                            }
+                match &mut result {
+                    Ok(r) => {
+                        let [x0, y0, x1, _] = tile.core;
+                        let side = x1 - x0;
+                        let mut map = locked(&labels_map);
+                        for (dy, row) in r.core_labels.chunks_exact(side).enumerate() {
+                            let at = (y0 + dy) * w + x0;
+                            map[at..at + side].copy_from_slice(row);
                         }
-                        Err(_) => result = Err(lock_error()),
+                        drop(map);
+                        // The map holds them now: not kept for every tile.
+                        r.core_labels = Vec::new();
                     }
-                }
-                if result.is_err() {
                     // The other workers stop after their current tile.
-                    next_tile.store(tiles.len(), Ordering::Relaxed);
+                    Err(_) => next_tile.store(tiles.len(), Ordering::Relaxed),
                 }
-                if let Ok(mut done) = done.lock() {
-                    done.push((t, result));
-                }
+                locked(&done).push((t, result));
             });
         }
     });
-    let mut done = done.into_inner().map_err(|_| lock_error())?;
-    let mut labels_map = labels_map.into_inner().map_err(|_| lock_error())?;
-    if done.len() < tiles.len() {
-        if let Some((_, Err(e))) = done.into_iter().find(|(_, r)| r.is_err()) {
-            return Err(e);
-        }
-        return Err(lock_error());
-    }
-    // Number the regions in tile order.
+    let mut done = done.into_inner().unwrap_or_else(PoisonError::into_inner);
+    let mut labels_map = labels_map
+        .into_inner()
+        .unwrap_or_else(PoisonError::into_inner);
+    // Number the regions in tile order. Tiles are missing only after a
+    // tile's error, which the loop returns.
     done.sort_by_key(|(t, _)| *t);
     let mut regions = Vec::new();
     let mut labels = Vec::new();

@@ -249,23 +249,7 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
         ms
     };
 
-    // Split: every tile in parallel, then the levels above tile size.
-    let tiles_x = w.div_ceil(TILE);
-    let tiles_y = h.div_ceil(TILE);
-    let tiles: Vec<TileSplit> = (0..tiles_x * tiles_y)
-        .into_par_iter()
-        .map_init(TileScratch::new, |scratch, t| {
-            scratch.split(
-                image,
-                &predicate,
-                (t % tiles_x) * TILE,
-                (t / tiles_x) * TILE,
-            )
-        })
-        .collect();
-    let (leaves, leaf_moments, cover) = split_coarse(&tiles, tiles_x, tiles_y, w, h, &predicate);
-    drop(tiles);
-    let mut labels = paint(&leaves, &cover, tiles_x, w, h);
+    let (leaves, leaf_moments, mut labels) = split(image, &predicate);
     let split_ms = lap();
 
     // Merge along the region adjacency graph.
@@ -383,6 +367,25 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
         leaves: leaves.len(),
         steps,
     })
+}
+
+/// Split `image` into quadtree leaves: every tile in parallel, then the
+/// levels above tile size. The leaves in depth-first order, their moments,
+/// and the leaf index of every pixel.
+fn split(image: &Image, predicate: &Predicate) -> (Vec<Leaf>, Vec<Moments>, Vec<u32>) {
+    let (w, h) = (image.width, image.height);
+    let tiles_x = w.div_ceil(TILE);
+    let tiles_y = h.div_ceil(TILE);
+    let tiles: Vec<TileSplit> = (0..tiles_x * tiles_y)
+        .into_par_iter()
+        .map_init(TileScratch::new, |scratch, t| {
+            scratch.split(image, predicate, (t % tiles_x) * TILE, (t / tiles_x) * TILE)
+        })
+        .collect();
+    let (leaves, leaf_moments, cover) = split_coarse(&tiles, tiles_x, tiles_y, w, h, predicate);
+    drop(tiles);
+    let labels = paint(&leaves, &cover, tiles_x, w, h);
+    (leaves, leaf_moments, labels)
 }
 
 /// Per-thread buffers for splitting one tile: the moments pyramid.
@@ -889,22 +892,8 @@ mod tests {
                 ..Default::default()
             };
             let predicate = Predicate::new(&params, image.bands);
-            let (w, h) = (image.width, image.height);
-            let (tiles_x, tiles_y) = (w.div_ceil(TILE), h.div_ceil(TILE));
-            let mut scratch = TileScratch::new();
-            let tiles: Vec<TileSplit> = (0..tiles_x * tiles_y)
-                .map(|t| {
-                    scratch.split(
-                        &image,
-                        &predicate,
-                        (t % tiles_x) * TILE,
-                        (t / tiles_x) * TILE,
-                    )
-                })
-                .collect();
-            let (leaves, _, cover) = split_coarse(&tiles, tiles_x, tiles_y, w, h, &predicate);
-            let labels = paint(&leaves, &cover, tiles_x, w, h);
-            let edges = adjacency(&leaves, &labels, w, h);
+            let (leaves, _, labels) = split(&image, &predicate);
+            let edges = adjacency(&leaves, &labels, image.width, image.height);
             assert!(edges.len() > leaves.len(), "{} edges", edges.len());
             assert!(edges.iter().all(|e| e.1 < e.2));
             assert!(edges
