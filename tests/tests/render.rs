@@ -33,7 +33,9 @@ fn depth_of_a_real_bundle_matches_the_exact_surface() {
         false,
     )
     .unwrap();
-    let frame = scene::render_bundle(&b, &view, &options, None).unwrap();
+    let frame = scene::render_bundle(&b, &view, &options, None)
+        .unwrap()
+        .to_rows();
     let heights = b.heights().unwrap();
     let mask = b.mask().unwrap();
     let tf = b.frame();
@@ -91,7 +93,9 @@ fn renders_of_real_bundles_match_their_references() {
         let view = View::home(&b.manifest.grid, [320, 180]);
         let bands = bands.map(|t| scene::parse_bands(t).unwrap());
         let options = scene::render_options(Mode::Raycast, false, bands, prefilter).unwrap();
-        let frame = scene::render_bundle(&b, &view, &options, hillshade).unwrap();
+        let frame = scene::render_bundle(&b, &view, &options, hillshade)
+            .unwrap()
+            .to_rows();
         let rgba = frame.rgba_bytes();
         let reference = repo(&format!("data/golden/renders/{name}.png"));
         compare_with_reference(rgba, [320, 180], &reference, 16, |d| {

@@ -257,7 +257,7 @@ pub fn render_once(
     let mut readback = renderer.targets.read(device, queue)?;
     // A terrain-only raycast's depth is the CPU buffer itself (not uploaded).
     if let Some(depth) = renderer.raycast_depth(scene, settings) {
-        readback.depth.copy_from_slice(depth);
+        readback.depth.copy_from_slice(&depth);
     }
     Ok((readback, stats))
 }

@@ -69,7 +69,9 @@ fn render_command_writes_what_the_library_renders() {
         ]);
         let bands = scene::parse_bands("3000:4:sub,inf:1").unwrap();
         let options = scene::render_options(Mode::Raycast, false, Some(bands), false).unwrap();
-        let frame = scene::render_bundle(&b, &view, &options, None).unwrap();
+        let frame = scene::render_bundle(&b, &view, &options, None)
+            .unwrap()
+            .to_rows();
         assert_eq!(decode_png(&png), frame.rgba_bytes());
         let written: Vec<f32> = std::fs::read(&depth)
             .unwrap()

@@ -565,11 +565,11 @@ impl Renderer {
         Ok(stats)
     }
 
-    /// The depth of the last frame when it was a terrain-only raycast:
-    /// exactly the CPU depth buffer (not uploaded for such frames).
-    pub fn raycast_depth<'a>(&self, scene: &'a Scene, settings: &Settings) -> Option<&'a [f32]> {
+    /// The depth of the last frame, row-major, when it was a terrain-only
+    /// raycast: exactly the CPU depth buffer (not uploaded for such frames).
+    pub fn raycast_depth(&self, scene: &Scene, settings: &Settings) -> Option<Vec<f32>> {
         let objects_drawn = settings.objects && scene.has_objects();
         (settings.mode == Mode::Raycast && settings.terrain && !objects_drawn)
-            .then(|| scene.raycaster.frame().depth.as_slice())
+            .then(|| scene.raycaster.frame().to_rows().depth)
     }
 }

@@ -1,14 +1,16 @@
 //! Raycast mode: relevo-core's floating-horizon raycast writes colour and
-//! depth on the CPU; they are uploaded (depth as `R32Float`, since wgpu
-//! cannot write a depth texture directly) and a full-screen pass writes both
-//! into the shared targets with `frag_depth`. A terrain-only frame uploads
-//! colour alone (Szenberg 1997, table 8.1).
+//! depth on the CPU, in column tiles; they are uploaded as they are, one
+//! tile per layer of a texture array (depth as `R32Float`, since wgpu
+//! cannot write a depth texture directly), and a full-screen pass writes
+//! both into the shared targets with `frag_depth`. A terrain-only frame
+//! uploads colour alone (Szenberg 1997, table 8.1).
 
 use super::targets::{Targets, COLOUR_FORMAT};
 use super::{FrameStats, Settings};
 use crate::scene::Scene;
 use eframe::egui_wgpu::wgpu;
 use relevo_core::camera::Camera;
+use relevo_core::horizon::TILE_COLUMNS;
 use std::time::Instant;
 
 pub struct RaycastPass {
@@ -34,7 +36,7 @@ impl RaycastPass {
             visibility: wgpu::ShaderStages::FRAGMENT,
             ty: wgpu::BindingType::Texture {
                 sample_type: wgpu::TextureSampleType::Float { filterable },
-                view_dimension: wgpu::TextureViewDimension::D2,
+                view_dimension: wgpu::TextureViewDimension::D2Array,
                 multisampled: false,
             },
             count: None,
@@ -100,14 +102,14 @@ impl RaycastPass {
                 bytes,
                 wgpu::TexelCopyBufferLayout {
                     offset: 0,
-                    bytes_per_row: Some(4 * size[0]),
+                    bytes_per_row: Some(4 * TILE_COLUMNS as u32),
                     rows_per_image: Some(size[1]),
                 },
                 texture.size(),
             );
         };
         let start = Instant::now();
-        write(&uploads.colour, frame.rgba_bytes());
+        write(&uploads.colour, bytemuck::cast_slice(&frame.rgba));
         stats.colour_upload_ms = start.elapsed().as_secs_f64() * 1e3;
         self.depth_uploaded = objects_drawn;
         if objects_drawn {
@@ -138,9 +140,9 @@ impl RaycastPass {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(label),
                 size: wgpu::Extent3d {
-                    width: size[0],
+                    width: TILE_COLUMNS as u32,
                     height: size[1],
-                    depth_or_array_layers: 1,
+                    depth_or_array_layers: size[0].div_ceil(TILE_COLUMNS as u32),
                 },
                 mip_level_count: 1,
                 sample_count: 1,
@@ -152,7 +154,13 @@ impl RaycastPass {
         };
         let colour = texture("raycast colour", COLOUR_FORMAT);
         let depth = texture("raycast depth", wgpu::TextureFormat::R32Float);
-        let view = |t: &wgpu::Texture| t.create_view(&wgpu::TextureViewDescriptor::default());
+        let view = |t: &wgpu::Texture| {
+            // An array even of one tile (the default view of one layer is 2D).
+            t.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            })
+        };
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("raycast bindings"),
             layout: &self.layout,

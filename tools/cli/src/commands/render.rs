@@ -120,10 +120,11 @@ pub fn run(a: RenderArgs) -> Result<()> {
     options.grow_steps = a.grow_steps;
     let hillshade = a.hillshade.map(|v| [v[0], v[1]]);
     let frame = scene::render_bundle(&bundle, &view, &options, hillshade)?;
-    let png = encode_rgba(frame.rgba_bytes(), frame.width, frame.height)?;
+    let rows = frame.to_rows();
+    let png = encode_rgba(rows.rgba_bytes(), rows.width, rows.height)?;
     output::write_atomic(&a.out, &png)?;
     if let Some(d) = &a.depth {
-        output::write_atomic(d, bytemuck::cast_slice(&frame.depth))?;
+        output::write_atomic(d, bytemuck::cast_slice(&rows.depth))?;
     }
     let s = frame.steps;
     eprintln!(

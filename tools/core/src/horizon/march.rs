@@ -8,81 +8,109 @@
 //! flight together instead of one after another. Slices are taken
 //! [`CHUNK`] at a time, and a chunk where no terrain under the packet can
 //! rise above any line's horizon is skipped unsampled (empty-space
-//! skipping, from each tile's highest height). The packet paints into a
-//! small image of its own, [`PACKET`] pixels a row (it stays in cache), and
-//! copies each row to the frame whole, so the frame is written once, in
-//! runs of 128 bytes. The packet ends when every line has painted the top
-//! row it is needed on (the horizon reached the top of the screen) or the
-//! slices run out.
+//! skipping, from each tile's highest height). The packet paints straight
+//! into the frame, whose column tiles (see [`super::frame`]) give its lines
+//! one contiguous block. The packet ends when every line has painted the
+//! top row it is needed on (the horizon reached the top of the screen) or
+//! the slices run out; the rows left above each line's horizon take the
+//! sky.
 
+use super::frame::{tiled_index, tiled_len, TILE_COLUMNS};
 use super::sample::Terrain;
 use super::screen::Screen;
 use super::Slice;
-use std::cell::RefCell;
 
 /// Lines marched together.
 pub(super) const PACKET: usize = 32;
 
+// A packet's lines lie in one tile.
+const _: () = assert!(TILE_COLUMNS.is_multiple_of(PACKET));
+
 /// Slices tested together against the coarse heights before any is sampled.
 const CHUNK: usize = 8;
 
-/// A row-major colour and depth image, top row first, that tasks marching
-/// disjoint sets of lines write into at once: column j belongs to line j.
+/// A colour and depth image in column tiles, one column per line, that
+/// tasks marching disjoint sets of lines write into at once.
 pub(super) struct Target {
     colour: *mut u32,
     depth: *mut f32,
-    stride: usize,
+    width: usize,
     rows: usize,
 }
 
-// SAFETY: tasks write only the columns of their own lines (see `set_run`),
-// so no element is ever written by two threads, and nothing reads while
-// they run.
+// SAFETY: tasks write only the columns of their own lines (see
+// `Target::lanes`), so no element is ever written by two threads, and
+// nothing reads while they run.
 unsafe impl Send for Target {}
 // SAFETY: as for `Send`.
 unsafe impl Sync for Target {}
 
 impl Target {
-    /// `colour` and `depth` hold `rows` rows of `stride` elements.
-    pub fn new(colour: &mut [u32], depth: &mut [f32], stride: usize, rows: usize) -> Self {
-        assert!(colour.len() >= stride * rows && depth.len() >= stride * rows);
+    /// `colour` and `depth` hold a `width` × `rows` image in column tiles.
+    pub fn new(colour: &mut [u32], depth: &mut [f32], width: usize, rows: usize) -> Self {
+        let len = tiled_len(width, rows);
+        assert!(colour.len() >= len && depth.len() >= len);
         Target {
             colour: colour.as_mut_ptr(),
             depth: depth.as_mut_ptr(),
-            stride,
+            width,
             rows,
         }
     }
 
-    /// Write `colour` and `depth` into row `r` (from the bottom), from
-    /// column `first` on.
+    /// The columns of lines `first..first + count`, all in one tile.
     ///
     /// # Safety
-    /// No other thread may be writing those columns.
-    #[inline]
-    unsafe fn set_run(&self, r: usize, first: usize, colour: &[u32], depth: &[f32]) {
-        let n = colour.len();
-        assert!(r < self.rows && first + n <= self.stride && depth.len() == n);
-        let i = (self.rows - 1 - r) * self.stride + first;
-        // SAFETY: `i..i + n` is in bounds (checked above) and, by the
-        // caller's promise, no other thread writes these columns; the
-        // sources are the caller's own buffers, so nothing overlaps.
+    /// No other thread may be writing those columns while the result lives.
+    unsafe fn lanes(&self, first: usize, count: usize) -> Lanes {
+        assert!(count <= PACKET && first + count <= self.width);
+        assert!(first % TILE_COLUMNS + count <= TILE_COLUMNS);
+        let at = tiled_index(first, 0, self.rows);
+        // SAFETY: `at` is within the image (the column is).
         unsafe {
-            let (c, d) = (self.colour.add(i), self.depth.add(i));
-            match (
-                <&[u32; PACKET]>::try_from(colour),
-                <&[f32; PACKET]>::try_from(depth),
-            ) {
-                // A whole packet's row: one fixed-size copy each.
-                (Ok(colour), Ok(depth)) => {
-                    c.cast::<[u32; PACKET]>().write_unaligned(*colour);
-                    d.cast::<[f32; PACKET]>().write_unaligned(*depth);
-                }
-                _ => {
-                    std::ptr::copy_nonoverlapping(colour.as_ptr(), c, n);
-                    std::ptr::copy_nonoverlapping(depth.as_ptr(), d, n);
-                }
+            Lanes {
+                colour: self.colour.add(at),
+                depth: self.depth.add(at),
+                rows: self.rows,
+                count,
             }
+        }
+    }
+}
+
+/// One packet's columns of a [`Target`].
+struct Lanes {
+    /// Top row of the packet's first column.
+    colour: *mut u32,
+    depth: *mut f32,
+    rows: usize,
+    count: usize,
+}
+
+impl Lanes {
+    /// Paint row `r` (from the bottom) of lane `k`.
+    #[inline(always)]
+    fn set(&mut self, r: usize, k: usize, colour: u32, depth: f32) {
+        assert!(r < self.rows && k < self.count);
+        let i = (self.rows - 1 - r) * TILE_COLUMNS + k;
+        // SAFETY: in bounds (checked above; the column and its rows lie in
+        // the target's tile), and the columns are this packet's alone
+        // (`Target::lanes`' promise).
+        unsafe {
+            self.colour.add(i).write(colour);
+            self.depth.add(i).write(depth);
+        }
+    }
+
+    /// Paint row `r` (from the bottom) of every lane.
+    #[inline(always)]
+    fn set_row(&mut self, r: usize, colour: u32, depth: f32) {
+        assert!(r < self.rows);
+        let i = (self.rows - 1 - r) * TILE_COLUMNS;
+        // SAFETY: as for `set`, for the `count` lanes.
+        unsafe {
+            std::slice::from_raw_parts_mut(self.colour.add(i), self.count).fill(colour);
+            std::slice::from_raw_parts_mut(self.depth.add(i), self.count).fill(depth);
         }
     }
 }
@@ -204,18 +232,6 @@ impl Sampling for FixedSampling<'_> {
     }
 }
 
-/// A packet's own image, [`PACKET`] pixels a row, bottom row first; one
-/// per thread, kept from frame to frame.
-#[derive(Default)]
-struct PacketImage {
-    colour: Vec<u32>,
-    depth: Vec<f32>,
-}
-
-thread_local! {
-    static PACKET_IMAGE: RefCell<PacketImage> = RefCell::default();
-}
-
 /// What every packet of a frame shares.
 pub(super) struct Pass<'a> {
     pub terrain: &'a Terrain<'a>,
@@ -234,7 +250,8 @@ pub(super) struct Pass<'a> {
 }
 
 impl Pass<'_> {
-    /// March lines `first..first + count` (count ≤ [`PACKET`]) into `target`.
+    /// March lines `first..first + count` (count ≤ [`PACKET`], in one
+    /// tile) into `target`.
     ///
     /// # Safety
     /// No other thread may be marching any of these lines into `target`.
@@ -245,40 +262,15 @@ impl Pass<'_> {
         count: usize,
         target: &Target,
     ) {
-        PACKET_IMAGE.with_borrow_mut(|image| {
-            #[cfg(target_arch = "x86_64")]
-            let sky_from = if std::is_x86_feature_detected!("avx2") {
-                // SAFETY: the machine has AVX2 (checked just above).
-                unsafe { self.paint_avx2(sampling, first, count, image) }
-            } else {
-                self.paint(sampling, first, count, image)
-            };
-            #[cfg(not(target_arch = "x86_64"))]
-            let sky_from = self.paint(sampling, first, count, image);
-            let needed = &self.screen.rows_needed[first..first + count];
-            let sky = ([self.sky; PACKET], [1.0f32; PACKET]);
-            for r in 0..self.screen.height {
-                let (colour, depth) = if r < sky_from {
-                    let at = r * PACKET;
-                    (&image.colour[at..at + count], &image.depth[at..at + count])
-                } else {
-                    (&sky.0[..count], &sky.1[..count])
-                };
-                let inside = |k: usize| (needed[k][0]..needed[k][1]).contains(&r);
-                if (0..count).all(inside) {
-                    // SAFETY: these lines are ours (the caller's promise).
-                    unsafe { target.set_run(r, first, colour, depth) };
-                } else {
-                    // A pitched screen's outer lines need only some rows.
-                    for k in (0..count).filter(|&k| inside(k)) {
-                        // SAFETY: as above.
-                        unsafe {
-                            target.set_run(r, first + k, &colour[k..k + 1], &depth[k..k + 1]);
-                        }
-                    }
-                }
-            }
-        });
+        // SAFETY: these lines are ours (the caller's promise).
+        let mut lanes = unsafe { target.lanes(first, count) };
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the machine has AVX2 (checked just above).
+            unsafe { self.paint_avx2(sampling, first, &mut lanes) };
+            return;
+        }
+        self.paint(sampling, first, &mut lanes);
     }
 
     /// [`Pass::paint`] compiled for AVX2, where the lanes' positions and
@@ -288,17 +280,11 @@ impl Pass<'_> {
     /// The machine must have AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn paint_avx2<S: Sampling>(
-        &self,
-        sampling: &S,
-        first: usize,
-        count: usize,
-        image: &mut PacketImage,
-    ) -> usize {
-        self.paint(sampling, first, count, image)
+    unsafe fn paint_avx2<S: Sampling>(&self, sampling: &S, first: usize, lanes: &mut Lanes) {
+        self.paint(sampling, first, lanes);
     }
 
-    /// March lines `first..first + count` into the packet's own image.
+    /// March the lines of `lanes`, from line `first` on, into them.
     ///
     /// Every slice samples all [`PACKET`] lanes (nearest samples without
     /// branching; lanes past `count`, or done, sample too and cover
@@ -306,18 +292,11 @@ impl Pass<'_> {
     /// metre its next unpainted row needs — and only the lanes whose sample
     /// covers a row paint.
     #[inline(always)]
-    fn paint<S: Sampling>(
-        &self,
-        sampling: &S,
-        first: usize,
-        count: usize,
-        image: &mut PacketImage,
-    ) -> usize {
+    fn paint<S: Sampling>(&self, sampling: &S, first: usize, lanes: &mut Lanes) {
+        let count = lanes.count;
         let slope = &self.screen.slope[..];
         let forward_per_depth = &self.screen.forward_per_depth[..];
         let [depth_a, depth_b] = self.depth_terms;
-        image.colour.resize(self.screen.height * PACKET, 0);
-        image.depth.resize(self.screen.height * PACKET, 0.0);
         // Per lane: its ground direction, next unpainted row, the row its
         // work ends at, and the slope a sample must rise above to cover the
         // next row (∞ for a lane with nothing left to paint).
@@ -377,8 +356,7 @@ impl Pass<'_> {
                         // before the far plane.
                         let depth = (depth_a - depth_over) as f32;
                         while *r < end && rise > s * slope[*r] {
-                            image.colour[*r * PACKET + k] = colour;
-                            image.depth[*r * PACKET + k] = depth;
+                            lanes.set(*r, k, colour, depth);
                             *r += 1;
                         }
                     }
@@ -393,8 +371,7 @@ impl Pass<'_> {
                                 (depth_a - depth_over * forward_per_depth[*r]) as f32,
                             )
                         };
-                        image.colour[*r * PACKET + k] = c;
-                        image.depth[*r * PACKET + k] = depth;
+                        lanes.set(*r, k, c, depth);
                         *r += 1;
                     }
                     if *r < end {
@@ -409,15 +386,23 @@ impl Pass<'_> {
                 break;
             }
         }
-        // Sky above each line's horizon, up to the row from which every
-        // line shows sky (the copy writes those rows from constants).
-        let sky_from = row[..count].iter().copied().max().unwrap_or(0);
-        for k in 0..count {
-            for r in row[k]..end[k].min(sky_from) {
-                image.colour[r * PACKET + k] = self.sky;
-                image.depth[r * PACKET + k] = 1.0;
+        // Sky above each line's horizon: rows where every lane shows it
+        // whole, the rest lane by lane.
+        let lanes_sky_from = &row[..count];
+        let all_sky_from = lanes_sky_from.iter().copied().max().unwrap_or(0);
+        let all_sky_until = end[..count].iter().copied().min().unwrap_or(0);
+        let some_sky_from = lanes_sky_from.iter().copied().min().unwrap_or(0);
+        let some_sky_until = end[..count].iter().copied().max().unwrap_or(0);
+        for r in some_sky_from..some_sky_until {
+            if (all_sky_from..all_sky_until).contains(&r) {
+                lanes.set_row(r, self.sky, 1.0);
+                continue;
+            }
+            for k in 0..count {
+                if (row[k]..end[k]).contains(&r) {
+                    lanes.set(r, k, self.sky, 1.0);
+                }
             }
         }
-        sky_from
     }
 }

@@ -22,10 +22,12 @@
 //! column at the same distance, rays evenly spaced in angle, radial steps)
 //! as a baseline; it does not match the GPU.
 
+mod frame;
 mod march;
 mod sample;
 mod screen;
 
+pub use frame::{tiled_index, tiled_len, Frame, Rows, TILE_COLUMNS};
 pub use sample::{ColorSource, Terrain};
 pub use screen::{pitch_range, MAX_LINE_DENSITY};
 
@@ -104,48 +106,8 @@ pub struct Steps {
     pub setup_ms: f64,
     /// Marching the columns.
     pub march_ms: f64,
-    /// Column-major buffers to the row-major image and depth.
+    /// A pitched camera's lines to the screen's pixels.
     pub output_ms: f64,
-}
-
-/// A rendered image: RGBA8 and [0, 1] depth, row-major, top row first.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct Frame {
-    pub width: usize,
-    pub height: usize,
-    /// One pixel per element, RGBA bytes in little-endian order
-    /// ([`Frame::rgba_bytes`] views them as bytes).
-    pub rgba: Vec<u32>,
-    pub depth: Vec<f32>,
-    pub steps: Steps,
-}
-
-impl Frame {
-    /// The image as RGBA8 bytes, row-major.
-    pub fn rgba_bytes(&self) -> &[u8] {
-        bytemuck::cast_slice(&self.rgba)
-    }
-
-    /// Peak signal-to-noise ratio of this image's RGB against `reference`'s
-    /// (same size), dB; infinite when they are equal.
-    pub fn psnr_db(&self, reference: &Frame) -> f64 {
-        let squared: f64 = self
-            .rgba_bytes()
-            .chunks_exact(4)
-            .zip(reference.rgba_bytes().chunks_exact(4))
-            .map(|(a, b)| {
-                (0..3)
-                    .map(|c| (a[c] as f64 - b[c] as f64).powi(2))
-                    .sum::<f64>()
-            })
-            .sum();
-        let mse = squared / (3 * self.rgba.len()).max(1) as f64;
-        if mse == 0.0 {
-            f64::INFINITY
-        } else {
-            10.0 * (255.0f64 * 255.0 / mse).log10()
-        }
-    }
 }
 
 /// One slice: horizontal forward distance and its band.
@@ -283,10 +245,7 @@ impl Renderer {
         let (w, h) = (camera.width as usize, camera.height as usize);
         if w == 0 || h == 0 {
             // A window minimised to nothing: an empty frame.
-            self.frame.width = w;
-            self.frame.height = h;
-            self.frame.rgba.clear();
-            self.frame.depth.clear();
+            self.frame.resize(w, h);
             return Ok(&self.frame);
         }
         self.screen.fill(camera)?;
@@ -319,12 +278,9 @@ impl Renderer {
 
         let start = Instant::now();
         let f = &mut self.frame;
-        f.width = w;
-        f.height = h;
-        f.rgba.resize(w * h, 0);
-        f.depth.resize(w * h, 0.0);
+        f.resize(w, h);
         let target = if screen.pitched {
-            let size = screen.lines * h;
+            let size = tiled_len(screen.lines, h);
             self.line_colour.resize(size, 0);
             self.line_depth.resize(size, 0.0);
             march::Target::new(&mut self.line_colour, &mut self.line_depth, screen.lines, h)
@@ -369,22 +325,26 @@ impl Renderer {
         (0..packets).into_par_iter().for_each(march_packet);
         let march_ms = start.elapsed().as_secs_f64() * 1e3;
 
-        // A pitched screen: every pixel takes its nearest line.
+        // A pitched screen: every pixel takes its nearest line (both in
+        // column tiles).
         let start = Instant::now();
         if screen.pitched {
-            let lines = screen.lines;
             let (line_colour, line_depth) = (&self.line_colour, &self.line_depth);
+            let tile = TILE_COLUMNS * h;
             f.rgba
-                .par_chunks_mut(w)
-                .zip(f.depth.par_chunks_mut(w))
+                .par_chunks_mut(tile)
+                .zip(f.depth.par_chunks_mut(tile))
                 .enumerate()
-                .for_each(|(y, (rgba, depth))| {
-                    let r = h - 1 - y;
-                    let row = y * lines;
-                    for p in 0..w {
-                        let j = screen.line_at(r, p);
-                        rgba[p] = line_colour[row + j];
-                        depth[p] = line_depth[row + j];
+                .for_each(|(t, (rgba, depth))| {
+                    let columns = TILE_COLUMNS.min(w - t * TILE_COLUMNS);
+                    for y in 0..h {
+                        let r = h - 1 - y;
+                        for c in 0..columns {
+                            let j = screen.line_at(r, t * TILE_COLUMNS + c);
+                            let from = tiled_index(j, y, h);
+                            rgba[y * TILE_COLUMNS + c] = line_colour[from];
+                            depth[y * TILE_COLUMNS + c] = line_depth[from];
+                        }
                     }
                 });
         }
@@ -526,7 +486,7 @@ mod tests {
             }],
             ..Default::default()
         };
-        let frame = render(&terrain, &cam, &opts).unwrap();
+        let frame = render(&terrain, &cam, &opts).unwrap().to_rows();
         let vp = cam.view_projection();
         spots
             .iter()
@@ -582,7 +542,7 @@ mod tests {
     /// measure its depth against the exact surface: per terrain pixel, the
     /// distance error in slice spacings (sorted), and how many pixels the
     /// two disagree on being terrain or sky.
-    fn depth_against_exact_surface(terrain: &Terrain, cam: &Camera) -> (Frame, Vec<f64>, usize) {
+    fn depth_against_exact_surface(terrain: &Terrain, cam: &Camera) -> (Rows, Vec<f64>, usize) {
         let opts = RenderOptions {
             bands: vec![Band {
                 until_m: f64::INFINITY,
@@ -591,7 +551,7 @@ mod tests {
             }],
             ..Default::default()
         };
-        let frame = render(terrain, cam, &opts).unwrap();
+        let frame = render(terrain, cam, &opts).unwrap().to_rows();
         let (mut errors, mut disagree) = (Vec::new(), 0);
         let d = cam.plane_distance_px();
         let (sin, cos) = cam.pitch_deg.to_radians().sin_cos();
@@ -840,8 +800,8 @@ mod tests {
                         grow_steps,
                         ..Default::default()
                     };
-                    let skipped = render(&terrain, &cam, &options).unwrap();
-                    let all = render(&every_slice, &cam, &options).unwrap();
+                    let skipped = render(&terrain, &cam, &options).unwrap().to_rows();
+                    let all = render(&every_slice, &cam, &options).unwrap().to_rows();
                     assert!(
                         skipped.rgba == all.rgba && skipped.depth == all.depth,
                         "{} from {eye:?} pitch {pitch}: {options:?}",
@@ -890,8 +850,8 @@ mod tests {
                             ..Default::default()
                         };
                         let (a, b) = (
-                            render(&floor, &cam, &options).unwrap(),
-                            render(&walled, &cam, &options).unwrap(),
+                            render(&floor, &cam, &options).unwrap().to_rows(),
+                            render(&walled, &cam, &options).unwrap().to_rows(),
                         );
                         let terrain = a.depth.iter().filter(|&&d| d < 1.0).count();
                         assert!(
@@ -956,9 +916,10 @@ mod tests {
             let psnr = grown.frame.psnr_db(&full.frame);
             let disagree = full
                 .frame
+                .to_rows()
                 .depth
                 .iter()
-                .zip(&grown.frame.depth)
+                .zip(&grown.frame.to_rows().depth)
                 .filter(|(a, b)| (**a < 1.0) != (**b < 1.0))
                 .count();
             eprintln!(
@@ -979,7 +940,9 @@ mod tests {
         let color = texel_per_cell(&rgba, side);
         let terrain = Terrain::new(side, 1.0, &heights, &mask, Some(color));
         let cam = camera(320, 180, [128.0, 0.0, 30.0], 10.0, 120.0, 400.0);
-        let float = render(&terrain, &cam, &RenderOptions::default()).unwrap();
+        let float = render(&terrain, &cam, &RenderOptions::default())
+            .unwrap()
+            .to_rows();
         let fixed = render(
             &terrain,
             &cam,
@@ -988,7 +951,8 @@ mod tests {
                 ..Default::default()
             },
         )
-        .unwrap();
+        .unwrap()
+        .to_rows();
         let differ = float
             .depth
             .iter()
@@ -1022,7 +986,7 @@ mod tests {
                 prefilter,
                 ..Default::default()
             };
-            let f = render(&terrain, &cam, &opts).unwrap();
+            let f = render(&terrain, &cam, &opts).unwrap().to_rows();
             // High-frequency energy of the far half of the terrain rows: mean
             // absolute difference of horizontal neighbours.
             let terrain_rows: Vec<usize> =
