@@ -329,21 +329,28 @@ impl Renderer {
         // column tiles).
         let start = Instant::now();
         if screen.pitched {
-            let (line_colour, line_depth) = (&self.line_colour, &self.line_depth);
+            let (line_colour, line_depth) = (&self.line_colour[..], &self.line_depth[..]);
             let tile = TILE_COLUMNS * h;
             f.rgba
                 .par_chunks_mut(tile)
                 .zip(f.depth.par_chunks_mut(tile))
                 .enumerate()
                 .for_each(|(t, (rgba, depth))| {
-                    let columns = TILE_COLUMNS.min(w - t * TILE_COLUMNS);
+                    let first = t * TILE_COLUMNS;
+                    let columns = TILE_COLUMNS.min(w - first);
+                    // The lines of one row of the tile, then their pixels.
+                    let mut lines = [0u32; TILE_COLUMNS];
+                    let lines = &mut lines[..columns];
                     for y in 0..h {
-                        let r = h - 1 - y;
-                        for c in 0..columns {
-                            let j = screen.line_at(r, t * TILE_COLUMNS + c);
-                            let from = tiled_index(j, y, h);
-                            rgba[y * TILE_COLUMNS + c] = line_colour[from];
-                            depth[y * TILE_COLUMNS + c] = line_depth[from];
+                        screen.lines_on_row(h - 1 - y, first, lines);
+                        let row = y * TILE_COLUMNS;
+                        let pixels = rgba[row..row + columns]
+                            .iter_mut()
+                            .zip(&mut depth[row..row + columns]);
+                        for ((colour, depth), &j) in pixels.zip(&*lines) {
+                            let from = tiled_index(j as usize, y, h);
+                            *colour = line_colour[from];
+                            *depth = line_depth[from];
                         }
                     }
                 });

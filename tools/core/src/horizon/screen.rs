@@ -200,8 +200,41 @@ impl Screen {
     #[inline]
     pub fn line_at(&self, r: usize, px: usize) -> usize {
         let [scale, shift] = self.row_map[r];
-        (px as f64 * scale + shift + 0.5).max(0.0) as usize
+        nearest_line(px, scale, shift)
     }
+
+    /// [`Screen::line_at`] of the pixels `first..first + out.len()` of row
+    /// `r`.
+    #[inline]
+    pub fn lines_on_row(&self, r: usize, first: usize, out: &mut [u32]) {
+        let [scale, shift] = self.row_map[r];
+        let last = self.lines.saturating_sub(1) as f64;
+        for (i, line) in out.iter_mut().enumerate() {
+            // Every pixel's line is one of the screen's (`lines` is the
+            // largest + 1), so the clamp changes nothing but lets the
+            // conversion skip saturation.
+            let v = line_position((first + i) as f64, scale, shift)
+                .max(0.0)
+                .min(last);
+            // SAFETY: finite (`max` takes 0 over NaN) and in
+            // [0, lines − 1], which fits a u32.
+            *line = unsafe { v.to_int_unchecked::<u32>() };
+        }
+    }
+}
+
+/// The line nearest pixel column `px` on a row mapped by `scale` and
+/// `shift` (see [`Screen::row_map`]).
+#[inline(always)]
+fn nearest_line(px: usize, scale: f64, shift: f64) -> usize {
+    line_position(px as f64, scale, shift).max(0.0) as usize
+}
+
+/// Where pixel column `px` falls among the lines, plus ½: its integer
+/// part is the nearest line.
+#[inline(always)]
+fn line_position(px: f64, scale: f64, shift: f64) -> f64 {
+    px * scale + shift + 0.5
 }
 
 #[cfg(test)]
