@@ -268,6 +268,9 @@ mod tests {
         }
     }
 
+    /// Every pixel's line paints the pixel's row, lines never step back
+    /// along a row, and the gather's lines, a row piece at a time, are the
+    /// same rule's.
     #[test]
     fn every_pixel_of_a_pitched_screen_takes_a_line_that_paints_its_row() {
         for pitch in [-45.0, -20.0, 15.0, 40.0] {
@@ -275,10 +278,16 @@ mod tests {
             let mut screen = Screen::default();
             screen.fill(&cam).unwrap();
             assert!(screen.lines > 1920 && (screen.lines as f64) < 1920.0 * MAX_LINE_DENSITY);
+            let mut on_row = [0u32; 1920];
             for r in 0..1080 {
+                // In pieces of a tile's width, from uneven starts too.
+                for (first, piece) in [(0, 64), (64, 1856), (1900, 20)] {
+                    screen.lines_on_row(r, first, &mut on_row[first..first + piece]);
+                }
                 let mut previous = None;
                 for p in 0..1920 {
                     let j = screen.line_at(r, p);
+                    assert_eq!(on_row[p] as usize, j, "pitch {pitch}: row {r} pixel {p}");
                     let [lo, hi] = screen.rows_needed[j];
                     assert!(
                         lo <= r && r < hi,
