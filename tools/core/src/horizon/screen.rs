@@ -285,9 +285,9 @@ mod tests {
                     screen.lines_on_row(r, first, &mut on_row[first..first + piece]);
                 }
                 let mut previous = None;
-                for p in 0..1920 {
+                for (p, &gathered) in on_row.iter().enumerate() {
                     let j = screen.line_at(r, p);
-                    assert_eq!(on_row[p] as usize, j, "pitch {pitch}: row {r} pixel {p}");
+                    assert_eq!(gathered as usize, j, "pitch {pitch}: row {r} pixel {p}");
                     let [lo, hi] = screen.rows_needed[j];
                     assert!(
                         lo <= r && r < hi,
