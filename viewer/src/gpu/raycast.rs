@@ -183,3 +183,15 @@ impl RaycastPass {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::TILE_COLUMNS;
+
+    /// The shader splits pixels into tiles with the raycaster's tile width.
+    #[test]
+    fn the_shader_reads_the_raycasters_tiles() {
+        let declared = format!("const TILE_COLUMNS: u32 = {TILE_COLUMNS}u;");
+        assert!(include_str!("raycast.wgsl").contains(&declared));
+    }
+}

@@ -27,10 +27,13 @@ struct Texel {
     tile: i32,
 };
 
+// relevo_core::horizon::TILE_COLUMNS (a test checks they agree): a
+// constant power of two, so the split below is a mask and a shift.
+const TILE_COLUMNS: u32 = 64u;
+
 fn texel(p: vec4<f32>) -> Texel {
-    let pixel = vec2<i32>(p.xy);
-    let columns = i32(textureDimensions(colour).x);
-    return Texel(vec2<i32>(pixel.x % columns, pixel.y), pixel.x / columns);
+    let x = u32(p.x);
+    return Texel(vec2<i32>(i32(x % TILE_COLUMNS), i32(p.y)), i32(x / TILE_COLUMNS));
 }
 
 @fragment
