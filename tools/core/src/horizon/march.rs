@@ -388,11 +388,12 @@ impl Pass<'_> {
         }
         // Sky above each line's horizon: rows where every lane shows it
         // whole, the rest lane by lane.
-        let lanes_sky_from = &row[..count];
-        let all_sky_from = lanes_sky_from.iter().copied().max().unwrap_or(0);
-        let all_sky_until = end[..count].iter().copied().min().unwrap_or(0);
-        let some_sky_from = lanes_sky_from.iter().copied().min().unwrap_or(0);
-        let some_sky_until = end[..count].iter().copied().max().unwrap_or(0);
+        // (Each lane's sky runs from its next unpainted row to its end.)
+        let (sky_from, sky_until) = (&row[..count], &end[..count]);
+        let all_sky_from = sky_from.iter().copied().max().unwrap_or(0);
+        let all_sky_until = sky_until.iter().copied().min().unwrap_or(0);
+        let some_sky_from = sky_from.iter().copied().min().unwrap_or(0);
+        let some_sky_until = sky_until.iter().copied().max().unwrap_or(0);
         for r in some_sky_from..some_sky_until {
             if (all_sky_from..all_sky_until).contains(&r) {
                 lanes.set_row(r, self.sky, 1.0);
