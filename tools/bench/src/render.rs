@@ -246,9 +246,9 @@ pub fn render(
                 let mut frames = Vec::new();
                 for k in 0..HEADINGS {
                     let cam = camera(grid, k, size, *pitch);
-                    renderer.render(&terrain, &cam, options)?; // warm the buffers
-                                                               // A reference left out still gives the others their
-                                                               // PSNR, untimed.
+                    // Warm the buffers. A reference left out still gives the
+                    // others their PSNR, untimed.
+                    renderer.render(&terrain, &cam, options)?;
                     for _ in 0..if shown { runs } else { 0 } {
                         let start = Instant::now();
                         renderer.render(&terrain, &cam, options)?;

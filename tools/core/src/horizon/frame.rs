@@ -4,8 +4,7 @@
 //! The march paints each screen column bottom-up, so a row-major frame
 //! would take every pixel at a stride of a whole row: a frame of 1920
 //! columns is written 128 bytes at a time, 7.5 KB apart, and waits on
-//! memory (2.4× the time of writing the same bytes in order, measured with
-//! a plain two-thread write of 16 MB). In column tiles, [`TILE_COLUMNS`]
+//! memory. In column tiles, [`TILE_COLUMNS`]
 //! columns at a time, top row first within a tile, the lines of one packet
 //! write one contiguous block: the march paints into the frame itself, and
 //! no copy follows. A GPU reads the tiles as the layers of a texture array
@@ -16,7 +15,7 @@ pub const TILE_COLUMNS: usize = 64;
 
 /// Elements of a `width` × `height` image in column tiles (the last tile
 /// padded to whole tiles).
-pub fn tiled_len(width: usize, height: usize) -> usize {
+pub(super) fn tiled_len(width: usize, height: usize) -> usize {
     width.div_ceil(TILE_COLUMNS) * TILE_COLUMNS * height
 }
 

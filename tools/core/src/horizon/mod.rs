@@ -27,7 +27,8 @@ mod march;
 mod sample;
 mod screen;
 
-pub use frame::{tiled_index, tiled_len, Frame, Rows, TILE_COLUMNS};
+use frame::tiled_len;
+pub use frame::{tiled_index, Frame, Rows, TILE_COLUMNS};
 pub use sample::{ColorSource, Terrain};
 pub use screen::{pitch_range, MAX_LINE_DENSITY};
 
