@@ -63,11 +63,10 @@ pub fn detect(
     origin: [usize; 2],
 ) -> Vec<Object> {
     let (w, h) = (segmentation.width, segmentation.height);
-    let label_at = |x: usize, y: usize| labels[segmentation.labels[y * w + x] as usize];
-    let is_vegetation =
-        |x: usize, y: usize| vegetation[label_at(x, y).class] && valid.is_none_or(|v| v[y * w + x]);
+    let label_at = |i: usize| labels[segmentation.labels[i] as usize];
+    let is_vegetation = |i: usize| vegetation[label_at(i).class] && valid.is_none_or(|v| v[i]);
     let object = |x: f64, y: f64, size_px: f32| {
-        let label = label_at(x as usize, y as usize);
+        let label = label_at(y as usize * w + x as usize);
         Object {
             x,
             y,
@@ -96,7 +95,7 @@ pub fn detect(
                         (x >= 0.0 && y >= 0.0 && x < w as f64 && y < h as f64).then_some((x, y))
                     })
                 })
-                .filter(|&(x, y)| is_vegetation(x as usize, y as usize))
+                .filter(|&(x, y)| is_vegetation(y as usize * w + x as usize))
                 .map(|(x, y)| object(x, y, diameter_px))
                 .collect()
         }
@@ -106,12 +105,13 @@ pub fn detect(
         } => {
             let outside: Vec<bool> = (0..w * h)
                 .into_par_iter()
-                .map(|i| !is_vegetation(i % w, i / w))
+                .map(|i| !is_vegetation(i))
                 .collect();
             // Sunlit tops: smoothed brightness, only inside vegetation.
-            let mut value: Vec<f32> = (0..w * h)
-                .into_par_iter()
-                .map(|i| image.colour(i % w, i / w)[0])
+            let mut value: Vec<f32> = image
+                .pixels
+                .par_chunks_exact(image.bands)
+                .map(|px| super::opponent(px)[0])
                 .collect();
             let blur = (0.3 * spacing_px).round() as usize;
             let mut rows = vec![0.0f32; w * h];
@@ -129,10 +129,12 @@ pub fn detect(
             let r = (spacing_px.max(1.0) / 2.0).ceil() as usize;
             let limit = (2.0 * spacing_px).ceil().max(2.0) as usize;
             let min_radius = min_radius_px.max(1.0);
-            let mut candidates: Vec<(usize, f32)> = (0..w * h)
+            let mut candidates: Vec<(usize, f32)> = (0..h)
                 .into_par_iter()
-                .filter(|&i| !outside[i] && is_window_max(&value, w, h, i, 1))
-                .filter(|&i| is_window_max(&value, w, h, i, r))
+                .flat_map_iter(|y| (0..w).map(move |x| (x, y)))
+                .filter(|&(x, y)| !outside[y * w + x] && is_window_max(&value, w, h, x, y, 1))
+                .filter(|&(x, y)| is_window_max(&value, w, h, x, y, r))
+                .map(|(x, y)| y * w + x)
                 .map(|i| (i, vegetation_radius(&outside, w, h, i, limit)))
                 .filter(|&(_, radius)| radius >= min_radius)
                 .collect();
@@ -154,10 +156,35 @@ pub fn detect(
 /// around it, clipped at the edges (separable running sums; `rows` holds the
 /// rows' means in between).
 fn box_blur(values: &mut [f32], rows: &mut [f32], w: usize, h: usize, r: usize) {
-    rows.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
-        let line = &values[y * w..(y + 1) * w];
-        running_mean(|x| line[x], w, r, |x, v| out[x] = v);
-    });
+    // Rows, a few at a time: their running sums side by side are independent
+    // chains of additions the processor overlaps.
+    const ROWS: usize = 8;
+    rows.par_chunks_mut(ROWS * w)
+        .zip(values.par_chunks(ROWS * w))
+        .for_each(|(out, lines)| {
+            let n = lines.len() / w;
+            let mut sums = [0.0f64; ROWS];
+            let (mut lo, mut hi) = (0, 0);
+            for x in 0..w {
+                let (want_lo, want_hi) = (x.saturating_sub(r), (x + r + 1).min(w));
+                while hi < want_hi {
+                    for (k, s) in sums.iter_mut().enumerate().take(n) {
+                        *s += lines[k * w + hi] as f64;
+                    }
+                    hi += 1;
+                }
+                while lo < want_lo {
+                    for (k, s) in sums.iter_mut().enumerate().take(n) {
+                        *s -= lines[k * w + lo] as f64;
+                    }
+                    lo += 1;
+                }
+                let count = (hi - lo) as f64;
+                for (k, s) in sums.iter().enumerate().take(n) {
+                    out[k * w + x] = (s / count) as f32;
+                }
+            }
+        });
     // Columns: bands of rows, each with its own running column sums.
     const BAND: usize = 128;
     let rows = &*rows;
@@ -191,24 +218,6 @@ fn box_blur(values: &mut [f32], rows: &mut [f32], w: usize, h: usize, r: usize) 
         });
 }
 
-/// Mean of `at(i−r ..= i+r)` clipped to `0..n`, for every `i`, in O(n).
-fn running_mean(at: impl Fn(usize) -> f32, n: usize, r: usize, mut put: impl FnMut(usize, f32)) {
-    let mut sum = 0.0f64;
-    let (mut lo, mut hi) = (0usize, 0usize);
-    for i in 0..n {
-        let (want_lo, want_hi) = (i.saturating_sub(r), (i + r + 1).min(n));
-        while hi < want_hi {
-            sum += at(hi) as f64;
-            hi += 1;
-        }
-        while lo < want_lo {
-            sum -= at(lo) as f64;
-            lo += 1;
-        }
-        put(i, (sum / (hi - lo) as f64) as f32);
-    }
-}
-
 /// Keep candidates (pixel index and radius, best first) at least `spacing` apart.
 fn suppress(candidates: &[(usize, f32)], w: usize, spacing: f32) -> Vec<(usize, f32)> {
     let cell = spacing as f64;
@@ -237,11 +246,10 @@ fn suppress(candidates: &[(usize, f32)], w: usize, spacing: f32) -> Vec<(usize, 
     kept
 }
 
-/// Whether cell `i` holds the maximum of the `(2r+1)²` window around it
-/// (clipped at the edges; ties allowed).
-fn is_window_max(values: &[f32], w: usize, h: usize, i: usize, r: usize) -> bool {
-    let (x, y) = (i % w, i / w);
-    let v = values[i];
+/// Whether cell `(x, y)` holds the maximum of the `(2r+1)²` window around
+/// it (clipped at the edges; ties allowed).
+fn is_window_max(values: &[f32], w: usize, h: usize, x: usize, y: usize, r: usize) -> bool {
+    let v = values[y * w + x];
     (y.saturating_sub(r)..(y + r + 1).min(h)).all(|yy| {
         values[yy * w + x.saturating_sub(r)..yy * w + (x + r + 1).min(w)]
             .iter()
@@ -358,22 +366,33 @@ mod tests {
     #[test]
     fn window_maximum() {
         let values = [1.0, 2.0, 1.0, 0.0, 5.0, 0.0, 1.0, 2.0, 1.0];
-        assert!(is_window_max(&values, 3, 3, 4, 1));
-        assert!(!is_window_max(&values, 3, 3, 1, 1));
-        assert!(is_window_max(&values, 3, 3, 1, 0));
+        assert!(is_window_max(&values, 3, 3, 1, 1, 1));
+        assert!(!is_window_max(&values, 3, 3, 1, 0, 1));
+        assert!(is_window_max(&values, 3, 3, 1, 0, 0));
     }
 
     #[test]
     fn box_blur_is_the_clipped_window_mean() {
-        let values: Vec<f32> = (0..20 * 9).map(|i| (i % 13) as f32).collect();
+        // 9 rows: one whole group of rows blurred together and one row alone.
+        let (w, h) = (20, 9);
+        let values: Vec<f32> = (0..w * h).map(|i| (i % 13) as f32).collect();
         let r = 2;
         let mut blurred = values.clone();
-        box_blur(&mut blurred, &mut vec![0.0; 20 * 9], 20, 9, r);
-        // At the left edge the row window is clipped to 3 values; the
-        // column window is whole (5 rows).
-        let (x, y) = (0usize, 4usize);
-        let row_mean = |yy: usize| (0..=2).map(|xx| values[yy * 20 + xx]).sum::<f32>() / 3.0;
-        let expected = (y - 2..=y + 2).map(row_mean).sum::<f32>() / 5.0;
-        assert!((blurred[y * 20 + x] - expected).abs() < 1e-5);
+        box_blur(&mut blurred, &mut vec![0.0; w * h], w, h, r);
+        // Windows are clipped at the edges (at x = 0 the row window holds 3
+        // values); the mean of row means is the window's mean.
+        let row_mean = |x: usize, y: usize| {
+            let xs = x.saturating_sub(r)..(x + r + 1).min(w);
+            let n = xs.len() as f32;
+            xs.map(|xx| values[y * w + xx]).sum::<f32>() / n
+        };
+        for y in 0..h {
+            for x in 0..w {
+                let ys = y.saturating_sub(r)..(y + r + 1).min(h);
+                let n = ys.len() as f32;
+                let expected = ys.map(|yy| row_mean(x, yy)).sum::<f32>() / n;
+                assert!((blurred[y * w + x] - expected).abs() < 1e-5, "({x}, {y})");
+            }
+        }
     }
 }

@@ -820,21 +820,21 @@ fn keep_core(
         }
     }
     let mut centre_sums = vec![[0.0f64; 2]; kept_regions.len()];
-    let side = cx1 - cx0;
-    for (i, l) in core_labels.iter_mut().enumerate() {
-        *l = index[*l as usize];
-        let (x, y) = ((cx0 + i % side) as u32, (cy0 + i / side) as u32);
-        let region = &mut kept_regions[*l as usize];
-        region.pixels += 1;
-        region.bbox = [
-            region.bbox[0].min(x),
-            region.bbox[1].min(y),
-            region.bbox[2].max(x + 1),
-            region.bbox[3].max(y + 1),
-        ];
-        let sums = &mut centre_sums[*l as usize];
-        sums[0] += x as f64 + 0.5;
-        sums[1] += y as f64 + 0.5;
+    for (y, row) in (cy0 as u32..).zip(core_labels.chunks_exact_mut(cx1 - cx0)) {
+        for (x, l) in (cx0 as u32..).zip(row) {
+            *l = index[*l as usize];
+            let region = &mut kept_regions[*l as usize];
+            region.pixels += 1;
+            region.bbox = [
+                region.bbox[0].min(x),
+                region.bbox[1].min(y),
+                region.bbox[2].max(x + 1),
+                region.bbox[3].max(y + 1),
+            ];
+            let sums = &mut centre_sums[*l as usize];
+            sums[0] += x as f64 + 0.5;
+            sums[1] += y as f64 + 0.5;
+        }
     }
     for (region, sums) in kept_regions.iter_mut().zip(&centre_sums) {
         let n = region.pixels as f64;
