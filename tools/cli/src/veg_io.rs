@@ -143,8 +143,10 @@ pub fn read_image(
 }
 
 /// Append `rows` rows from `row` of 8-bit `bands` to `pixels`
-/// (interleaved) and their validity (every band differs from the no-data
-/// value) to `valid`: the values as they are, without a detour through f64.
+/// (interleaved) and, when the file has a no-data value, their validity
+/// (every band differs from it) to `valid`: the values as they are, without
+/// a detour through f64. Without a no-data value `valid` stays empty (every
+/// pixel has data), so a large image pays no mask it does not need.
 fn read_byte_strip(
     source: &gdalio::Source,
     row: usize,
@@ -161,7 +163,9 @@ fn read_byte_strip(
         .nodata
         .filter(|v| (0.0..=255.0).contains(v) && v.fract() == 0.0);
     let valid_start = valid.len();
-    valid.resize(valid_start + cells, true);
+    if nodata.is_some() {
+        valid.resize(valid_start + cells, true);
+    }
     let mut band_values = vec![0u8; cells];
     for (k, &b) in bands.iter().enumerate() {
         source

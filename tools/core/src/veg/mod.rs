@@ -31,6 +31,7 @@ pub mod spacing;
 pub mod tiles;
 
 use crate::{Error, Result};
+use rayon::prelude::*;
 
 /// Most bands the analysis takes (e.g. R, G, B, NIR).
 pub const MAX_BANDS: usize = 4;
@@ -73,11 +74,24 @@ impl Image {
     /// Span between the 1st and 99th percentiles of brightness (the mean of
     /// the bands), in 8-bit units: how much of the range the image uses.
     pub fn brightness_span(&self) -> f32 {
-        let mut histogram = [0u64; 256];
-        for px in self.pixels.chunks_exact(self.bands) {
-            let sum: u32 = px.iter().map(|&v| v as u32).sum();
-            histogram[(sum / self.bands as u32) as usize] += 1;
-        }
+        let histogram = self
+            .pixels
+            .par_chunks(self.bands * 65_536)
+            .map(|part| {
+                let mut histogram = [0u64; 256];
+                for px in part.chunks_exact(self.bands) {
+                    let sum: u32 = px.iter().map(|&v| v as u32).sum();
+                    histogram[(sum / self.bands as u32) as usize] += 1;
+                }
+                histogram
+            })
+            .reduce(
+                || [0u64; 256],
+                |mut a, b| {
+                    a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
+                    a
+                },
+            );
         let n = (self.width * self.height) as u64;
         let level = |fraction: f64| {
             let target = (fraction * n as f64).ceil() as u64;
