@@ -74,6 +74,7 @@ impl Image {
     /// Span between the 1st and 99th percentiles of brightness (the mean of
     /// the bands), in 8-bit units: how much of the range the image uses.
     pub fn brightness_span(&self) -> f32 {
+        // Counted in parts of 65 536 pixels in parallel, then added up.
         let histogram = self
             .pixels
             .par_chunks(self.bands * 65_536)
