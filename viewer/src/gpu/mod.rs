@@ -570,6 +570,6 @@ impl Renderer {
     pub fn raycast_depth(&self, scene: &Scene, settings: &Settings) -> Option<Vec<f32>> {
         let objects_drawn = settings.objects && scene.has_objects();
         (settings.mode == Mode::Raycast && settings.terrain && !objects_drawn)
-            .then(|| scene.raycaster.frame().to_rows().depth)
+            .then(|| scene.raycaster.frame().depth_rows())
     }
 }

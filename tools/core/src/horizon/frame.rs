@@ -82,19 +82,28 @@ impl Frame {
 
     /// The frame in row-major order.
     pub fn to_rows(&self) -> Rows {
+        Rows {
+            width: self.width,
+            height: self.height,
+            rgba: self.in_rows(&self.rgba),
+            depth: self.in_rows(&self.depth),
+        }
+    }
+
+    /// The depth alone in row-major order.
+    pub fn depth_rows(&self) -> Vec<f32> {
+        self.in_rows(&self.depth)
+    }
+
+    /// One of the frame's tiled buffers in row-major order.
+    fn in_rows<T: Copy>(&self, tiled: &[T]) -> Vec<T> {
         let (w, h) = (self.width, self.height);
-        let mut rows = Rows {
-            width: w,
-            height: h,
-            rgba: Vec::with_capacity(w * h),
-            depth: Vec::with_capacity(w * h),
-        };
+        let mut rows = Vec::with_capacity(w * h);
         for y in 0..h {
             for tile in 0..w.div_ceil(TILE_COLUMNS) {
                 let at = tiled_index(tile * TILE_COLUMNS, y, h);
                 let n = TILE_COLUMNS.min(w - tile * TILE_COLUMNS);
-                rows.rgba.extend_from_slice(&self.rgba[at..at + n]);
-                rows.depth.extend_from_slice(&self.depth[at..at + n]);
+                rows.extend_from_slice(&tiled[at..at + n]);
             }
         }
         rows
@@ -151,6 +160,7 @@ mod tests {
             .iter()
             .zip(&expected)
             .all(|(&d, &e)| d == e as f32));
+        assert_eq!(frame.depth_rows(), rows.depth);
         assert_eq!(frame.pixel(149, 6).1, (6 * w + 149) as f32);
     }
 }
