@@ -26,6 +26,12 @@ pub(super) const PACKET: usize = 32;
 // A packet's lines lie in one tile.
 const _: () = assert!(TILE_COLUMNS.is_multiple_of(PACKET));
 
+/// Lanes painted together, a row at a time (one AVX2 register of colours).
+const GROUP: usize = 8;
+
+// A packet is whole groups.
+const _: () = assert!(PACKET.is_multiple_of(GROUP));
+
 /// Slices tested together against the coarse heights before any is sampled.
 const CHUNK: usize = 8;
 
@@ -58,13 +64,15 @@ impl Target {
         }
     }
 
-    /// The columns of lines `first..first + count`, all in one tile.
+    /// The columns of the packet of lines `first..first + count` (`first`
+    /// a multiple of [`PACKET`]): [`PACKET`] columns of one tile, those
+    /// past `count` the last tile's padding.
     ///
     /// # Safety
     /// No other thread may be writing those columns while the result lives.
     unsafe fn lanes(&self, first: usize, count: usize) -> Lanes {
         assert!(count <= PACKET && first + count <= self.width);
-        assert!(first % TILE_COLUMNS + count <= TILE_COLUMNS);
+        assert!(first.is_multiple_of(PACKET));
         let at = tiled_index(first, 0, self.rows);
         // SAFETY: `at` is within the image (the column is).
         unsafe {
@@ -102,6 +110,24 @@ impl Lanes {
         }
     }
 
+    /// Row `r` (from the bottom) of lanes `first..first + GROUP`: their
+    /// colours and depths.
+    #[inline(always)]
+    fn group_row(&mut self, r: usize, first: usize) -> (&mut [u32; GROUP], &mut [f32; GROUP]) {
+        assert!(r < self.rows && first + GROUP <= PACKET);
+        let i = (self.rows - 1 - r) * TILE_COLUMNS + first;
+        // SAFETY: in bounds (checked above; a packet's PACKET columns lie in
+        // the target's tile, padding columns past `count` included), the
+        // columns are this packet's alone (`Target::lanes`' promise), and
+        // the two arrays are distinct buffers.
+        unsafe {
+            (
+                &mut *self.colour.add(i).cast::<[u32; GROUP]>(),
+                &mut *self.depth.add(i).cast::<[f32; GROUP]>(),
+            )
+        }
+    }
+
     /// Paint row `r` (from the bottom) of every lane.
     #[inline(always)]
     fn set_row(&mut self, r: usize, colour: u32, depth: f32) {
@@ -113,6 +139,21 @@ impl Lanes {
             std::slice::from_raw_parts_mut(self.depth.add(i), self.count).fill(depth);
         }
     }
+}
+
+/// One slice's samples in a group of [`GROUP`] lanes of a packet.
+struct GroupSamples {
+    /// The group's first lane.
+    first: usize,
+    /// Bit j: lane j's sample covers at least its next unpainted row.
+    covering: u32,
+    /// Per lane: its next unpainted row and the row its work ends at.
+    row: [u32; GROUP],
+    end: [u32; GROUP],
+    /// Per lane: the sample's height above the eye, metres (−∞ for a lane
+    /// whose sample covers nothing), and its colour.
+    rise: [f64; GROUP],
+    colour: [u32; GROUP],
 }
 
 /// How positions and heights are computed (seed 000, chapter 7).
@@ -232,6 +273,26 @@ impl Sampling for FixedSampling<'_> {
     }
 }
 
+/// The set bits of `mask`, lowest first.
+#[inline(always)]
+fn set_bits(mut mask: u32) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        (mask != 0).then(|| {
+            let k = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            k
+        })
+    })
+}
+
+/// A lane's horizon once its next unpainted row is `row`: the slope that
+/// row needs, or ∞ when its work is done (`row` = `end`; returns false).
+#[inline(always)]
+fn next_horizon(row: usize, end: usize, slope: &[f64], horizon: &mut f64) -> bool {
+    *horizon = if row < end { slope[row] } else { f64::INFINITY };
+    row < end
+}
+
 /// What every packet of a frame shares.
 pub(super) struct Pass<'a> {
     pub terrain: &'a Terrain<'a>,
@@ -295,7 +356,6 @@ impl Pass<'_> {
     fn paint<S: Sampling>(&self, sampling: &S, first: usize, lanes: &mut Lanes) {
         let count = lanes.count;
         let slope = &self.screen.slope[..];
-        let forward_per_depth = &self.screen.forward_per_depth[..];
         let [depth_a, depth_b] = self.depth_terms;
         // Per lane: its ground direction, next unpainted row, the row its
         // work ends at, and the slope a sample must rise above to cover the
@@ -343,42 +403,63 @@ impl Pass<'_> {
                 for k in 0..PACKET {
                     covering |= u32::from(ground[k] - self.eye_z > s * horizon[k]) << k;
                 }
-                while covering != 0 {
-                    let k = covering.trailing_zeros() as usize;
-                    covering &= covering - 1;
+                if covering == 0 {
+                    continue;
+                }
+                let colour_of = |k: usize| {
                     let position = sampling.position([dirs[0][k], dirs[1][k]], s);
                     let rise = ground[k] - self.eye_z;
                     let level = slice.level(self.terrain, self.eye_z, rise + self.eye_z);
-                    let colour = sampling.colour(position, slice.subvoxel, level);
-                    let (r, end) = (&mut row[k], end[k]);
-                    if !self.screen.pitched {
-                        // Level: one depth for the slice, and the slices end
-                        // before the far plane.
-                        let depth = (depth_a - depth_over) as f32;
-                        while *r < end && rise > s * slope[*r] {
+                    sampling.colour(position, slice.subvoxel, level)
+                };
+                // Rows each lane paints: from its next unpainted row up
+                // while its rise clears the row's slope, below its end (seed
+                // 000, Algorithm 1, line 11A).
+                if self.screen.pitched {
+                    // Each row has its own depth and far-plane test: eight
+                    // lanes go together, a row at a time.
+                    let mut rise = [f64::NEG_INFINITY; PACKET];
+                    let mut colour = [0u32; PACKET];
+                    for k in set_bits(covering) {
+                        rise[k] = ground[k] - self.eye_z;
+                        colour[k] = colour_of(k);
+                    }
+                    for g in (0..PACKET).step_by(GROUP) {
+                        let group_covering = (covering >> g) & ((1 << GROUP) - 1);
+                        if group_covering == 0 {
+                            continue;
+                        }
+                        let samples = GroupSamples {
+                            first: g,
+                            covering: group_covering,
+                            row: std::array::from_fn(|j| row[g + j] as u32),
+                            end: std::array::from_fn(|j| end[g + j] as u32),
+                            rise: std::array::from_fn(|j| rise[g + j]),
+                            colour: std::array::from_fn(|j| colour[g + j]),
+                        };
+                        let painted = self.paint_pitched_rows(lanes, s, depth_over, &samples);
+                        for j in set_bits(group_covering) {
+                            let k = g + j;
+                            row[k] += painted[j] as usize;
+                            if !next_horizon(row[k], end[k], slope, &mut horizon[k]) {
+                                busy -= 1;
+                            }
+                        }
+                    }
+                } else {
+                    // Level: one depth for the slice, and the slices end
+                    // before the far plane; lane by lane.
+                    let depth = (depth_a - depth_over) as f32;
+                    for k in set_bits(covering) {
+                        let (colour, rise) = (colour_of(k), ground[k] - self.eye_z);
+                        let r = &mut row[k];
+                        while *r < end[k] && rise > s * slope[*r] {
                             lanes.set(*r, k, colour, depth);
                             *r += 1;
                         }
-                    }
-                    while *r < end && rise > s * slope[*r] {
-                        // Beyond the far plane for this row's rays: sky (only a
-                        // pitched camera's rows differ).
-                        let (c, depth) = if s > self.far_m * forward_per_depth[*r] {
-                            (self.sky, 1.0)
-                        } else {
-                            (
-                                colour,
-                                (depth_a - depth_over * forward_per_depth[*r]) as f32,
-                            )
-                        };
-                        lanes.set(*r, k, c, depth);
-                        *r += 1;
-                    }
-                    if *r < end {
-                        horizon[k] = slope[*r];
-                    } else {
-                        horizon[k] = f64::INFINITY;
-                        busy -= 1;
+                        if !next_horizon(*r, end[k], slope, &mut horizon[k]) {
+                            busy -= 1;
+                        }
                     }
                 }
             }
@@ -405,5 +486,85 @@ impl Pass<'_> {
                 }
             }
         }
+    }
+
+    /// Paint the rows one slice's samples cover in a group of a pitched
+    /// camera's lanes, a row at a time for all of them: each row's depth
+    /// and far-plane test (which a pitched camera's rows do not share)
+    /// come once for the group instead of once a lane. A lane paints from
+    /// its next unpainted row up while its rise clears the row's slope,
+    /// below the row its work ends at; as the slopes increase with the
+    /// row, its rows form one run. `depth_over` is the slice's B/s (eq.
+    /// 5.11). Returns the rows each lane painted.
+    #[inline(always)]
+    fn paint_pitched_rows(
+        &self,
+        lanes: &mut Lanes,
+        s: f64,
+        depth_over: f64,
+        samples: &GroupSamples,
+    ) -> [u32; GROUP] {
+        let GroupSamples {
+            first,
+            covering,
+            row,
+            end,
+            rise,
+            colour,
+        } = samples;
+        // The covering lanes' rows start between `lowest` and `last_start`
+        // and end by `last_end`.
+        let lowest = set_bits(*covering).map(|j| row[j]).min().unwrap_or(0);
+        let last_start = set_bits(*covering).map(|j| row[j]).max().unwrap_or(0);
+        let last_end = set_bits(*covering).map(|j| end[j]).max().unwrap_or(0);
+        // Row r of lane j is open while row[j] ≤ r < end[j]. Every open row
+        // is painted later (by a farther sample or the sky), so it may take
+        // anything now: a row open in every lane is written whole, others
+        // are blended. Masks are all ones or all zeros, so that the lanes
+        // go side by side in registers.
+        let rows_left: [u32; GROUP] = std::array::from_fn(|j| end[j] - row[j]);
+        let all_open =
+            row.iter().max().copied().unwrap_or(0)..end.iter().min().copied().unwrap_or(0);
+        let depth_a = self.depth_terms[0];
+        let mut painted = [0u32; GROUP];
+        for r in lowest..last_end {
+            let threshold = s * self.screen.slope[r as usize];
+            let open: [u32; GROUP] = std::array::from_fn(|j| {
+                u32::from(r.wrapping_sub(row[j]) < rows_left[j]).wrapping_neg()
+            });
+            let paints: [u32; GROUP] =
+                std::array::from_fn(|j| open[j] & u32::from(rise[j] > threshold).wrapping_neg());
+            if paints.iter().fold(0, |any, &p| any | p) == 0 {
+                if r >= last_start {
+                    break;
+                }
+                continue;
+            }
+            let forward_per_depth = self.screen.forward_per_depth[r as usize];
+            let (row_colours, depth) = if s > self.far_m * forward_per_depth {
+                // Beyond the far plane for this row's rays: sky.
+                ([self.sky; GROUP], 1.0)
+            } else {
+                (*colour, (depth_a - depth_over * forward_per_depth) as f32)
+            };
+            let (colours, depths) = lanes.group_row(r as usize, *first);
+            if all_open.contains(&r) {
+                *colours = row_colours;
+                *depths = [depth; GROUP];
+            } else {
+                // Blended through copies: the compiler keeps them in
+                // registers (selecting in place, it stored lane by lane).
+                let (old_colours, old_depths) = (*colours, *depths);
+                let depth = depth.to_bits();
+                *colours = std::array::from_fn(|j| {
+                    (row_colours[j] & open[j]) | (old_colours[j] & !open[j])
+                });
+                *depths = std::array::from_fn(|j| {
+                    f32::from_bits((depth & open[j]) | (old_depths[j].to_bits() & !open[j]))
+                });
+            }
+            painted = std::array::from_fn(|j| painted[j].wrapping_sub(paints[j]));
+        }
+        painted
     }
 }

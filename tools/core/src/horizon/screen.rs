@@ -304,6 +304,35 @@ mod tests {
         }
     }
 
+    /// The painters take a lane's covered rows as one run from its next
+    /// row up, which holds while the rows' slopes rise strictly: at every
+    /// pitch of the range, the ends included, and every size.
+    #[test]
+    fn slopes_rise_with_the_row_at_every_pitch() {
+        for (width, height) in [(1920, 1080), (150, 97), (1000, 1000)] {
+            let sized = Camera {
+                width,
+                height,
+                incl_px: height as f64 / 2.0,
+                ..camera(0.0)
+            };
+            let [low, high] = pitch_range(&sized);
+            for pitch in [low, -30.0, -1e-9, 0.0, 1e-9, 12.5, high] {
+                let mut screen = Screen::default();
+                screen
+                    .fill(&Camera {
+                        pitch_deg: pitch,
+                        ..sized
+                    })
+                    .unwrap();
+                assert!(
+                    screen.slope.windows(2).all(|pair| pair[0] < pair[1]),
+                    "{width}×{height} pitch {pitch}"
+                );
+            }
+        }
+    }
+
     #[test]
     fn the_pitch_range_is_where_lines_stay_bounded() {
         let [low, high] = pitch_range(&camera(0.0));
