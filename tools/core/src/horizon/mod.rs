@@ -337,23 +337,12 @@ impl Renderer {
                 .zip(f.depth.par_chunks_mut(tile))
                 .enumerate()
                 .for_each(|(t, (rgba, depth))| {
-                    let first = t * TILE_COLUMNS;
-                    let columns = TILE_COLUMNS.min(w - first);
-                    // The lines of one row of the tile, then their pixels.
-                    let mut lines = [0u32; TILE_COLUMNS];
-                    let lines = &mut lines[..columns];
-                    for y in 0..h {
-                        screen.lines_on_row(h - 1 - y, first, lines);
-                        let row = y * TILE_COLUMNS;
-                        let pixels = rgba[row..row + columns]
-                            .iter_mut()
-                            .zip(&mut depth[row..row + columns]);
-                        for ((colour, depth), &j) in pixels.zip(&*lines) {
-                            let from = tiled_index(j as usize, y, h);
-                            *colour = line_colour[from];
-                            *depth = line_depth[from];
-                        }
-                    }
+                    let tile = GatherTile {
+                        first: t * TILE_COLUMNS,
+                        rgba,
+                        depth,
+                    };
+                    tile.gather(screen, line_colour, line_depth);
                 });
         }
         let output_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -363,6 +352,60 @@ impl Renderer {
             output_ms,
         };
         Ok(&self.frame)
+    }
+}
+
+/// One column tile of a pitched frame, to take its pixels from the lines.
+struct GatherTile<'a> {
+    /// The tile's first pixel column.
+    first: usize,
+    rgba: &'a mut [u32],
+    depth: &'a mut [f32],
+}
+
+impl GatherTile<'_> {
+    /// Each pixel takes its nearest line's colour and depth (the lines'
+    /// buffers are in column tiles too).
+    fn gather(self, screen: &Screen, line_colour: &[u32], line_depth: &[f32]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the machine has AVX2 (checked just above).
+            unsafe { self.gather_avx2(screen, line_colour, line_depth) };
+            return;
+        }
+        self.gather_rows(screen, line_colour, line_depth);
+    }
+
+    /// [`GatherTile::gather_rows`] compiled for AVX2, where a row's lines
+    /// take four at a time.
+    ///
+    /// # Safety
+    /// The machine must have AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn gather_avx2(self, screen: &Screen, line_colour: &[u32], line_depth: &[f32]) {
+        self.gather_rows(screen, line_colour, line_depth);
+    }
+
+    /// The lines of one row of the tile, then their pixels, row by row.
+    #[inline(always)]
+    fn gather_rows(self, screen: &Screen, line_colour: &[u32], line_depth: &[f32]) {
+        let (w, h) = (screen.width, screen.height);
+        let columns = TILE_COLUMNS.min(w - self.first);
+        let mut lines = [0u32; TILE_COLUMNS];
+        let lines = &mut lines[..columns];
+        for y in 0..h {
+            screen.lines_on_row(h - 1 - y, self.first, lines);
+            let row = y * TILE_COLUMNS;
+            let pixels = self.rgba[row..row + columns]
+                .iter_mut()
+                .zip(&mut self.depth[row..row + columns]);
+            for ((colour, depth), &j) in pixels.zip(&*lines) {
+                let from = tiled_index(j as usize, y, h);
+                *colour = line_colour[from];
+                *depth = line_depth[from];
+            }
+        }
     }
 }
 

@@ -175,6 +175,12 @@ impl Screen {
             self.row_map.push([scale, shift]);
         }
         self.lines = (0..h).map(|r| self.line_at(r, w - 1)).max().unwrap_or(0) + 1;
+        if self.lines > i32::MAX as usize {
+            return Err(Error::Input(format!(
+                "a {w}×{h} view pitched {}° needs {} lines, more than the raycast indexes",
+                camera.pitch_deg, self.lines
+            )));
+        }
         // The lines a row needs widen towards the vanishing point and nest:
         // walk the rows from the narrowest; a line first met on row r is
         // needed from r to the widest end (the running hull keeps this true
@@ -205,20 +211,21 @@ impl Screen {
 
     /// [`Screen::line_at`] of the pixels `first..first + out.len()` of row
     /// `r`.
-    #[inline]
+    #[inline(always)]
     pub fn lines_on_row(&self, r: usize, first: usize, out: &mut [u32]) {
         let [scale, shift] = self.row_map[r];
         let last = self.lines.saturating_sub(1) as f64;
         for (i, line) in out.iter_mut().enumerate() {
             // Every pixel's line is one of the screen's (`lines` is the
             // largest + 1), so the clamp changes nothing but lets the
-            // conversion skip saturation.
+            // conversion skip saturation (and go through i32, which SIMD
+            // converts in one instruction).
             let v = line_position((first + i) as f64, scale, shift)
                 .max(0.0)
                 .min(last);
             // SAFETY: finite (`max` takes 0 over NaN) and in
-            // [0, lines − 1], which fits a u32.
-            *line = unsafe { v.to_int_unchecked::<u32>() };
+            // [0, lines − 1], which fits an i32 (`fill` refuses more lines).
+            *line = unsafe { v.to_int_unchecked::<i32>() } as u32;
         }
     }
 }
