@@ -394,16 +394,21 @@ impl GatherTile<'_> {
         let columns = TILE_COLUMNS.min(w - self.first);
         let mut lines = [0u32; TILE_COLUMNS];
         let lines = &mut lines[..columns];
+        // The lines' buffers hold fewer than 2³² elements (`Screen::fill`),
+        // so their indices are computed in u32, eight to a register.
+        let (rows, tile) = (h as u32, TILE_COLUMNS as u32);
         for y in 0..h {
             screen.lines_on_row(h - 1 - y, self.first, lines);
+            for j in lines.iter_mut() {
+                *j = (*j / tile * rows + y as u32) * tile + *j % tile;
+            }
             let row = y * TILE_COLUMNS;
             let pixels = self.rgba[row..row + columns]
                 .iter_mut()
                 .zip(&mut self.depth[row..row + columns]);
-            for ((colour, depth), &j) in pixels.zip(&*lines) {
-                let from = tiled_index(j as usize, y, h);
-                *colour = line_colour[from];
-                *depth = line_depth[from];
+            for ((colour, depth), &from) in pixels.zip(&*lines) {
+                *colour = line_colour[from as usize];
+                *depth = line_depth[from as usize];
             }
         }
     }

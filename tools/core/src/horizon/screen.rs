@@ -175,7 +175,9 @@ impl Screen {
             self.row_map.push([scale, shift]);
         }
         self.lines = (0..h).map(|r| self.line_at(r, w - 1)).max().unwrap_or(0) + 1;
-        if self.lines > i32::MAX as usize {
+        if self.lines > i32::MAX as usize
+            || super::frame::tiled_len(self.lines, h) > u32::MAX as usize
+        {
             return Err(Error::Input(format!(
                 "a {w}×{h} view pitched {}° needs {} lines, more than the raycast indexes",
                 camera.pitch_deg, self.lines
