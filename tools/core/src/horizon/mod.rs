@@ -377,7 +377,7 @@ impl GatherTile<'_> {
     }
 
     /// [`GatherTile::gather_rows`] compiled for AVX2, where a row's lines
-    /// take four at a time.
+    /// and their places in the buffers go several at a time.
     ///
     /// # Safety
     /// The machine must have AVX2.
@@ -394,13 +394,12 @@ impl GatherTile<'_> {
         let columns = TILE_COLUMNS.min(w - self.first);
         let mut lines = [0u32; TILE_COLUMNS];
         let lines = &mut lines[..columns];
-        // The lines' buffers hold fewer than 2³² elements (`Screen::fill`),
-        // so their indices are computed in u32, eight to a register.
-        let (rows, tile) = (h as u32, TILE_COLUMNS as u32);
         for y in 0..h {
+            // The row's lines, then where they lie in the lines' buffers
+            // (fewer than 2³² elements, `Screen::fill`), side by side.
             screen.lines_on_row(h - 1 - y, self.first, lines);
             for j in lines.iter_mut() {
-                *j = (*j / tile * rows + y as u32) * tile + *j % tile;
+                *j = tiled_index(*j as usize, y, h) as u32;
             }
             let row = y * TILE_COLUMNS;
             let pixels = self.rgba[row..row + columns]
