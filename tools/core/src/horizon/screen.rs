@@ -342,6 +342,32 @@ mod tests {
         }
     }
 
+    /// A pitched screen whose lines' buffers would outgrow 32-bit indices
+    /// is refused with its size, before any buffer is sized.
+    #[test]
+    fn screens_beyond_32_bit_line_buffers_are_refused() {
+        let huge = Camera {
+            width: 40_000,
+            height: 40_000,
+            incl_px: 20_000.0,
+            ..camera(0.0)
+        };
+        let [low, _] = pitch_range(&huge);
+        let mut screen = Screen::default();
+        let err = screen
+            .fill(&Camera {
+                pitch_deg: low + 0.5,
+                ..huge
+            })
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("40000×40000") && err.contains("lines"),
+            "{err}"
+        );
+        assert!(screen.rows_needed.is_empty());
+    }
+
     #[test]
     fn the_pitch_range_is_where_lines_stay_bounded() {
         let [low, high] = pitch_range(&camera(0.0));
