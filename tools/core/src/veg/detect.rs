@@ -163,27 +163,27 @@ fn box_blur(values: &mut [f32], rows: &mut [f32], w: usize, h: usize, r: usize) 
         .zip(values.par_chunks(ROWS * w))
         .for_each(|(out, lines)| {
             let n = lines.len() / w;
-            let mut sums = [0.0f64; ROWS];
-            let (mut lo, mut hi) = (0, 0);
-            for x in 0..w {
-                let (want_lo, want_hi) = (x.saturating_sub(r), (x + r + 1).min(w));
-                while hi < want_hi {
+            slide_window(
+                &mut [0.0f64; ROWS],
+                w,
+                r,
+                0..w,
+                |sums, x| {
                     for (k, s) in sums.iter_mut().enumerate().take(n) {
-                        *s += lines[k * w + hi] as f64;
+                        *s += lines[k * w + x] as f64;
                     }
-                    hi += 1;
-                }
-                while lo < want_lo {
+                },
+                |sums, x| {
                     for (k, s) in sums.iter_mut().enumerate().take(n) {
-                        *s -= lines[k * w + lo] as f64;
+                        *s -= lines[k * w + x] as f64;
                     }
-                    lo += 1;
-                }
-                let count = (hi - lo) as f64;
-                for (k, s) in sums.iter().enumerate().take(n) {
-                    out[k * w + x] = (s / count) as f32;
-                }
-            }
+                },
+                |sums, x, count| {
+                    for (k, s) in sums.iter().enumerate().take(n) {
+                        out[k * w + x] = (s / count as f64) as f32;
+                    }
+                },
+            );
         });
     // Columns: bands of rows, each with its own running column sums.
     const BAND: usize = 128;
@@ -193,29 +193,60 @@ fn box_blur(values: &mut [f32], rows: &mut [f32], w: usize, h: usize, r: usize) 
         .enumerate()
         .for_each(|(band, block)| {
             let y0 = band * BAND;
-            let mut sums = vec![0.0f64; w];
-            let (mut lo, mut hi) = (y0.saturating_sub(r), y0.saturating_sub(r));
-            for (dy, line) in block.chunks_mut(w).enumerate() {
-                let y = y0 + dy;
-                let (want_lo, want_hi) = (y.saturating_sub(r), (y + r + 1).min(h));
-                while hi < want_hi {
+            slide_window(
+                &mut vec![0.0f64; w],
+                h,
+                r,
+                y0..y0 + block.len() / w,
+                |sums, y| {
                     sums.iter_mut()
-                        .zip(&rows[hi * w..(hi + 1) * w])
+                        .zip(&rows[y * w..(y + 1) * w])
                         .for_each(|(s, v)| *s += *v as f64);
-                    hi += 1;
-                }
-                while lo < want_lo {
+                },
+                |sums, y| {
                     sums.iter_mut()
-                        .zip(&rows[lo * w..(lo + 1) * w])
+                        .zip(&rows[y * w..(y + 1) * w])
                         .for_each(|(s, v)| *s -= *v as f64);
-                    lo += 1;
-                }
-                let count = (hi - lo) as f64;
-                line.iter_mut()
-                    .zip(&sums)
-                    .for_each(|(o, s)| *o = (s / count) as f32);
-            }
+                },
+                |sums, y, count| {
+                    block[(y - y0) * w..(y - y0 + 1) * w]
+                        .iter_mut()
+                        .zip(&*sums)
+                        .for_each(|(o, s)| *o = (s / count as f64) as f32);
+                },
+            );
         });
+}
+
+/// Slide the window of positions `p − r ..= p + r`, clipped to `0..n`,
+/// over the positions `along` (in `0..n`): `enter(state, i)` as position i
+/// comes into the window, `leave(state, i)` as it goes out, then
+/// `at(state, p, size)` with the window at `p` and its size — running sums
+/// in O(n), whatever `r`.
+#[inline(always)]
+fn slide_window<S: ?Sized>(
+    state: &mut S,
+    n: usize,
+    r: usize,
+    along: std::ops::Range<usize>,
+    enter: impl Fn(&mut S, usize),
+    leave: impl Fn(&mut S, usize),
+    mut at: impl FnMut(&mut S, usize, usize),
+) {
+    let start = along.start.saturating_sub(r);
+    let (mut lo, mut hi) = (start, start);
+    for p in along {
+        let (want_lo, want_hi) = (p.saturating_sub(r), (p + r + 1).min(n));
+        while hi < want_hi {
+            enter(state, hi);
+            hi += 1;
+        }
+        while lo < want_lo {
+            leave(state, lo);
+            lo += 1;
+        }
+        at(state, p, hi - lo);
+    }
 }
 
 /// Keep candidates (pixel index and radius, best first) at least `spacing` apart.
