@@ -110,6 +110,42 @@ impl Lanes {
         }
     }
 
+    /// Paint lane `k` from row `from` (from the bottom) up while `covers`
+    /// holds for the row's slope, at most up to the last of `slopes`;
+    /// returns the first row left unpainted.
+    #[inline(always)]
+    fn paint_run(
+        &mut self,
+        k: usize,
+        from: usize,
+        slopes: &[f64],
+        colour: u32,
+        depth: f32,
+        covers: impl Fn(f64) -> bool,
+    ) -> usize {
+        assert!(slopes.len() <= self.rows && k < self.count);
+        let mut r = from;
+        // Element of row r; wraps below zero only once r passes the top row,
+        // where the loop ends before writing.
+        let mut i = (self.rows.wrapping_sub(1 + from))
+            .wrapping_mul(TILE_COLUMNS)
+            .wrapping_add(k);
+        while let Some(&slope) = slopes.get(r) {
+            if !covers(slope) {
+                break;
+            }
+            // SAFETY: r < rows (slopes.len() ≤ rows), so i is row r's element
+            // of column k, in the packet's tile (as for `set`).
+            unsafe {
+                self.colour.add(i).write(colour);
+                self.depth.add(i).write(depth);
+            }
+            i = i.wrapping_sub(TILE_COLUMNS);
+            r += 1;
+        }
+        r
+    }
+
     /// Row `r` (from the bottom) of lanes `first..first + GROUP`: their
     /// colours and depths.
     #[inline(always)]
@@ -167,10 +203,24 @@ pub(super) trait Sampling: Sync {
     fn colour(&self, p: Self::Position, subvoxel: bool, level: usize) -> u32;
     /// Nearest-vertex heights `s` metres along each lane's direction
     /// (`dirs`: x components, then y), all lanes at once where the sampling
-    /// can.
+    /// can; where it colours by vertex, also each lane's vertex for
+    /// [`Sampling::vertex_colour`] (`vertices` untouched otherwise).
     #[inline(always)]
-    fn nearest_heights(&self, dirs: &[[f64; PACKET]; 2], s: f64, out: &mut [f64; PACKET]) {
+    fn nearest_heights(
+        &self,
+        dirs: &[[f64; PACKET]; 2],
+        s: f64,
+        out: &mut [f64; PACKET],
+        _vertices: &mut [u32; PACKET],
+    ) {
         heights_one_by_one(self, dirs, s, false, out);
+    }
+    /// The colour of a vertex [`Sampling::nearest_heights`] gave, where
+    /// the sampling colours by vertex (the same as [`Sampling::colour`] at
+    /// that sample's position without sub-voxels); `None` otherwise.
+    #[inline(always)]
+    fn vertex_colour(&self, _vertex: u32) -> Option<u32> {
+        None
     }
 }
 
@@ -220,8 +270,20 @@ impl Sampling for FloatSampling<'_> {
     }
 
     #[inline(always)]
-    fn nearest_heights(&self, dirs: &[[f64; PACKET]; 2], s: f64, out: &mut [f64; PACKET]) {
-        self.terrain.nearest_heights(self.eye, dirs, s, out);
+    fn nearest_heights(
+        &self,
+        dirs: &[[f64; PACKET]; 2],
+        s: f64,
+        out: &mut [f64; PACKET],
+        vertices: &mut [u32; PACKET],
+    ) {
+        self.terrain
+            .nearest_heights(self.eye, dirs, s, out, vertices);
+    }
+
+    #[inline(always)]
+    fn vertex_colour(&self, vertex: u32) -> Option<u32> {
+        self.terrain.vertex_colour(vertex)
     }
 }
 
@@ -394,10 +456,11 @@ impl Pass<'_> {
                 let depth_over = depth_b / s;
                 // A NaN rise (no data) covers nothing.
                 let mut ground = [0.0; PACKET];
+                let mut vertices = [0u32; PACKET];
                 if slice.subvoxel {
                     heights_one_by_one(sampling, &dirs, s, true, &mut ground);
                 } else {
-                    sampling.nearest_heights(&dirs, s, &mut ground);
+                    sampling.nearest_heights(&dirs, s, &mut ground, &mut vertices);
                 }
                 let mut covering = 0u32;
                 for k in 0..PACKET {
@@ -406,12 +469,20 @@ impl Pass<'_> {
                 if covering == 0 {
                     continue;
                 }
-                let colour_of = |k: usize| {
-                    let position = sampling.position([dirs[0][k], dirs[1][k]], s);
-                    let rise = ground[k] - self.eye_z;
-                    let level = slice.level(self.terrain, self.eye_z, rise + self.eye_z);
-                    sampling.colour(position, slice.subvoxel, level)
-                };
+                // The covering lanes' colours, all looked up before any
+                // paints so that their loads are in flight together; by the
+                // vertex the height came from where that gives the colour.
+                let mut colour = [0u32; PACKET];
+                for k in set_bits(covering) {
+                    let by_vertex = (!slice.subvoxel)
+                        .then(|| sampling.vertex_colour(vertices[k]))
+                        .flatten();
+                    colour[k] = by_vertex.unwrap_or_else(|| {
+                        let position = sampling.position([dirs[0][k], dirs[1][k]], s);
+                        let level = slice.level(self.terrain, self.eye_z, ground[k]);
+                        sampling.colour(position, slice.subvoxel, level)
+                    });
+                }
                 // Rows each lane paints: from its next unpainted row up
                 // while its rise clears the row's slope, below its end (seed
                 // 000, Algorithm 1, line 11A).
@@ -419,10 +490,8 @@ impl Pass<'_> {
                     // Each row has its own depth and far-plane test: eight
                     // lanes go together, a row at a time.
                     let mut rise = [f64::NEG_INFINITY; PACKET];
-                    let mut colour = [0u32; PACKET];
                     for k in set_bits(covering) {
                         rise[k] = ground[k] - self.eye_z;
-                        colour[k] = colour_of(k);
                     }
                     for g in (0..PACKET).step_by(GROUP) {
                         let group_covering = (covering >> g) & ((1 << GROUP) - 1);
@@ -451,13 +520,16 @@ impl Pass<'_> {
                     // before the far plane; lane by lane.
                     let depth = (depth_a - depth_over) as f32;
                     for k in set_bits(covering) {
-                        let (colour, rise) = (colour_of(k), ground[k] - self.eye_z);
-                        let r = &mut row[k];
-                        while *r < end[k] && rise > s * slope[*r] {
-                            lanes.set(*r, k, colour, depth);
-                            *r += 1;
-                        }
-                        if !next_horizon(*r, end[k], slope, &mut horizon[k]) {
+                        let rise = ground[k] - self.eye_z;
+                        row[k] = lanes.paint_run(
+                            k,
+                            row[k],
+                            &slope[..end[k]],
+                            colour[k],
+                            depth,
+                            |slope| rise > s * slope,
+                        );
+                        if !next_horizon(row[k], end[k], slope, &mut horizon[k]) {
                             busy -= 1;
                         }
                     }

@@ -453,8 +453,9 @@ impl<'a> Terrain<'a> {
     }
 
     /// [`Terrain::nearest_height`] at `eye` + `dir`ₖ·`s` for every lane k
-    /// (directions one array per axis): the indices of all lanes first,
-    /// side by side, then the loads, all in flight together.
+    /// (directions one array per axis), and where each lane's vertex is
+    /// kept (for [`Terrain::vertex_colour`]): the indices of all lanes
+    /// first, side by side, then the loads, all in flight together.
     #[inline(always)]
     pub(super) fn nearest_heights<const N: usize>(
         &self,
@@ -462,9 +463,9 @@ impl<'a> Terrain<'a> {
         dirs: &[[f64; N]; 2],
         s: f64,
         out: &mut [f64; N],
+        index: &mut [u32; N],
     ) {
         let vertex_index = VertexIndex::of(self);
-        let mut index = [0u32; N];
         for k in 0..N {
             index[k] = vertex_index.nearest(eye[0] + dirs[0][k] * s, eye[1] + dirs[1][k] * s);
         }
@@ -559,6 +560,16 @@ impl<'a> Terrain<'a> {
             None => self.vertex_colours[self.nearest_index(x, y) as usize],
             Some(src) => self.image_color(src, x, y, subvoxel, level),
         }
+    }
+
+    /// The colour of the vertex kept at `index` (as
+    /// [`Terrain::nearest_heights`] gives it) where the terrain is coloured
+    /// by vertex; `None` where it is draped with an image.
+    #[inline(always)]
+    pub(super) fn vertex_colour(&self, index: u32) -> Option<u32> {
+        self.color
+            .is_none()
+            .then(|| self.vertex_colours[index as usize])
     }
 
     /// [`Terrain::color`] from the drape image (kept out of line: the march
