@@ -22,6 +22,30 @@ fn tile_index(tiles_across: u32, c: u32, r: u32) -> u32 {
     ((r / tile) * tiles_across + c / tile) * tile * tile + (r % tile) * tile + c % tile
 }
 
+/// `x.round()` (halfway cases away from zero) without a call to the maths
+/// library: the baseline x86-64 has no rounding instruction, and the drape's
+/// colour lookup, compiled for it (out of the march's AVX2 code), rounds five
+/// times a sample. Bit for bit `f64::round` (tested).
+#[inline(always)]
+fn round_half_away(x: f64) -> f64 {
+    // From 2⁵² on every f64 is an integer; ±∞ and NaN stay as they are.
+    if !(x.abs() < 4_503_599_627_370_496.0) {
+        return x;
+    }
+    // Toward zero, and the fraction left: both exact below 2⁵².
+    let whole = x as i64 as f64;
+    let fraction = x - whole;
+    let rounded = if fraction >= 0.5 {
+        whole + 1.0
+    } else if fraction <= -0.5 {
+        whole - 1.0
+    } else {
+        whole
+    };
+    // A zero keeps the sign of x, as `f64::round` gives it.
+    rounded.copysign(x)
+}
+
 /// Bilinear weights of the four voxels around each of the DIVISIONS² sub-voxels,
 /// `[top-left, top-right, bottom-left, bottom-right]` in grid order — the
 /// contribution matrix of seed 000, Algorithm 3, taken at sub-voxel centres.
@@ -423,7 +447,7 @@ impl<'a> Terrain<'a> {
     /// Nearest vertex with data, if (c, r) is on the grid.
     #[inline]
     fn vertex(&self, c: f64, r: f64) -> Option<usize> {
-        let (c, r) = (c.round(), r.round());
+        let (c, r) = (round_half_away(c), round_half_away(r));
         if c < 0.0 || r < 0.0 || c > (self.side - 1) as f64 || r > (self.side - 1) as f64 {
             return None;
         }
@@ -619,12 +643,14 @@ impl<'a> Terrain<'a> {
                     }
                     rgb
                 } else {
-                    let t = texel(u.floor(), v.floor());
+                    // `texel` truncates after clamping at 0, which for
+                    // these is the floor.
+                    let t = texel(u, v);
                     [t[0] as f64, t[1] as f64, t[2] as f64]
                 }
             }
         };
-        let [r8, g8, b8] = rgb.map(|v| (v * light as f64).round().clamp(0.0, 255.0) as u8);
+        let [r8, g8, b8] = rgb.map(|v| round_half_away(v * light as f64).clamp(0.0, 255.0) as u8);
         u32::from_le_bytes([r8, g8, b8, 255])
     }
 
@@ -633,5 +659,46 @@ impl<'a> Terrain<'a> {
     pub(super) fn color_fixed(&self, x: i64, y: i64, subvoxel: bool, level: usize) -> u32 {
         let to_m = self.cell_m / 65536.0;
         self.color(x as f64 * to_m, y as f64 * to_m, subvoxel, level)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rounding_without_the_library_is_f64_round() {
+        let two_52 = 4_503_599_627_370_496.0_f64;
+        let mut values = vec![
+            0.0,
+            0.5,
+            1.5,
+            2.5,
+            0.499_999_999_999_999_94,
+            1.0 - f64::EPSILON / 2.0,
+            255.499_999_999_999_97,
+            254.5,
+            two_52 - 0.5,
+            two_52 - 1.5,
+            two_52,
+            two_52 + 1.0,
+            2.0 * two_52 + 2.0,
+            f64::MAX,
+            f64::MIN_POSITIVE,
+            5e-324,
+            f64::INFINITY,
+            1e300,
+        ];
+        // Every quarter from −1000 to 1000, and their neighbours.
+        for q in -4000..=4000 {
+            let x = q as f64 / 4.0;
+            values.extend([x, x.next_up(), x.next_down()]);
+        }
+        let negated: Vec<f64> = values.iter().map(|x| -x).collect();
+        values.extend(negated);
+        for x in values {
+            assert_eq!(round_half_away(x).to_bits(), x.round().to_bits(), "{x:e}");
+        }
+        assert!(round_half_away(f64::NAN).is_nan());
     }
 }
