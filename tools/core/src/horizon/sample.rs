@@ -29,7 +29,7 @@ fn tile_index(tiles_across: u32, c: u32, r: u32) -> u32 {
 #[inline(always)]
 fn round_half_away(x: f64) -> f64 {
     // From 2⁵² on every f64 is an integer; ±∞ and NaN stay as they are.
-    if !(x.abs() < 4_503_599_627_370_496.0) {
+    if x.is_nan() || x.abs() >= 4_503_599_627_370_496.0 {
         return x;
     }
     // Toward zero, and the fraction left: both exact below 2⁵².
