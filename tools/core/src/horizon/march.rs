@@ -16,7 +16,7 @@
 //! sky.
 
 use super::frame::{tiled_index, tiled_len, TILE_COLUMNS};
-use super::sample::Terrain;
+use super::sample::{LaneCells, Terrain};
 use super::screen::Screen;
 use super::Slice;
 
@@ -201,13 +201,19 @@ pub(super) trait Sampling: Sync {
     fn height(&self, p: Self::Position, subvoxel: bool) -> f64;
     /// Colour at `p` from colour level `level`.
     fn colour(&self, p: Self::Position, subvoxel: bool, level: usize) -> u32;
+    /// What a packet's lanes keep for [`Sampling::nearest_heights`],
+    /// prepared once a packet.
+    type Lanes;
+    /// The lanes of ground directions `dirs` (x components, then y).
+    fn lanes(&self, dirs: &[[f64; PACKET]; 2]) -> Self::Lanes;
     /// Nearest-vertex heights `s` metres along each lane's direction
-    /// (`dirs`: x components, then y), all lanes at once where the sampling
+    /// (`lanes` prepared from `dirs`), all lanes at once where the sampling
     /// can; where it colours by vertex, also each lane's vertex for
     /// [`Sampling::vertex_colour`] (`vertices` untouched otherwise).
     #[inline(always)]
     fn nearest_heights(
         &self,
+        _lanes: &Self::Lanes,
         dirs: &[[f64; PACKET]; 2],
         s: f64,
         out: &mut [f64; PACKET],
@@ -269,16 +275,23 @@ impl Sampling for FloatSampling<'_> {
         self.terrain.color(x, y, subvoxel, level)
     }
 
+    /// In grid units and f32, eight lanes to an AVX2 register.
+    type Lanes = LaneCells<PACKET>;
+
+    fn lanes(&self, dirs: &[[f64; PACKET]; 2]) -> LaneCells<PACKET> {
+        self.terrain.lane_cells(self.eye, dirs)
+    }
+
     #[inline(always)]
     fn nearest_heights(
         &self,
-        dirs: &[[f64; PACKET]; 2],
+        lanes: &LaneCells<PACKET>,
+        _dirs: &[[f64; PACKET]; 2],
         s: f64,
         out: &mut [f64; PACKET],
         vertices: &mut [u32; PACKET],
     ) {
-        self.terrain
-            .nearest_heights(self.eye, dirs, s, out, vertices);
+        self.terrain.nearest_heights(lanes, s, out, vertices);
     }
 
     #[inline(always)]
@@ -310,6 +323,10 @@ impl<'a> FixedSampling<'a> {
 
 impl Sampling for FixedSampling<'_> {
     type Position = [i64; 2];
+    /// Nothing: heights are taken one by one.
+    type Lanes = ();
+
+    fn lanes(&self, _dirs: &[[f64; PACKET]; 2]) {}
 
     #[inline]
     fn position(&self, dir: [f64; 2], distance_m: f64) -> [i64; 2] {
@@ -434,6 +451,7 @@ impl Pass<'_> {
             }
         }
         let mut busy = horizon.iter().filter(|h| h.is_finite()).count();
+        let lane_sampling = sampling.lanes(&dirs);
         let (first_dir, last_dir) = (self.directions[first], self.directions[first + count - 1]);
         for chunk in self.slices.chunks(CHUNK) {
             // Empty-space skipping: the packet's samples over this chunk lie
@@ -460,7 +478,7 @@ impl Pass<'_> {
                 if slice.subvoxel {
                     heights_one_by_one(sampling, &dirs, s, true, &mut ground);
                 } else {
-                    sampling.nearest_heights(&dirs, s, &mut ground, &mut vertices);
+                    sampling.nearest_heights(&lane_sampling, &dirs, s, &mut ground, &mut vertices);
                 }
                 let mut covering = 0u32;
                 for k in 0..PACKET {

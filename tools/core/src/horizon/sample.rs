@@ -179,11 +179,13 @@ fn heights_beside_data(heights: &[f32], mask: &[u8], side: usize) -> Option<Vec<
 /// tiles; off the grid, the element past them (NaN height). Branch-free
 /// 32-bit arithmetic on constants copied out of the terrain, so that the
 /// march computes many lanes at once in SIMD registers (mask not checked:
-/// masked heights are NaN).
+/// masked heights are NaN). Grid positions are f32 — eight lanes to an AVX2
+/// register — whose error (an f32 ulp, 2⁻¹² cell at column 4096) moves the
+/// nearest vertex only for points that close to halfway between two.
 #[derive(Clone, Copy)]
 struct VertexIndex {
     inv_cell: f64,
-    /// side − 1, as f64.
+    /// side − 1.
     last: f64,
     tiles_across: u32,
     off_grid: u32,
@@ -200,18 +202,36 @@ impl VertexIndex {
         }
     }
 
+    /// The vertex nearest terrain-frame point (x, y), metres.
     #[inline(always)]
     fn nearest(self, x: f64, y: f64) -> u32 {
-        let c = x * self.inv_cell + 0.5;
-        let r = self.last - y * self.inv_cell + 0.5;
-        let side = self.last + 1.0;
+        let [column, row] = self.to_grid([x, y]);
+        self.at(column as f32, row as f32)
+    }
+
+    /// Grid position (column, row) of terrain-frame point `p`, each plus ½
+    /// so that truncating gives the nearest vertex.
+    #[inline(always)]
+    fn to_grid(self, p: [f64; 2]) -> [f64; 2] {
+        [
+            p[0] * self.inv_cell + 0.5,
+            self.last - p[1] * self.inv_cell + 0.5,
+        ]
+    }
+
+    /// The vertex at grid position (`c`, `r`) plus ½ each (see
+    /// [`VertexIndex::to_grid`]).
+    #[inline(always)]
+    fn at(self, c: f32, r: f32) -> u32 {
+        let last = self.last as f32;
+        let side = last + 1.0;
         let on_grid = (c >= 0.0) & (r >= 0.0) & (c < side) & (r < side);
         // SAFETY: clamped onto the grid (NaN to 0), so finite and in
         // [0, side − 1], which fits an i32.
         let (column, row) = unsafe {
             (
-                c.max(0.0).min(self.last).to_int_unchecked::<i32>() as u32,
-                r.max(0.0).min(self.last).to_int_unchecked::<i32>() as u32,
+                c.max(0.0).min(last).to_int_unchecked::<i32>() as u32,
+                r.max(0.0).min(last).to_int_unchecked::<i32>() as u32,
             )
         };
         let index = tile_index(self.tiles_across, column, row);
@@ -221,6 +241,15 @@ impl VertexIndex {
             self.off_grid
         }
     }
+}
+
+/// A packet's lanes in grid units, for [`Terrain::nearest_heights`]: the
+/// eye's grid position (plus ½, see [`VertexIndex::to_grid`]) and each
+/// lane's direction in cells per metre, so that a slice's positions are one
+/// multiply-add a lane in f32.
+pub(super) struct LaneCells<const N: usize> {
+    eye: [f32; 2],
+    dirs: [[f32; N]; 2],
 }
 
 /// The terrain the raycaster reads.
@@ -476,22 +505,42 @@ impl<'a> Terrain<'a> {
         self.tiled[self.nearest_index(x, y) as usize]
     }
 
-    /// [`Terrain::nearest_height`] at `eye` + `dir`ₖ·`s` for every lane k
-    /// (directions one array per axis), and where each lane's vertex is
-    /// kept (for [`Terrain::vertex_colour`]): the indices of all lanes
-    /// first, side by side, then the loads, all in flight together.
-    #[inline(always)]
-    pub(super) fn nearest_heights<const N: usize>(
+    /// `eye` and the lanes' ground directions `dirs` (one array per axis,
+    /// metres per metre of s) in grid units, for [`Terrain::nearest_heights`].
+    pub(super) fn lane_cells<const N: usize>(
         &self,
         eye: [f64; 2],
         dirs: &[[f64; N]; 2],
+    ) -> LaneCells<N> {
+        let grid_eye = VertexIndex::of(self).to_grid(eye);
+        LaneCells {
+            eye: grid_eye.map(|v| v as f32),
+            dirs: [
+                dirs[0].map(|d| (d * self.inv_cell) as f32),
+                dirs[1].map(|d| (-d * self.inv_cell) as f32),
+            ],
+        }
+    }
+
+    /// The nearest vertex's height `s` metres along every lane of `lanes`,
+    /// and where each lane's vertex is kept (for [`Terrain::vertex_colour`]):
+    /// the indices of all lanes first, side by side, then the loads, all in
+    /// flight together.
+    #[inline(always)]
+    pub(super) fn nearest_heights<const N: usize>(
+        &self,
+        lanes: &LaneCells<N>,
         s: f64,
         out: &mut [f64; N],
         index: &mut [u32; N],
     ) {
         let vertex_index = VertexIndex::of(self);
-        for k in 0..N {
-            index[k] = vertex_index.nearest(eye[0] + dirs[0][k] * s, eye[1] + dirs[1][k] * s);
+        let s = s as f32;
+        for (k, vertex) in index.iter_mut().enumerate() {
+            *vertex = vertex_index.at(
+                lanes.eye[0] + lanes.dirs[0][k] * s,
+                lanes.eye[1] + lanes.dirs[1][k] * s,
+            );
         }
         for k in 0..N {
             out[k] = self.tiled[index[k] as usize] as f64;
