@@ -206,21 +206,17 @@ pub(super) trait Sampling: Sync {
     type Lanes;
     /// The lanes of ground directions `dirs` (x components, then y).
     fn lanes(&self, dirs: &[[f64; PACKET]; 2]) -> Self::Lanes;
-    /// Nearest-vertex heights `s` metres along each lane's direction
-    /// (`lanes` prepared from `dirs`), all lanes at once where the sampling
-    /// can; where it colours by vertex, also each lane's vertex for
-    /// [`Sampling::vertex_colour`] (`vertices` untouched otherwise).
-    #[inline(always)]
+    /// Nearest-vertex heights `s` metres along each lane's direction, all
+    /// lanes at once where the sampling can; where it colours by vertex,
+    /// also each lane's vertex for [`Sampling::vertex_colour`] (`vertices`
+    /// untouched otherwise).
     fn nearest_heights(
         &self,
-        _lanes: &Self::Lanes,
-        dirs: &[[f64; PACKET]; 2],
+        lanes: &Self::Lanes,
         s: f64,
         out: &mut [f64; PACKET],
-        _vertices: &mut [u32; PACKET],
-    ) {
-        heights_one_by_one(self, dirs, s, false, out);
-    }
+        vertices: &mut [u32; PACKET],
+    );
     /// The colour of a vertex [`Sampling::nearest_heights`] gave, where
     /// the sampling colours by vertex (the same as [`Sampling::colour`] at
     /// that sample's position without sub-voxels); `None` otherwise.
@@ -286,7 +282,6 @@ impl Sampling for FloatSampling<'_> {
     fn nearest_heights(
         &self,
         lanes: &LaneCells<PACKET>,
-        _dirs: &[[f64; PACKET]; 2],
         s: f64,
         out: &mut [f64; PACKET],
         vertices: &mut [u32; PACKET],
@@ -323,10 +318,23 @@ impl<'a> FixedSampling<'a> {
 
 impl Sampling for FixedSampling<'_> {
     type Position = [i64; 2];
-    /// Nothing: heights are taken one by one.
-    type Lanes = ();
+    /// The directions themselves: heights are taken one by one.
+    type Lanes = [[f64; PACKET]; 2];
 
-    fn lanes(&self, _dirs: &[[f64; PACKET]; 2]) {}
+    fn lanes(&self, dirs: &[[f64; PACKET]; 2]) -> [[f64; PACKET]; 2] {
+        *dirs
+    }
+
+    #[inline(always)]
+    fn nearest_heights(
+        &self,
+        dirs: &[[f64; PACKET]; 2],
+        s: f64,
+        out: &mut [f64; PACKET],
+        _vertices: &mut [u32; PACKET],
+    ) {
+        heights_one_by_one(self, dirs, s, false, out);
+    }
 
     #[inline]
     fn position(&self, dir: [f64; 2], distance_m: f64) -> [i64; 2] {
@@ -478,7 +486,7 @@ impl Pass<'_> {
                 if slice.subvoxel {
                     heights_one_by_one(sampling, &dirs, s, true, &mut ground);
                 } else {
-                    sampling.nearest_heights(&lane_sampling, &dirs, s, &mut ground, &mut vertices);
+                    sampling.nearest_heights(&lane_sampling, s, &mut ground, &mut vertices);
                 }
                 let mut covering = 0u32;
                 for k in 0..PACKET {
