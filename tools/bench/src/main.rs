@@ -54,7 +54,8 @@ enum BenchCommand {
     },
     /// The floating-horizon raycast: each configuration, level and pitched,
     /// at 1920×1080 and 1280×720, far 1024, 8 headings, with its PSNR against
-    /// the full-resolution render, beside the classic voxel-space loop.
+    /// the full-resolution render, beside the classic voxel-space loop and
+    /// the time to merely write a frame (the memory floor).
     #[command(after_help = "Examples:
   relevo-bench render
   relevo-bench render --json --runs 3
@@ -70,7 +71,7 @@ enum BenchCommand {
         #[arg(long)]
         size: Option<String>,
         /// Only the configuration of this name (`raycast`), or those whose
-        /// name contains it (`growing`, `pitch`, `classic`, …); a reference
+        /// name contains it (`growing`, `pitch`, `classic`, `floor`, …); a reference
         /// left out is still rendered for the others' PSNR, untimed.
         #[arg(long)]
         mode: Option<String>,

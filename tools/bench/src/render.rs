@@ -1,7 +1,8 @@
 //! Raycast figures: milliseconds per frame for each configuration of the
 //! floating-horizon renderer, level and pitched, with an image-quality
-//! figure beside each time, and the classic voxel-space loop in the same run
-//! as the baseline.
+//! figure beside each time, and in the same run the classic voxel-space
+//! loop as the baseline and the time to merely write a frame as the memory
+//! floor.
 
 use crate::bench::{emit, median, srtm_padded};
 use anyhow::Result;
@@ -118,7 +119,8 @@ impl ClassicVoxelSpace {
 
 /// Raycast figures: each configuration at 1920×1080 and 1280×720, far 1024
 /// cells, the median over 8 headings × `runs`, with its PSNR against the
-/// full-resolution level or pitched render, beside the classic loop.
+/// full-resolution level or pitched render, beside the classic loop and the
+/// frame write floor.
 /// `grid` keeps only the grids whose name contains it, `size` (e.g.
 /// `1920x1080`) only that frame size, `mode` only the configurations whose
 /// name contains it.
@@ -289,6 +291,21 @@ pub fn render(
                     ),
                 );
             }
+            if mode.is_none_or(|part| FRAME_WRITE.contains(part)) {
+                let ms = frame_write_ms(size, runs);
+                emit(
+                    json_lines,
+                    json!({"bench": "render", "grid": grid.name, "mode": FRAME_WRITE,
+                           "threads": threads, "width": size[0], "height": size[1], "ms": ms}),
+                    format!(
+                        "{:>15} {}×{} {FRAME_WRITE:>36}: {ms:7.2} ms/frame ({threads} thread{})",
+                        grid.name,
+                        size[0],
+                        size[1],
+                        if threads == 1 { "" } else { "s" }
+                    ),
+                );
+            }
             for threads in [1, 2] {
                 if mode.is_some_and(|part| !"classic voxel space".contains(part)) {
                     continue;
@@ -322,6 +339,38 @@ pub fn render(
         }
     }
     Ok(())
+}
+
+/// The name of the memory floor's figure.
+const FRAME_WRITE: &str = "frame write floor";
+
+/// The memory floor under every configuration: milliseconds to write a
+/// frame's colour and depth once (4 + 4 bytes a pixel, in column tiles as
+/// the raycaster does, tiles in parallel on its threads), nothing
+/// computed — the median over `runs` × [`HEADINGS`] writes into buffers
+/// written before.
+fn frame_write_ms(size: [u32; 2], runs: usize) -> f64 {
+    let (w, h) = (size[0] as usize, size[1] as usize);
+    let len = w.div_ceil(horizon::TILE_COLUMNS) * horizon::TILE_COLUMNS * h;
+    let (mut colour, mut depth) = (vec![0u32; len], vec![0.0f32; len]);
+    let tile = horizon::TILE_COLUMNS * h;
+    let mut times = Vec::new();
+    for run in 0..=runs * HEADINGS {
+        let start = Instant::now();
+        colour
+            .par_chunks_mut(tile)
+            .zip(depth.par_chunks_mut(tile))
+            .for_each(|(colour, depth)| {
+                colour.fill(run as u32);
+                depth.fill(run as f32);
+            });
+        // The first write touches fresh pages: not timed.
+        if run > 0 {
+            times.push(start.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+    std::hint::black_box((&colour, &depth));
+    median(&times)
 }
 
 /// The raycaster's own colour of every vertex (hillshaded height ramp), row
