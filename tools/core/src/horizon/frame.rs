@@ -10,7 +10,7 @@
 //! no copy follows. A GPU reads the tiles as the layers of a texture array
 //! (one upload, 256 bytes a row); files take [`Frame::to_rows`].
 
-/// Columns per tile: two packets of the march, 256 bytes of colour a row.
+/// Columns per tile: one packet of the march, 256 bytes of colour a row.
 pub const TILE_COLUMNS: usize = 64;
 
 /// Elements of a `width` × `height` image in column tiles (the last tile

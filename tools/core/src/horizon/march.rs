@@ -21,10 +21,11 @@ use super::screen::Screen;
 use super::Slice;
 
 /// Lines marched together.
-pub(super) const PACKET: usize = 32;
+pub(super) const PACKET: usize = 64;
 
-// A packet's lines lie in one tile.
-const _: () = assert!(TILE_COLUMNS.is_multiple_of(PACKET));
+// A packet's lines lie in one tile, and its lanes are the bits of a u64
+// (which lanes a slice's samples cover).
+const _: () = assert!(TILE_COLUMNS.is_multiple_of(PACKET) && PACKET <= 64);
 
 /// Lanes painted together, a row at a time (one AVX2 register of colours).
 const GROUP: usize = 8;
@@ -182,7 +183,7 @@ struct GroupSamples {
     /// The group's first lane.
     first: usize,
     /// Bit j: lane j's sample covers at least its next unpainted row.
-    covering: u32,
+    covering: u64,
     /// Per lane: its next unpainted row and the row its work ends at.
     row: [u32; GROUP],
     end: [u32; GROUP],
@@ -362,7 +363,7 @@ impl Sampling for FixedSampling<'_> {
 
 /// The set bits of `mask`, lowest first.
 #[inline(always)]
-fn set_bits(mut mask: u32) -> impl Iterator<Item = usize> {
+fn set_bits(mut mask: u64) -> impl Iterator<Item = usize> {
     std::iter::from_fn(move || {
         (mask != 0).then(|| {
             let k = mask.trailing_zeros() as usize;
@@ -488,9 +489,9 @@ impl Pass<'_> {
                 } else {
                     sampling.nearest_heights(&lane_sampling, s, &mut ground, &mut vertices);
                 }
-                let mut covering = 0u32;
+                let mut covering = 0u64;
                 for k in 0..PACKET {
-                    covering |= u32::from(ground[k] - self.eye_z > s * horizon[k]) << k;
+                    covering |= u64::from(ground[k] - self.eye_z > s * horizon[k]) << k;
                 }
                 if covering == 0 {
                     continue;
