@@ -27,8 +27,9 @@ pub(super) const PACKET: usize = 64;
 // (which lanes a slice's samples cover).
 const _: () = assert!(TILE_COLUMNS.is_multiple_of(PACKET) && PACKET <= 64);
 
-/// Lanes painted together, a row at a time (one AVX2 register of colours).
-const GROUP: usize = 8;
+/// Lanes a pitched camera paints together, a row at a time (two AVX2
+/// registers of colours).
+const GROUP: usize = 16;
 
 // A packet is whole groups.
 const _: () = assert!(PACKET.is_multiple_of(GROUP));
