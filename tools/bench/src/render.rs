@@ -292,7 +292,9 @@ pub fn render(
                 );
             }
             if mode.is_none_or(|part| FRAME_WRITE.contains(part)) {
-                let ms = frame_write_ms(size, runs);
+                // A frame of the renderer's, which has drawn this size's
+                // references: the raycaster's own buffers and layout.
+                let ms = frame_write_ms(renderer.frame().clone(), runs);
                 emit(
                     json_lines,
                     json!({"bench": "render", "grid": grid.name, "mode": FRAME_WRITE,
@@ -344,32 +346,26 @@ pub fn render(
 /// The name of the memory floor's figure.
 const FRAME_WRITE: &str = "frame write floor";
 
-/// The memory floor under every configuration: milliseconds to write a
-/// frame's colour and depth once (4 + 4 bytes a pixel, in column tiles as
-/// the raycaster does, tiles in parallel on its threads), nothing
-/// computed — the median over `runs` × [`HEADINGS`] writes into buffers
-/// written before.
-fn frame_write_ms(size: [u32; 2], runs: usize) -> f64 {
-    let (w, h) = (size[0] as usize, size[1] as usize);
-    let len = w.div_ceil(horizon::TILE_COLUMNS) * horizon::TILE_COLUMNS * h;
-    let (mut colour, mut depth) = (vec![0u32; len], vec![0.0f32; len]);
-    let tile = horizon::TILE_COLUMNS * h;
+/// The memory floor under every configuration: milliseconds to write
+/// `frame`'s colour and depth once (4 + 4 bytes a pixel, in its column
+/// tiles, tiles in parallel on the renderer's threads), nothing computed —
+/// the median over `runs` × [`HEADINGS`] writes.
+fn frame_write_ms(mut frame: Frame, runs: usize) -> f64 {
+    let tile = horizon::TILE_COLUMNS * frame.height;
     let mut times = Vec::new();
-    for run in 0..=runs * HEADINGS {
+    for run in 0..runs * HEADINGS {
         let start = Instant::now();
-        colour
+        frame
+            .rgba
             .par_chunks_mut(tile)
-            .zip(depth.par_chunks_mut(tile))
+            .zip(frame.depth.par_chunks_mut(tile))
             .for_each(|(colour, depth)| {
                 colour.fill(run as u32);
                 depth.fill(run as f32);
             });
-        // The first write touches fresh pages: not timed.
-        if run > 0 {
-            times.push(start.elapsed().as_secs_f64() * 1e3);
-        }
+        times.push(start.elapsed().as_secs_f64() * 1e3);
     }
-    std::hint::black_box((&colour, &depth));
+    std::hint::black_box(&frame);
     median(&times)
 }
 
