@@ -294,7 +294,14 @@ pub fn render(
             if mode.is_none_or(|part| FRAME_WRITE.contains(part)) {
                 // A frame of the renderer's, which has drawn this size's
                 // references: the raycaster's own buffers and layout.
-                let ms = frame_write_ms(renderer.frame().clone(), runs);
+                let frame = renderer.frame().clone();
+                anyhow::ensure!(
+                    [frame.width, frame.height] == [size[0] as usize, size[1] as usize],
+                    "the floor needs a frame of {}×{}",
+                    size[0],
+                    size[1]
+                );
+                let ms = frame_write_ms(frame, runs);
                 emit(
                     json_lines,
                     json!({"bench": "render", "grid": grid.name, "mode": FRAME_WRITE,
