@@ -60,11 +60,13 @@ enum BenchCommand {
   relevo-bench render
   relevo-bench render --json --runs 3
   relevo-bench render --grid srtm --size 1920x1080 --mode growing
+  relevo-bench render --grid grenoble --bundle out/grenoble.relevo --size 1920x1080
   RAYON_NUM_THREADS=1 perf record -- relevo-bench render --grid srtm --size 1920x1080 --mode raycast --runs 50")]
     Render {
         #[command(flatten)]
         common: BenchArgs,
-        /// Only the grids whose name contains this (`fractal`, `srtm`).
+        /// Only the grids whose name contains this (`fractal`, `srtm`, or
+        /// the bundle's name).
         #[arg(long)]
         grid: Option<String>,
         /// Only this frame size, WIDTHxHEIGHT (1920x1080 or 1280x720).
@@ -75,6 +77,10 @@ enum BenchCommand {
         /// left out is still rendered for the others' PSNR, untimed.
         #[arg(long)]
         mode: Option<String>,
+        /// Also a bundle's terrain with its drape, as `relevo render` and the
+        /// viewer draw it (e.g. out/grenoble.relevo from `scripts/demo`).
+        #[arg(long)]
+        bundle: Option<PathBuf>,
     },
     /// Vegetation: F1 on the annotated crowns beside an excess-green baseline;
     /// split-and-merge and detection speed beside scikit-image's felzenszwalb.
@@ -192,6 +198,7 @@ fn main() -> ExitCode {
             grid,
             size,
             mode,
+            bundle,
         } => render::render(
             &a.data,
             a.runs.max(1),
@@ -199,6 +206,7 @@ fn main() -> ExitCode {
             grid.as_deref(),
             size.as_deref(),
             mode.as_deref(),
+            bundle.as_deref(),
         ),
         BenchCommand::Veg {
             common: a,

@@ -7,9 +7,12 @@
 use crate::bench::{emit, median, srtm_padded};
 use anyhow::Result;
 use rayon::prelude::*;
+use relevo_core::bundle::Bundle;
 use relevo_core::camera::Camera;
 use relevo_core::grid::fractal_heights;
-use relevo_core::horizon::{self, Arithmetic, Band, Frame, Mode, RenderOptions, Terrain};
+use relevo_core::horizon::{
+    self, Arithmetic, Band, ColorSource, Frame, Mode, RenderOptions, Terrain,
+};
 use serde_json::json;
 use std::path::Path;
 use std::time::Instant;
@@ -17,13 +20,15 @@ use std::time::Instant;
 /// Headings each configuration is timed from.
 const HEADINGS: usize = 8;
 
-/// A terrain to fly over: name, side, heights (NaN-free), mask, cell size.
+/// A terrain to fly over: name, side, heights, mask, cell size, and the
+/// drape of a bundle (without one, a hillshaded height ramp by vertex).
 struct Grid {
-    name: &'static str,
+    name: String,
     side: usize,
     heights: Vec<f32>,
     mask: Vec<u8>,
     cell_m: f64,
+    drape: Option<ColorSource>,
 }
 
 /// The camera of heading `k`: from the grid's centre, 100 m above its
@@ -123,7 +128,8 @@ impl ClassicVoxelSpace {
 /// frame write floor.
 /// `grid` keeps only the grids whose name contains it, `size` (e.g.
 /// `1920x1080`) only that frame size, `mode` only the configurations whose
-/// name contains it.
+/// name contains it; `bundle` adds a bundle's terrain with its drape (what
+/// `relevo render` and the viewer draw: colours from the drape image).
 pub fn render(
     data: &Path,
     runs: usize,
@@ -131,6 +137,7 @@ pub fn render(
     grid: Option<&str>,
     size: Option<&str>,
     mode: Option<&str>,
+    bundle: Option<&Path>,
 ) -> Result<()> {
     let sizes: Vec<[u32; 2]> = [[1920u32, 1080], [1280, 720]]
         .into_iter()
@@ -146,26 +153,53 @@ pub fn render(
     let mut grids = Vec::new();
     if wanted("fractal 4097²") {
         grids.push(Grid {
-            name: "fractal 4097²",
+            name: "fractal 4097²".into(),
             side: 4097,
             heights: fractal_heights(4097, 1),
             mask: vec![1u8; 4097 * 4097],
             cell_m: 30.0,
+            drape: None,
         });
     }
     if wanted("srtm_ref 1025²") {
         let srtm = srtm_padded(data)?;
         grids.push(Grid {
-            name: "srtm_ref 1025²",
+            name: "srtm_ref 1025²".into(),
             side: srtm.side,
             heights: srtm.heights,
             mask: srtm.mask,
             cell_m: 90.0,
+            drape: None,
         });
+    }
+    if let Some(path) = bundle {
+        let bundle = Bundle::open(path)?;
+        let frame = bundle.frame();
+        let name = path.file_stem().map_or_else(
+            || "bundle".into(),
+            |stem| stem.to_string_lossy().into_owned(),
+        );
+        let drape = bundle.drape()?.and_then(|d| d.color_source(&frame));
+        anyhow::ensure!(
+            drape.is_some(),
+            "{}: the bundle has no drape",
+            path.display()
+        );
+        let name = format!("{name} {}² (drape)", frame.side);
+        if wanted(&name) {
+            grids.push(Grid {
+                name,
+                side: frame.side,
+                heights: bundle.heights()?.to_vec(),
+                mask: bundle.mask()?.to_vec(),
+                cell_m: frame.cell_size_m,
+                drape,
+            });
+        }
     }
     if grids.is_empty() {
         anyhow::bail!(
-            "--grid {}: the grids are fractal and srtm",
+            "--grid {}: the grids are fractal, srtm and a --bundle's name",
             grid.unwrap_or("")
         );
     }
@@ -222,9 +256,14 @@ pub fn render(
         ),
     ];
     let threads = rayon::current_num_threads();
-    for grid in &grids {
-        let terrain = Terrain::new(grid.side, grid.cell_m, &grid.heights, &grid.mask, None)
-            .with_hillshade(315.0, 40.0);
+    for grid in &mut grids {
+        let drape = grid.drape.take();
+        let shaded = drape.is_none();
+        let mut terrain = Terrain::new(grid.side, grid.cell_m, &grid.heights, &grid.mask, drape);
+        if shaded {
+            terrain = terrain.with_hillshade(315.0, 40.0);
+        }
+        let grid = &*grid;
         let shade = terrain_colours(&terrain, grid);
         for &size in &sizes {
             let mut renderer = horizon::Renderer::default();
