@@ -46,6 +46,17 @@ fn round_half_away(x: f64) -> f64 {
     rounded.copysign(x)
 }
 
+/// `x` rounded half away from zero and clamped to a byte:
+/// `round_half_away(x).clamp(0.0, 255.0) as u8` (NaN gives 0), with the
+/// clamp first so that the rounding only meets 0 ≤ x ≤ 255 (or NaN, which
+/// truncates to 0 and compares false).
+#[inline(always)]
+fn byte_of(x: f64) -> u8 {
+    let x = x.clamp(0.0, 255.0);
+    let whole = x as u32;
+    (whole + u32::from(x - whole as f64 >= 0.5)) as u8
+}
+
 /// Bilinear weights of the four voxels around each of the DIVISIONS² sub-voxels,
 /// `[top-left, top-right, bottom-left, bottom-right]` in grid order — the
 /// contribution matrix of seed 000, Algorithm 3, taken at sub-voxel centres.
@@ -68,6 +79,26 @@ struct Level {
     width: usize,
     height: usize,
     texels: Vec<[u8; 4]>,
+    /// Its texels per level-0 pixel, 2^−level.
+    per_pixel: f64,
+    /// The last column and row, as the lookups clamp to them.
+    last: [f64; 2],
+}
+
+impl Level {
+    /// Level `index` of the pyramid: `texels`, `width`×`height`, row-major.
+    fn new(index: usize, width: usize, height: usize, texels: Vec<[u8; 4]>) -> Level {
+        Level {
+            width,
+            height,
+            texels,
+            per_pixel: 0.5f64.powi(index as i32),
+            last: [
+                width.saturating_sub(1) as f64,
+                height.saturating_sub(1) as f64,
+            ],
+        }
+    }
 }
 
 /// The drape image, as levels halving in size (level 0 is the image).
@@ -92,14 +123,14 @@ impl ColorSource {
         // Terrain frame → world → colour pixel, all affine.
         let to_pixel = frame.terrain_to_pixel(color_geo)?;
         let texel_m = color_geo.cell_size().0.max(color_geo.cell_size().1);
-        let mut levels = vec![Level {
+        let mut levels = vec![Level::new(
+            0,
             width,
             height,
-            texels: rgba
-                .chunks_exact(4)
+            rgba.chunks_exact(4)
                 .map(|c| [c[0], c[1], c[2], c[3]])
                 .collect(),
-        }];
+        )];
         while let Some(prev) = levels.last().filter(|l| l.width > 1 || l.height > 1) {
             let (w, h) = (prev.width.div_ceil(2), prev.height.div_ceil(2));
             let mut texels = Vec::with_capacity(w * h);
@@ -117,11 +148,7 @@ impl ColorSource {
                     texels.push(sum.map(|s| ((s + 2) / 4) as u8));
                 }
             }
-            levels.push(Level {
-                width: w,
-                height: h,
-                texels,
-            });
+            levels.push(Level::new(levels.len(), w, h, texels));
         }
         Some(ColorSource {
             levels,
@@ -660,13 +687,15 @@ impl<'a> Terrain<'a> {
         let rgb: [f64; 3] = {
             {
                 let t = &src.to_pixel;
-                let scale = (1u64 << level) as f64;
-                let u = (t[0] + t[1] * x + t[2] * y) / scale;
-                let v = (t[3] + t[4] * x + t[5] * y) / scale;
                 let lv = &src.levels[level];
+                // Scaling by a power of two is exact.
+                let u = (t[0] + t[1] * x + t[2] * y) * lv.per_pixel;
+                let v = (t[3] + t[4] * x + t[5] * y) * lv.per_pixel;
+                // Clamped (NaN to 0), then truncated (images are far
+                // narrower than 2³² texels).
                 let texel = |cu: f64, cv: f64| {
-                    let cu = cu.clamp(0.0, (lv.width - 1) as f64) as usize;
-                    let cv = cv.clamp(0.0, (lv.height - 1) as f64) as usize;
+                    let cu = cu.max(0.0).min(lv.last[0]) as u32 as usize;
+                    let cv = cv.max(0.0).min(lv.last[1]) as u32 as usize;
                     lv.texels[cv * lv.width + cu]
                 };
                 if subvoxel {
@@ -699,7 +728,7 @@ impl<'a> Terrain<'a> {
                 }
             }
         };
-        let [r8, g8, b8] = rgb.map(|v| round_half_away(v * light as f64).clamp(0.0, 255.0) as u8);
+        let [r8, g8, b8] = rgb.map(|v| byte_of(v * light as f64));
         u32::from_le_bytes([r8, g8, b8, 255])
     }
 
@@ -749,5 +778,34 @@ mod tests {
             assert_eq!(round_half_away(x).to_bits(), x.round().to_bits(), "{x:e}");
         }
         assert!(round_half_away(f64::NAN).is_nan());
+    }
+
+    #[test]
+    fn bytes_are_the_rounded_values_clamped() {
+        let mut values = vec![
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            -0.0,
+            0.499_999_999_999_999_94,
+            254.5,
+            254.499_999_999_999_97,
+            255.499_999_999_999_97,
+            255.5,
+            1e300,
+            -1e300,
+        ];
+        // Every 1/64 from −300 to 300, and their neighbours.
+        for q in -19200..=19200 {
+            let x = q as f64 / 64.0;
+            values.extend([x, x.next_up(), x.next_down()]);
+        }
+        for x in values {
+            assert_eq!(
+                byte_of(x),
+                round_half_away(x).clamp(0.0, 255.0) as u8,
+                "{x:e}"
+            );
+        }
     }
 }
