@@ -394,20 +394,29 @@ impl GatherTile<'_> {
         let columns = TILE_COLUMNS.min(w - self.first);
         let mut lines = [0u32; TILE_COLUMNS];
         let lines = &mut lines[..columns];
+        // Every element the gather reads lies below this.
+        let len = line_colour.len().min(line_depth.len());
         for y in 0..h {
             // The row's lines, then where they lie in the lines' buffers
             // (fewer than 2³² elements, `Screen::fill`), side by side.
             screen.lines_on_row(h - 1 - y, self.first, lines);
+            let mut last = 0;
             for j in lines.iter_mut() {
                 *j = tiled_index(*j as usize, y, h) as u32;
+                last = last.max(*j);
             }
+            assert!((last as usize) < len, "a line outside its buffers");
             let row = y * TILE_COLUMNS;
             let pixels = self.rgba[row..row + columns]
                 .iter_mut()
                 .zip(&mut self.depth[row..row + columns]);
             for ((colour, depth), &from) in pixels.zip(&*lines) {
-                *colour = line_colour[from as usize];
-                *depth = line_depth[from as usize];
+                // SAFETY: from ≤ last < len, both buffers' length (checked
+                // above).
+                unsafe {
+                    *colour = *line_colour.get_unchecked(from as usize);
+                    *depth = *line_depth.get_unchecked(from as usize);
+                }
             }
         }
     }
