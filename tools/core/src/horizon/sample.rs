@@ -569,8 +569,16 @@ impl<'a> Terrain<'a> {
                 lanes.eye[1] + lanes.dirs[1][k] * s,
             );
         }
+        // Every index lies in `tiled` (`VertexIndex::at`); checked once for
+        // the lanes rather than at every load.
+        let last = index.iter().fold(0, |last, &i| last.max(i));
+        assert!(
+            (last as usize) < self.tiled.len(),
+            "a vertex outside the tiles"
+        );
         for k in 0..N {
-            out[k] = self.tiled[index[k] as usize] as f64;
+            // SAFETY: index[k] ≤ last < tiled.len() (checked above).
+            out[k] = unsafe { *self.tiled.get_unchecked(index[k] as usize) } as f64;
         }
     }
 
