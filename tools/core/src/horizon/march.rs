@@ -180,7 +180,7 @@ impl Lanes {
 }
 
 /// One slice's samples in a group of [`GROUP`] lanes of a packet.
-struct GroupSamples {
+struct GroupSamples<'a> {
     /// The group's first lane.
     first: usize,
     /// Bit j: lane j's sample covers at least its next unpainted row.
@@ -190,8 +190,8 @@ struct GroupSamples {
     end: [u32; GROUP],
     /// Per lane: the sample's height above the eye, metres (−∞ for a lane
     /// whose sample covers nothing), and its colour.
-    rise: [f64; GROUP],
-    colour: [u32; GROUP],
+    rise: &'a [f64; GROUP],
+    colour: &'a [u32; GROUP],
 }
 
 /// How positions and heights are computed (seed 000, chapter 7).
@@ -521,7 +521,9 @@ impl Pass<'_> {
                     for k in set_bits(covering) {
                         rise[k] = ground[k] - self.eye_z;
                     }
-                    for g in (0..PACKET).step_by(GROUP) {
+                    let groups = rise.as_chunks::<GROUP>().0.iter();
+                    let groups = groups.zip(colour.as_chunks::<GROUP>().0);
+                    for ((rise, colour), g) in groups.zip((0..PACKET).step_by(GROUP)) {
                         let group_covering = (covering >> g) & ((1 << GROUP) - 1);
                         if group_covering == 0 {
                             continue;
@@ -531,8 +533,8 @@ impl Pass<'_> {
                             covering: group_covering,
                             row: std::array::from_fn(|j| row[g + j] as u32),
                             end: std::array::from_fn(|j| end[g + j] as u32),
-                            rise: std::array::from_fn(|j| rise[g + j]),
-                            colour: std::array::from_fn(|j| colour[g + j]),
+                            rise,
+                            colour,
                         };
                         let painted = self.paint_pitched_rows(lanes, s, depth_over, &samples);
                         for j in set_bits(group_covering) {
@@ -645,7 +647,7 @@ impl Pass<'_> {
                 // Beyond the far plane for this row's rays: sky.
                 ([self.sky; GROUP], 1.0)
             } else {
-                (*colour, (depth_a - depth_over * forward_per_depth) as f32)
+                (**colour, (depth_a - depth_over * forward_per_depth) as f32)
             };
             let (colours, depths) = lanes.group_row(r as usize, *first);
             if all_open.contains(&r) {
