@@ -515,8 +515,8 @@ impl Pass<'_> {
                 // while its rise clears the row's slope, below its end (seed
                 // 000, Algorithm 1, line 11A).
                 if self.screen.pitched {
-                    // Each row has its own depth and far-plane test: eight
-                    // lanes go together, a row at a time.
+                    // Each row has its own depth and far-plane test: a
+                    // group of lanes goes together, a row at a time.
                     let mut rise = [f64::NEG_INFINITY; PACKET];
                     for k in set_bits(covering) {
                         rise[k] = ground[k] - self.eye_z;
