@@ -375,11 +375,13 @@ fn set_bits(mut mask: u64) -> impl Iterator<Item = usize> {
 }
 
 /// A lane's horizon once its next unpainted row is `row`: the slope that
-/// row needs, or ∞ when its work is done (`row` = `end`; returns false).
+/// row needs among the lane's `slopes` (those of the rows below its end), or
+/// ∞ when its work is done (past them; returns false).
 #[inline(always)]
-fn next_horizon(row: usize, end: usize, slope: &[f64], horizon: &mut f64) -> bool {
-    *horizon = if row < end { slope[row] } else { f64::INFINITY };
-    row < end
+fn next_horizon(row: usize, slopes: &[f64], horizon: &mut f64) -> bool {
+    let next = slopes.get(row);
+    *horizon = next.copied().unwrap_or(f64::INFINITY);
+    next.is_some()
 }
 
 /// What every packet of a frame shares.
@@ -540,7 +542,7 @@ impl Pass<'_> {
                         for j in set_bits(group_covering) {
                             let k = g + j;
                             row[k] += painted[j] as usize;
-                            if !next_horizon(row[k], end[k], slope, &mut horizon[k]) {
+                            if !next_horizon(row[k], &slope[..end[k]], &mut horizon[k]) {
                                 busy -= 1;
                             }
                         }
@@ -551,15 +553,11 @@ impl Pass<'_> {
                     let depth = (depth_a - depth_over) as f32;
                     for k in set_bits(covering) {
                         let rise = ground[k] - self.eye_z;
-                        row[k] = lanes.paint_run(
-                            k,
-                            row[k],
-                            &slope[..end[k]],
-                            colour[k],
-                            depth,
-                            |slope| rise > s * slope,
-                        );
-                        if !next_horizon(row[k], end[k], slope, &mut horizon[k]) {
+                        let slopes = &slope[..end[k]];
+                        row[k] = lanes.paint_run(k, row[k], slopes, colour[k], depth, |slope| {
+                            rise > s * slope
+                        });
+                        if !next_horizon(row[k], slopes, &mut horizon[k]) {
                             busy -= 1;
                         }
                     }
