@@ -81,7 +81,8 @@ struct Level {
     texels: Vec<[u8; 4]>,
     /// Its texels per level-0 pixel, 2^−level.
     per_pixel: f64,
-    /// The last column and row, as the lookups clamp to them.
+    /// The last column and row, which the lookups clamp to: kept as f64
+    /// so that no lookup converts them from integers again.
     last: [f64; 2],
 }
 
