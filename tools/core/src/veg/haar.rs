@@ -16,7 +16,8 @@
 //! images, not regions of arbitrary position and shape.
 
 use super::segment::{Region, Segmentation};
-use super::{Image, MAX_BANDS};
+use super::Image;
+use glam::Vec4;
 
 /// Side of the patch a region is resampled to before its transform.
 pub const PATCH: usize = 16;
@@ -24,20 +25,35 @@ const LEVELS: usize = PATCH.trailing_zeros() as usize;
 /// Features per channel: the mean and three sub-bands per level.
 pub const FEATURES_PER_CHANNEL: usize = 1 + 3 * LEVELS;
 
+/// A value the transform works on: one channel (`f32`), or every channel
+/// of a pixel at once (`Vec4`, a lane per channel, the same operations lane
+/// by lane as on one `f32`).
+pub trait Coefficient:
+    Copy
+    + Default
+    + std::ops::Add<Output = Self>
+    + std::ops::Sub<Output = Self>
+    + std::ops::Mul<f32, Output = Self>
+{
+}
+
+impl Coefficient for f32 {}
+impl Coefficient for Vec4 {}
+
 /// Forward transform of the `n`×`n` row-major block in place (`n` a power of
 /// two, at most [`PATCH`]).
-pub fn forward(block: &mut [f32], n: usize) {
+pub fn forward<T: Coefficient>(block: &mut [T], n: usize) {
     forward_from(block, n, n);
 }
 
 /// [`forward`] from the level whose low-pass quadrant is `size`×`size`
 /// (the top-left of the `n`×`n` block) down: the finer levels are taken as
 /// done.
-fn forward_from(block: &mut [f32], n: usize, size: usize) {
+fn forward_from<T: Coefficient>(block: &mut [T], n: usize, size: usize) {
     assert!(n.is_power_of_two() && n <= PATCH && block.len() == n * n);
     assert!(size.is_power_of_two() && size <= n);
     // Rows go from the block to `rows`, columns from `rows` back to the block.
-    let mut rows = [0.0f32; PATCH * PATCH];
+    let mut rows = [T::default(); PATCH * PATCH];
     let mut size = size;
     while size > 1 {
         let half = size / 2;
@@ -102,29 +118,36 @@ fn unstep(line: &mut [f32], scratch: &mut [f32]) {
     line.copy_from_slice(&scratch[..line.len()]);
 }
 
-/// The signature of one transformed channel: mean, then for each level from
+/// The signatures of the first `bands` channels of a transformed block (a
+/// lane per channel), channel after channel: mean, then for each level from
 /// the finest the RMS of its horizontal, vertical and diagonal details.
-fn channel_signature(coefficients: &[f32], out: &mut Vec<f32>) {
+fn channel_signatures(coefficients: &[Vec4], bands: usize, out: &mut Vec<f32>) {
     let n = PATCH;
-    out.push(coefficients[0] / n as f32);
+    let mut features = [Vec4::ZERO; FEATURES_PER_CHANNEL];
+    features[0] = coefficients[0] / n as f32;
     let mut size = n;
+    let mut next = 1;
     while size > 1 {
         let half = size / 2;
         let rms = |x0: usize, y0: usize| {
-            let mut sum = 0.0f32;
+            let mut sum = Vec4::ZERO;
             for y in y0..y0 + half {
-                for x in x0..x0 + half {
-                    sum += coefficients[y * n + x].powi(2);
+                for &c in &coefficients[y * n + x0..y * n + x0 + half] {
+                    sum += c * c;
                 }
             }
-            (sum / (half * half) as f32).sqrt()
+            Vec4::from_array((sum / (half * half) as f32).to_array().map(f32::sqrt))
         };
         // Rows were transformed first: the right half holds horizontal
         // differences, the bottom half vertical ones.
-        out.push(rms(half, 0));
-        out.push(rms(0, half));
-        out.push(rms(half, half));
+        features[next] = rms(half, 0);
+        features[next + 1] = rms(0, half);
+        features[next + 2] = rms(half, half);
+        next += 3;
         size = half;
+    }
+    for c in 0..bands {
+        out.extend(features.iter().map(|f| f[c]));
     }
 }
 
@@ -191,27 +214,22 @@ fn replicated_signature(image: &Image, window: [u32; 4]) -> Vec<f32> {
     let repeat_levels = (PATCH / side).trailing_zeros();
     // One level on a repeated pair (a, a): rows give (a + a)/√2, columns
     // the same again; the details (a − a)/√2 are zero.
-    let coarsen = |mut v: f32| {
+    let coarsen = |mut v: Vec4| {
         for _ in 0..repeat_levels {
             let row = (v + v) * std::f32::consts::FRAC_1_SQRT_2;
             v = (row + row) * std::f32::consts::FRAC_1_SQRT_2;
         }
         v
     };
-    let mut out = Vec::with_capacity(image.bands * FEATURES_PER_CHANNEL);
-    let mut blocks = [[0.0f32; PATCH * PATCH]; MAX_BANDS];
+    let mut block = [Vec4::ZERO; PATCH * PATCH];
     for y in y0..y1 {
         for x in x0..x1 {
-            let colour = image.colour(x, y);
-            for (block, v) in blocks.iter_mut().zip(colour).take(image.bands) {
-                block[(y - y0) * PATCH + x - x0] = coarsen(v);
-            }
+            block[(y - y0) * PATCH + x - x0] = coarsen(Vec4::from_array(image.colour(x, y)));
         }
     }
-    for block in blocks.iter_mut().take(image.bands) {
-        forward_from(block, PATCH, side);
-        channel_signature(block, &mut out);
-    }
+    forward_from(&mut block, PATCH, side);
+    let mut out = Vec::with_capacity(image.bands * FEATURES_PER_CHANNEL);
+    channel_signatures(&block, image.bands, &mut out);
     out
 }
 
@@ -226,7 +244,7 @@ fn resampled_signature(image: &Image, window: [u32; 4], only: Option<(&[u32], u3
     for (k, x) in (x0..x1).step_by(stride_x).enumerate() {
         cell_x[k] = (x - x0) * PATCH / ww;
     }
-    let mut sums = [[0.0f32; MAX_BANDS]; PATCH * PATCH];
+    let mut sums = [Vec4::ZERO; PATCH * PATCH];
     let mut counts = [0u32; PATCH * PATCH];
     for y in (y0..y1).step_by(stride_y) {
         let row = (y - y0) * PATCH / wh * PATCH;
@@ -236,12 +254,8 @@ fn resampled_signature(image: &Image, window: [u32; 4], only: Option<(&[u32], u3
                     continue;
                 }
             }
-            let colour = image.colour(x, y);
             let at = row + cell_x[k];
-            let cell = &mut sums[at];
-            for c in 0..image.bands {
-                cell[c] += colour[c];
-            }
+            sums[at] += Vec4::from_array(image.colour(x, y));
             counts[at] += 1;
         }
     }
@@ -262,32 +276,24 @@ fn resampled_signature(image: &Image, window: [u32; 4], only: Option<(&[u32], u3
         }
     });
     // Cells left without pixels take the window's mean.
-    let mut mean = [0.0f32; MAX_BANDS];
+    let mut mean = Vec4::ZERO;
     if source_cell.iter().any(|&at| counts[at] == 0) {
         let total: u32 = counts.iter().sum();
-        for cell in &sums {
-            for c in 0..MAX_BANDS {
-                mean[c] += cell[c] / total.max(1) as f32;
-            }
+        for &cell in &sums {
+            mean += cell / total.max(1) as f32;
         }
     }
-    let averages: [[f32; MAX_BANDS]; PATCH * PATCH] = std::array::from_fn(|at| {
-        let n = counts[at] as f32;
-        sums[at].map(|sum| sum / n)
-    });
+    let mut block = [Vec4::ZERO; PATCH * PATCH];
+    for (value, &at) in block.iter_mut().zip(&source_cell) {
+        *value = if counts[at] == 0 {
+            mean
+        } else {
+            sums[at] / counts[at] as f32
+        };
+    }
+    forward(&mut block, PATCH);
     let mut out = Vec::with_capacity(image.bands * FEATURES_PER_CHANNEL);
-    let mut block = [0.0f32; PATCH * PATCH];
-    for c in 0..image.bands {
-        for (value, &at) in block.iter_mut().zip(&source_cell) {
-            *value = if counts[at] == 0 {
-                mean[c]
-            } else {
-                averages[at][c]
-            };
-        }
-        forward(&mut block, PATCH);
-        channel_signature(&block, &mut out);
-    }
+    channel_signatures(&block, image.bands, &mut out);
     out
 }
 
@@ -358,22 +364,42 @@ mod tests {
 
     #[test]
     fn constant_has_only_the_mean_and_stripes_only_their_band() {
-        let mut flat = vec![7.0f32; PATCH * PATCH];
-        forward(&mut flat, PATCH);
-        let mut sig = Vec::new();
-        channel_signature(&flat, &mut sig);
-        assert!((sig[0] - 7.0).abs() < 1e-4);
-        assert!(sig[1..].iter().all(|v| v.abs() < 1e-4));
-        // Columns alternating 0/10: finest horizontal detail only (rows give
-        // −10/√2 per pair, columns then add two such rows: −10).
-        let mut stripes: Vec<f32> = (0..PATCH * PATCH)
-            .map(|i| if i % 2 == 0 { 0.0 } else { 10.0 })
+        // Channel 0 flat at 7; channel 1 columns alternating 0/10: finest
+        // horizontal detail only (rows give −10/√2 per pair, columns then
+        // add two such rows: −10).
+        let mut block: Vec<Vec4> = (0..PATCH * PATCH)
+            .map(|i| Vec4::new(7.0, if i % 2 == 0 { 0.0 } else { 10.0 }, 0.0, 0.0))
             .collect();
-        forward(&mut stripes, PATCH);
+        forward(&mut block, PATCH);
         let mut sig = Vec::new();
-        channel_signature(&stripes, &mut sig);
-        assert!((sig[0] - 5.0).abs() < 1e-4);
-        assert!((sig[1] - 10.0).abs() < 1e-3, "{sig:?}");
-        assert!(sig[2..].iter().all(|v| v.abs() < 1e-3), "{sig:?}");
+        channel_signatures(&block, 2, &mut sig);
+        assert_eq!(sig.len(), 2 * FEATURES_PER_CHANNEL);
+        let (flat, stripes) = sig.split_at(FEATURES_PER_CHANNEL);
+        assert!((flat[0] - 7.0).abs() < 1e-4);
+        assert!(flat[1..].iter().all(|v| v.abs() < 1e-4));
+        assert!((stripes[0] - 5.0).abs() < 1e-4);
+        assert!((stripes[1] - 10.0).abs() < 1e-3, "{stripes:?}");
+        assert!(stripes[2..].iter().all(|v| v.abs() < 1e-3), "{stripes:?}");
+    }
+
+    /// Transforming the channels side by side (a lane each) gives each
+    /// channel's own transform bit for bit.
+    #[test]
+    fn lanes_transform_as_each_channel_alone() {
+        let values = pseudo_random(4 * PATCH * PATCH);
+        let channels: Vec<&[f32]> = values.chunks_exact(PATCH * PATCH).collect();
+        let mut lanes: Vec<Vec4> = (0..PATCH * PATCH)
+            .map(|i| Vec4::from_array(std::array::from_fn(|c| channels[c][i])))
+            .collect();
+        forward(&mut lanes, PATCH);
+        for (c, channel) in channels.iter().enumerate() {
+            let mut alone = channel.to_vec();
+            forward(&mut alone, PATCH);
+            let bits = |v: &mut dyn Iterator<Item = f32>| v.map(f32::to_bits).collect::<Vec<_>>();
+            assert_eq!(
+                bits(&mut lanes.iter().map(|l| l[c])),
+                bits(&mut alone.into_iter())
+            );
+        }
     }
 }
