@@ -464,6 +464,11 @@ impl Pass<'_> {
         }
         let mut busy = horizon.iter().filter(|h| h.is_finite()).count();
         let lane_sampling = sampling.lanes(&dirs);
+        // Each slice's heights, and the vertices they came from: every
+        // lane of `ground` is written for each slice (and `vertices` where
+        // the sampling colours by vertex), so they are set up once.
+        let mut ground = [0.0; PACKET];
+        let mut vertices = [0u32; PACKET];
         let (first_dir, last_dir) = (self.directions[first], self.directions[first + count - 1]);
         for chunk in self.slices.chunks(CHUNK) {
             // Empty-space skipping: the packet's samples over this chunk lie
@@ -485,8 +490,6 @@ impl Pass<'_> {
                 let s = slice.distance_m;
                 let depth_over = depth_b / s;
                 // A NaN rise (no data) covers nothing.
-                let mut ground = [0.0; PACKET];
-                let mut vertices = [0u32; PACKET];
                 if slice.subvoxel {
                     heights_one_by_one(sampling, &dirs, s, true, &mut ground);
                 } else {
