@@ -261,7 +261,7 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
     });
     // The edges come in (a, b) order, so a stable sort by difference
     // alone orders them by (difference, a, b).
-    radsort::sort_by_key(&mut edges, |e| e.0);
+    let edges = sort_by_difference(edges);
     let adjacency_ms = lap();
     let mut sets = DisjointSets::new(leaf_moments);
     sets.join_along(&edges, |x, y| predicate.homogeneous(&x.joined(y)));
@@ -622,6 +622,49 @@ fn adjacency(leaves: &[Leaf], labels: &[u32], w: usize, h: usize) -> Vec<(u32, u
         .collect()
 }
 
+/// Top bits of a difference's key that [`sort_by_difference`] first
+/// buckets by: 4096 buckets, whose write positions stay in cache.
+const BUCKET_BITS: u32 = 12;
+
+/// `edges` sorted stably by their first field (the bits of a non-negative
+/// f32, so in the order of the values). One counting pass scatters them to
+/// buckets of their top [`BUCKET_BITS`] bits (keeping their order), then
+/// each bucket — a few hundred edges, in cache — is sorted stably by the
+/// whole key: the same order as a stable sort of the whole array, with one
+/// pass over it instead of one per key byte.
+fn sort_by_difference(edges: Vec<(u32, u32, u32)>) -> Vec<(u32, u32, u32)> {
+    let bucket = |e: &(u32, u32, u32)| (e.0 >> (32 - BUCKET_BITS)) as usize;
+    let mut next = vec![0usize; 1 << BUCKET_BITS];
+    for e in &edges {
+        next[bucket(e)] += 1;
+    }
+    let mut start = 0;
+    for slot in next.iter_mut() {
+        let size = *slot;
+        *slot = start;
+        start += size;
+    }
+    let mut sorted = vec![(0, 0, 0); edges.len()];
+    for e in &edges {
+        let at = &mut next[bucket(e)];
+        sorted[*at] = *e;
+        *at += 1;
+    }
+    drop(edges);
+    // `next` now holds each bucket's end.
+    let mut start = 0;
+    for &end in &next {
+        let part = &mut sorted[start..end];
+        if part.len() > 1024 {
+            radsort::sort_by_key(part, |e| e.0);
+        } else {
+            part.sort_by_key(|e| e.0);
+        }
+        start = end;
+    }
+    sorted
+}
+
 /// What a set carries at its root: its size in pixels and how two combine.
 trait SetData: Copy + Send + Sync {
     fn pixels(&self) -> f64;
@@ -899,6 +942,31 @@ mod tests {
             assert!(edges
                 .windows(2)
                 .all(|p| (p[0].1, p[0].2) < (p[1].1, p[1].2)));
+        }
+    }
+
+    /// The bucketed sort gives a stable sort's order: on a real image's
+    /// edges with their differences, and on keys crowded into one bucket
+    /// (past the size sorted by radix) with many ties.
+    #[test]
+    fn edges_sort_as_a_stable_sort_by_difference() {
+        let image = crate::testdata::soap_061();
+        let params = SegmentParams::default();
+        let predicate = Predicate::new(&params, image.bands);
+        let (leaves, moments, labels) = split(&image, &predicate);
+        let mut real = adjacency(&leaves, &labels, image.width, image.height);
+        for e in &mut real {
+            e.0 = predicate
+                .difference(&moments[e.1 as usize], &moments[e.2 as usize])
+                .to_bits();
+        }
+        let crowded: Vec<(u32, u32, u32)> = (0..5000u32)
+            .map(|i| (0x3f80_0000 | (i * 7919 % 61), i, i * 3))
+            .collect();
+        for edges in [real, crowded] {
+            let mut want = edges.clone();
+            want.sort_by_key(|e| e.0);
+            assert_eq!(sort_by_difference(edges), want);
         }
     }
 
