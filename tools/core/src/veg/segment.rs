@@ -253,15 +253,9 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
     let split_ms = lap();
 
     // Merge along the region adjacency graph.
-    let mut edges = adjacency(&leaves, &labels, w, h);
-    edges.par_iter_mut().for_each(|e| {
-        e.0 = predicate
-            .difference(&leaf_moments[e.1 as usize], &leaf_moments[e.2 as usize])
-            .to_bits();
-    });
     // The edges come in (a, b) order, so a stable sort by difference
     // alone orders them by (difference, a, b).
-    let edges = sort_by_difference(edges);
+    let edges = sort_by_difference(adjacency(&leaves, &leaf_moments, &labels, w, h, &predicate));
     let adjacency_ms = lap();
     let mut sets = DisjointSets::new(leaf_moments);
     sets.join_along(&edges, |x, y| predicate.homogeneous(&x.joined(y)));
@@ -283,7 +277,7 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
         .par_iter()
         .map(|&r| (r, small.data[r as usize]))
         .collect();
-    let edges: Vec<(u32, u32, u32)> = edges
+    let edges: Vec<Edge> = edges
         .into_par_iter()
         .filter(|&(_, a, b)| {
             let (ra, na) = region_and_size[a as usize];
@@ -580,26 +574,43 @@ fn paint(leaves: &[Leaf], cover: &[TileCover], tiles_x: usize, w: usize, h: usiz
     labels
 }
 
-/// Pairs of 4-adjacent leaves `(0, a, b)`, `a < b`, found along each leaf's
-/// right and bottom borders; runs of one neighbour along a border give one
-/// pair. Pairs come sorted by `(a, b)`: leaves are numbered in the
-/// quadtree's depth-first (Z) order, and a leaf's right or bottom neighbour
-/// always comes later in it (the two lie in the left and right, or top and
-/// bottom, children of their smallest common block), so `a` is the leaf
-/// whose border was walked; each leaf's own pairs are sorted by `b`.
-fn adjacency(leaves: &[Leaf], labels: &[u32], w: usize, h: usize) -> Vec<(u32, u32, u32)> {
+/// An adjacency edge: the bits of the two leaves' [`Predicate::difference`]
+/// (a non-negative f32, so ordered as the value), and the leaves `a < b`.
+type Edge = (u32, u32, u32);
+
+/// Leaves in a part of the adjacency search, found in parallel.
+const ADJACENCY_PART: usize = 4096;
+
+/// The edges between 4-adjacent leaves, found along each leaf's right and
+/// bottom borders (runs of one neighbour along a border give one edge), in
+/// parts of [`ADJACENCY_PART`] leaves. In part order they come sorted by
+/// `(a, b)`: leaves are numbered in the quadtree's depth-first (Z) order,
+/// and a leaf's right or bottom neighbour always comes later in it (the two
+/// lie in the left and right, or top and bottom, children of their smallest
+/// common block), so `a` is the leaf whose border was walked; each leaf's
+/// own edges are sorted by `b`.
+fn adjacency(
+    leaves: &[Leaf],
+    moments: &[Moments],
+    labels: &[u32],
+    w: usize,
+    h: usize,
+    predicate: &Predicate,
+) -> Vec<Vec<Edge>> {
     leaves
-        .par_chunks(4096)
+        .par_chunks(ADJACENCY_PART)
         .enumerate()
-        .flat_map_iter(|(chunk, part)| {
+        .map(|(part, part_leaves)| {
             let mut edges = Vec::new();
-            for (k, leaf) in part.iter().enumerate() {
-                let id = (chunk * 4096 + k) as u32;
+            for (k, leaf) in part_leaves.iter().enumerate() {
+                let id = part * ADJACENCY_PART + k;
                 let first = edges.len();
                 let mut push = |other: u32, last: &mut u32| {
                     if other != *last {
                         *last = other;
-                        edges.push((0, id, other));
+                        let difference =
+                            predicate.difference(&moments[id], &moments[other as usize]);
+                        edges.push((difference.to_bits(), id as u32, other));
                     }
                 };
                 let (x1, y1) = ((leaf.x + leaf.w) as usize, (leaf.y + leaf.h) as usize);
@@ -626,16 +637,17 @@ fn adjacency(leaves: &[Leaf], labels: &[u32], w: usize, h: usize) -> Vec<(u32, u
 /// buckets by: 4096 buckets, whose write positions stay in cache.
 const BUCKET_BITS: u32 = 12;
 
-/// `edges` sorted stably by their first field (the bits of a non-negative
-/// f32, so in the order of the values). One counting pass scatters them to
-/// buckets of their top [`BUCKET_BITS`] bits (keeping their order), then
-/// each bucket — a few hundred edges, in cache — is sorted stably by the
-/// whole key: the same order as a stable sort of the whole array, with one
-/// pass over it instead of one per key byte.
-fn sort_by_difference(edges: Vec<(u32, u32, u32)>) -> Vec<(u32, u32, u32)> {
-    let bucket = |e: &(u32, u32, u32)| (e.0 >> (32 - BUCKET_BITS)) as usize;
+/// The edges of all `parts`, in part order, sorted stably by difference.
+/// One counting pass scatters them to buckets of their key's top
+/// [`BUCKET_BITS`] bits (keeping their order), then each bucket — a few
+/// hundred edges, in cache — is sorted stably by the whole key: the same
+/// order as a stable sort of the parts joined, with one pass over them
+/// instead of one per key byte (and no copy to join them first).
+fn sort_by_difference(parts: Vec<Vec<Edge>>) -> Vec<Edge> {
+    let bucket = |e: &Edge| (e.0 >> (32 - BUCKET_BITS)) as usize;
+    let edges = || parts.iter().flatten();
     let mut next = vec![0usize; 1 << BUCKET_BITS];
-    for e in &edges {
+    for e in edges() {
         next[bucket(e)] += 1;
     }
     let mut start = 0;
@@ -644,13 +656,13 @@ fn sort_by_difference(edges: Vec<(u32, u32, u32)>) -> Vec<(u32, u32, u32)> {
         *slot = start;
         start += size;
     }
-    let mut sorted = vec![(0, 0, 0); edges.len()];
-    for e in &edges {
+    let mut sorted = vec![(0, 0, 0); start];
+    for e in edges() {
         let at = &mut next[bucket(e)];
         sorted[*at] = *e;
         *at += 1;
     }
-    drop(edges);
+    drop(parts);
     // `next` now holds each bucket's end.
     let mut start = 0;
     for &end in &next {
@@ -721,7 +733,7 @@ impl<T: SetData> DisjointSets<T> {
     /// sets' data. The edges are sorted by difference, so their leaves lie
     /// all over the sets: each join asks the cache early for the leaves of
     /// the edge [`PREFETCH_EDGES`] ahead.
-    fn join_along(&mut self, edges: &[(u32, u32, u32)], accept: impl Fn(&T, &T) -> bool) {
+    fn join_along(&mut self, edges: &[Edge], accept: impl Fn(&T, &T) -> bool) {
         for (k, &(_, a, b)) in edges.iter().enumerate() {
             if let Some(&(_, next_a, next_b)) = edges.get(k + PREFETCH_EDGES) {
                 self.prefetch(next_a);
@@ -935,8 +947,16 @@ mod tests {
                 ..Default::default()
             };
             let predicate = Predicate::new(&params, image.bands);
-            let (leaves, _, labels) = split(&image, &predicate);
-            let edges = adjacency(&leaves, &labels, image.width, image.height);
+            let (leaves, moments, labels) = split(&image, &predicate);
+            let edges: Vec<Edge> = adjacency(
+                &leaves,
+                &moments,
+                &labels,
+                image.width,
+                image.height,
+                &predicate,
+            )
+            .concat();
             assert!(edges.len() > leaves.len(), "{} edges", edges.len());
             assert!(edges.iter().all(|e| e.1 < e.2));
             assert!(edges
@@ -954,19 +974,23 @@ mod tests {
         let params = SegmentParams::default();
         let predicate = Predicate::new(&params, image.bands);
         let (leaves, moments, labels) = split(&image, &predicate);
-        let mut real = adjacency(&leaves, &labels, image.width, image.height);
-        for e in &mut real {
-            e.0 = predicate
-                .difference(&moments[e.1 as usize], &moments[e.2 as usize])
-                .to_bits();
-        }
-        let crowded: Vec<(u32, u32, u32)> = (0..5000u32)
+        let real = adjacency(
+            &leaves,
+            &moments,
+            &labels,
+            image.width,
+            image.height,
+            &predicate,
+        );
+        assert!(real.len() > 1, "one part only");
+        let crowded: Vec<Edge> = (0..5000u32)
             .map(|i| (0x3f80_0000 | (i * 7919 % 61), i, i * 3))
             .collect();
-        for edges in [real, crowded] {
-            let mut want = edges.clone();
+        let crowded = crowded.chunks(1700).map(<[Edge]>::to_vec).collect();
+        for parts in [real, crowded] {
+            let mut want = parts.concat();
             want.sort_by_key(|e| e.0);
-            assert_eq!(sort_by_difference(edges), want);
+            assert_eq!(sort_by_difference(parts), want);
         }
     }
 
