@@ -129,12 +129,9 @@ pub fn detect(
             let r = (spacing_px.max(1.0) / 2.0).ceil() as usize;
             let limit = (2.0 * spacing_px).ceil().max(2.0) as usize;
             let min_radius = min_radius_px.max(1.0);
-            let mut candidates: Vec<(usize, f32)> = (0..h)
+            let mut candidates: Vec<(usize, f32)> = local_maxima(&value, &outside, w, h)
                 .into_par_iter()
-                .flat_map_iter(|y| (0..w).map(move |x| (x, y)))
-                .filter(|&(x, y)| !outside[y * w + x] && is_window_max(&value, w, h, x, y, 1))
-                .filter(|&(x, y)| is_window_max(&value, w, h, x, y, r))
-                .map(|(x, y)| y * w + x)
+                .filter(|&i| is_window_max(&value, w, h, i % w, i / w, r))
                 .map(|i| (i, vegetation_radius(&outside, w, h, i, limit)))
                 .filter(|&(_, radius)| radius >= min_radius)
                 .collect();
@@ -277,6 +274,51 @@ fn suppress(candidates: &[(usize, f32)], w: usize, spacing: f32) -> Vec<(usize, 
     kept
 }
 
+/// The cells not `outside` that hold the maximum of their 3×3 window
+/// (clipped at the edges; ties allowed), in row order: [`is_window_max`]
+/// with r = 1 at every cell, as the rows' running maxima of three-row
+/// column maxima. `values` must be finite (NaN-free), so that a cell is its
+/// window's maximum exactly when it is at least the window's largest value.
+fn local_maxima(values: &[f32], outside: &[bool], w: usize, h: usize) -> Vec<usize> {
+    const BAND: usize = 64;
+    (0..h.div_ceil(BAND))
+        .into_par_iter()
+        .flat_map_iter(|band| {
+            let mut column_max = vec![0.0f32; w];
+            let mut window_max = vec![0.0f32; w];
+            let mut found = Vec::new();
+            for y in band * BAND..((band + 1) * BAND).min(h) {
+                let rows = y.saturating_sub(1)..(y + 2).min(h);
+                column_max.copy_from_slice(&values[rows.start * w..(rows.start + 1) * w]);
+                for yy in rows.start + 1..rows.end {
+                    let row = &values[yy * w..(yy + 1) * w];
+                    for (m, &v) in column_max.iter_mut().zip(row) {
+                        *m = m.max(v);
+                    }
+                }
+                // Along the row: the column maxima at x − 1, x and x + 1.
+                window_max.copy_from_slice(&column_max);
+                for (m, &right) in window_max.iter_mut().zip(&column_max[1..]) {
+                    *m = m.max(right);
+                }
+                for (m, &left) in window_max[1..].iter_mut().zip(&column_max) {
+                    *m = m.max(left);
+                }
+                let row = &values[y * w..(y + 1) * w];
+                let row_outside = &outside[y * w..(y + 1) * w];
+                for (x, ((&v, &m), &out)) in
+                    row.iter().zip(&window_max).zip(row_outside).enumerate()
+                {
+                    if !out && v >= m {
+                        found.push(y * w + x);
+                    }
+                }
+            }
+            found
+        })
+        .collect()
+}
+
 /// Whether cell `(x, y)` holds the maximum of the `(2r+1)²` window around
 /// it (clipped at the edges; ties allowed).
 fn is_window_max(values: &[f32], w: usize, h: usize, x: usize, y: usize, r: usize) -> bool {
@@ -400,6 +442,27 @@ mod tests {
         assert!(is_window_max(&values, 3, 3, 1, 1, 1));
         assert!(!is_window_max(&values, 3, 3, 1, 0, 1));
         assert!(is_window_max(&values, 3, 3, 1, 0, 0));
+    }
+
+    /// The 3×3 maxima found by rows are the cells [`is_window_max`] takes
+    /// (r = 1) outside `outside`: many ties, `f32::MIN` cells, edges, and
+    /// grids one cell wide or high, across more than one band of rows.
+    #[test]
+    fn local_maxima_are_the_three_by_three_window_maxima() {
+        for (w, h) in [(37, 150), (1, 70), (70, 1), (2, 2), (65, 129)] {
+            let values: Vec<f32> = (0..w * h)
+                .map(|i| match (i * 7919) % 11 {
+                    0 => f32::MIN,
+                    k => (k % 4) as f32 * 0.5,
+                })
+                .collect();
+            let outside: Vec<bool> = (0..w * h).map(|i| (i * 31) % 7 == 0).collect();
+            let want: Vec<usize> = (0..w * h)
+                .filter(|&i| !outside[i] && is_window_max(&values, w, h, i % w, i / w, 1))
+                .collect();
+            assert!(!want.is_empty());
+            assert_eq!(local_maxima(&values, &outside, w, h), want, "{w}×{h}");
+        }
     }
 
     #[test]
