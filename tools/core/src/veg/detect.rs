@@ -154,34 +154,48 @@ pub fn detect(
 /// rows' means in between).
 fn box_blur(values: &mut [f32], rows: &mut [f32], w: usize, h: usize, r: usize) {
     // Rows, a few at a time: their running sums side by side are independent
-    // chains of additions the processor overlaps.
+    // chains of additions the processor overlaps. The rows are first laid
+    // out column by column (a pixel's ROWS values together), so each step
+    // adds, subtracts and divides them as one vector.
     const ROWS: usize = 8;
     rows.par_chunks_mut(ROWS * w)
         .zip(values.par_chunks(ROWS * w))
-        .for_each(|(out, lines)| {
-            let n = lines.len() / w;
-            slide_window(
-                &mut [0.0f64; ROWS],
-                w,
-                r,
-                0..w,
-                |sums, x| {
-                    for (k, s) in sums.iter_mut().enumerate().take(n) {
-                        *s += lines[k * w + x] as f64;
+        .for_each_init(
+            || (vec![[0.0f32; ROWS]; w], vec![[0.0f32; ROWS]; w]),
+            |(across, means), (out, lines)| {
+                for (k, line) in lines.chunks_exact(w).enumerate() {
+                    for (column, &v) in across.iter_mut().zip(line) {
+                        column[k] = v;
                     }
-                },
-                |sums, x| {
-                    for (k, s) in sums.iter_mut().enumerate().take(n) {
-                        *s -= lines[k * w + x] as f64;
+                }
+                slide_window(
+                    &mut [0.0f64; ROWS],
+                    w,
+                    r,
+                    0..w,
+                    |sums, x| {
+                        for (s, &v) in sums.iter_mut().zip(&across[x]) {
+                            *s += v as f64;
+                        }
+                    },
+                    |sums, x| {
+                        for (s, &v) in sums.iter_mut().zip(&across[x]) {
+                            *s -= v as f64;
+                        }
+                    },
+                    |sums, x, count| {
+                        for (m, &s) in means[x].iter_mut().zip(sums.iter()) {
+                            *m = (s / count as f64) as f32;
+                        }
+                    },
+                );
+                for (k, line) in out.chunks_exact_mut(w).enumerate() {
+                    for (o, column) in line.iter_mut().zip(means.iter()) {
+                        *o = column[k];
                     }
-                },
-                |sums, x, count| {
-                    for (k, s) in sums.iter().enumerate().take(n) {
-                        out[k * w + x] = (s / count as f64) as f32;
-                    }
-                },
-            );
-        });
+                }
+            },
+        );
     // Columns: bands of rows, each with its own running column sums.
     const BAND: usize = 128;
     let rows = &*rows;
