@@ -218,8 +218,14 @@ impl Classifier {
         for (&class, &d) in self.example_class.iter().zip(distances.iter()) {
             let list = &mut smallest[class * k..(class + 1) * k];
             if d < list[k - 1] {
-                let at = list.partition_point(|&v| v <= d);
-                list.copy_within(at..k - 1, at + 1);
+                // Shift the larger ones up a place (the last drops out) and
+                // put `d` after the last that is not larger, as a few moves
+                // (the list is a handful long: no call to copy memory).
+                let mut at = k - 1;
+                while at > 0 && list[at - 1] > d {
+                    list[at] = list[at - 1];
+                    at -= 1;
+                }
                 list[at] = d;
             }
             found[class] += 1;

@@ -601,7 +601,9 @@ fn adjacency(
         .par_chunks(ADJACENCY_PART)
         .enumerate()
         .map(|(part, part_leaves)| {
-            let mut edges = Vec::new();
+            // About two and a half edges a leaf: room for three, so the part
+            // rarely grows.
+            let mut edges = Vec::with_capacity(3 * part_leaves.len());
             for (k, leaf) in part_leaves.iter().enumerate() {
                 let id = part * ADJACENCY_PART + k;
                 let first = edges.len();
