@@ -64,7 +64,11 @@ pub fn detect(
 ) -> Vec<Object> {
     let (w, h) = (segmentation.width, segmentation.height);
     let label_at = |i: usize| labels[segmentation.labels[i] as usize];
-    let is_vegetation = |i: usize| vegetation[label_at(i).class] && valid.is_none_or(|v| v[i]);
+    // Per region: whether its class is vegetation (one lookup a pixel).
+    let region_is_vegetation: Vec<bool> = labels.iter().map(|l| vegetation[l.class]).collect();
+    let is_vegetation = |i: usize| {
+        region_is_vegetation[segmentation.labels[i] as usize] && valid.is_none_or(|v| v[i])
+    };
     let object = |x: f64, y: f64, size_px: f32| {
         let label = label_at(y as usize * w + x as usize);
         Object {
