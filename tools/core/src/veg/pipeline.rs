@@ -820,20 +820,26 @@ fn keep_core(
         }
     }
     let mut centre_sums = vec![[0.0f64; 2]; kept_regions.len()];
+    // A run of one label at a time. Centre sums are multiples of a half far
+    // below 2⁵³ (exact in f64), so a run's sum added at once gives the sums
+    // of pixel after pixel bit for bit.
     for (y, row) in (cy0 as u32..).zip(core_labels.chunks_exact_mut(cx1 - cx0)) {
-        for (x, l) in (cx0 as u32..).zip(row) {
-            *l = index[*l as usize];
-            let region = &mut kept_regions[*l as usize];
-            region.pixels += 1;
+        let mut x = cx0 as u32;
+        for run in row.chunk_by_mut(|a, b| a == b) {
+            let (kept, length) = (index[run[0] as usize], run.len() as u32);
+            run.fill(kept);
+            let region = &mut kept_regions[kept as usize];
+            region.pixels += length;
             region.bbox = [
                 region.bbox[0].min(x),
                 region.bbox[1].min(y),
-                region.bbox[2].max(x + 1),
+                region.bbox[2].max(x + length),
                 region.bbox[3].max(y + 1),
             ];
-            let sums = &mut centre_sums[*l as usize];
-            sums[0] += x as f64 + 0.5;
-            sums[1] += y as f64 + 0.5;
+            let sums = &mut centre_sums[kept as usize];
+            sums[0] += (x as f64 + length as f64 / 2.0) * length as f64;
+            sums[1] += (y as f64 + 0.5) * length as f64;
+            x += length;
         }
     }
     for (region, sums) in kept_regions.iter_mut().zip(&centre_sums) {
