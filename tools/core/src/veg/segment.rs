@@ -937,6 +937,16 @@ mod tests {
         }
     }
 
+    /// The number of leaves `image` splits into and the adjacency parts of
+    /// its leaves.
+    fn leaves_and_edges(image: &Image, params: &SegmentParams) -> (usize, Vec<Vec<Edge>>) {
+        let predicate = Predicate::new(params, image.bands);
+        let (leaves, moments, labels) = split(image, &predicate);
+        let (w, h) = (image.width, image.height);
+        let parts = adjacency(&leaves, &moments, &labels, w, h, &predicate);
+        (leaves.len(), parts)
+    }
+
     /// The adjacency pairs of a real image's quadtree come in strictly
     /// increasing `(a, b)` order with `a` the earlier leaf, which the stable
     /// sort by difference relies on for its tie order.
@@ -948,18 +958,9 @@ mod tests {
                 min_block_px,
                 ..Default::default()
             };
-            let predicate = Predicate::new(&params, image.bands);
-            let (leaves, moments, labels) = split(&image, &predicate);
-            let edges: Vec<Edge> = adjacency(
-                &leaves,
-                &moments,
-                &labels,
-                image.width,
-                image.height,
-                &predicate,
-            )
-            .concat();
-            assert!(edges.len() > leaves.len(), "{} edges", edges.len());
+            let (leaves, parts) = leaves_and_edges(&image, &params);
+            let edges: Vec<Edge> = parts.concat();
+            assert!(edges.len() > leaves, "{} edges", edges.len());
             assert!(edges.iter().all(|e| e.1 < e.2));
             assert!(edges
                 .windows(2)
@@ -973,17 +974,7 @@ mod tests {
     #[test]
     fn edges_sort_as_a_stable_sort_by_difference() {
         let image = crate::testdata::soap_061();
-        let params = SegmentParams::default();
-        let predicate = Predicate::new(&params, image.bands);
-        let (leaves, moments, labels) = split(&image, &predicate);
-        let real = adjacency(
-            &leaves,
-            &moments,
-            &labels,
-            image.width,
-            image.height,
-            &predicate,
-        );
+        let (_, real) = leaves_and_edges(&image, &SegmentParams::default());
         assert!(real.len() > 1, "one part only");
         let crowded: Vec<Edge> = (0..5000u32)
             .map(|i| (0x3f80_0000 | (i * 7919 % 61), i, i * 3))
