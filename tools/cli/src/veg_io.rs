@@ -6,11 +6,12 @@
 use crate::ingest::crs;
 use crate::ingest::gdalio::{self, GridSpec};
 use crate::output;
-use anyhow::{anyhow, bail, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use gdal::raster::GdalDataType;
 use gdal::spatial_ref::SpatialRef;
 use gdal::vector::{Feature, FieldValue, Geometry, LayerAccess, LayerOptions, OGRFieldType};
 use gdal::DriverManager;
+use rayon::prelude::*;
 use relevo_core::geo::GeoTransform;
 use relevo_core::raster::stretch::{stretch_or_default, stretch_ranges, to_u8};
 use relevo_core::raster::Raster;
@@ -85,27 +86,58 @@ pub fn read_image(
             stretch_ranges(&decimated, stretch)
         }
     };
-    let mut pixels = Vec::with_capacity(w * h * bands.len());
-    let mut valid = Vec::with_capacity(w * h);
-    let all_bytes = bands.iter().all(|&b| {
-        source
-            .dataset
-            .rasterband(b)
-            .is_ok_and(|band| band.band_type() == GdalDataType::UInt8)
-    });
-    for row in (0..h).step_by(STRIP_ROWS) {
-        let rows = STRIP_ROWS.min(h - row);
-        if all_bytes && stretch.is_none() {
-            read_byte_strip(&source, row, rows, &bands, &mut pixels, &mut valid)?;
-            continue;
-        }
-        let strip = source.read_window(0, row, w, rows, Some(&bands), source.nodata)?;
-        for i in 0..strip.cells() {
-            pixels.extend((0..bands.len()).map(|b| to_u8(strip.band(b)[i], ranges[b])));
-            valid.push(strip.is_valid(i));
-        }
-    }
-    let valid = valid.contains(&false).then_some(valid);
+    // Strips of rows read in parallel, each worker through its own handle
+    // on the file (a GDAL dataset is not shared between threads). 8-bit
+    // bands without a stretch are copied as they are, without a detour
+    // through f64; then only a no-data value asks for the validity mask, so
+    // a large image pays no mask it does not need.
+    let as_bytes = stretch.is_none()
+        && bands.iter().all(|&b| {
+            source
+                .dataset
+                .rasterband(b)
+                .is_ok_and(|band| band.band_type() == GdalDataType::UInt8)
+        });
+    let byte_nodata = source
+        .nodata
+        .filter(|v| (0.0..=255.0).contains(v) && v.fract() == 0.0);
+    let masked = !as_bytes || byte_nodata.is_some();
+    let mut pixels = vec![0u8; w * h * bands.len()];
+    let mut valid = if masked {
+        vec![true; w * h]
+    } else {
+        Vec::new()
+    };
+    let strip_cells = STRIP_ROWS * w;
+    let valid_strips: Vec<Option<&mut [bool]>> = if masked {
+        valid.chunks_mut(strip_cells).map(Some).collect()
+    } else {
+        (0..h.div_ceil(STRIP_ROWS)).map(|_| None).collect()
+    };
+    pixels
+        .par_chunks_mut(strip_cells * bands.len())
+        .zip(valid_strips)
+        .enumerate()
+        .try_for_each_init(
+            || gdalio::open(path),
+            |handle, (k, (strip, valid))| -> Result<()> {
+                let source = handle.as_ref().map_err(|e| anyhow!("{e:#}"))?;
+                let (row, rows) = (k * STRIP_ROWS, strip.len() / (w * bands.len()));
+                if as_bytes {
+                    return read_byte_strip(source, row, rows, &bands, byte_nodata, strip, valid);
+                }
+                let values = source.read_window(0, row, w, rows, Some(&bands), source.nodata)?;
+                let valid = valid.context("a mask for every strip read through f64")?;
+                for (i, (px, ok)) in strip.chunks_exact_mut(bands.len()).zip(valid).enumerate() {
+                    for (b, v) in px.iter_mut().enumerate() {
+                        *v = to_u8(values.band(b)[i], ranges[b]);
+                    }
+                    *ok = values.is_valid(i);
+                }
+                Ok(())
+            },
+        )?;
+    let valid = (masked && valid.contains(&false)).then_some(valid);
     let image =
         Image::new(w, h, bands.len(), pixels).map_err(|e| anyhow!("{}: {e}", path.display()))?;
     let crs_wkt = match &source.srs {
@@ -142,31 +174,19 @@ pub fn read_image(
     })
 }
 
-/// Append `rows` rows from `row` of 8-bit `bands` to `pixels`
-/// (interleaved) and, when the file has a no-data value, their validity
-/// (every band differs from it) to `valid`: the values as they are, without
-/// a detour through f64. Without a no-data value `valid` stays empty (every
-/// pixel has data), so a large image pays no mask it does not need.
+/// Read `rows` rows from `row` of 8-bit `bands` into `strip`
+/// (interleaved) and, with a no-data value, their validity (every band
+/// differs from it) into `valid`.
 fn read_byte_strip(
     source: &gdalio::Source,
     row: usize,
     rows: usize,
     bands: &[usize],
-    pixels: &mut Vec<u8>,
-    valid: &mut Vec<bool>,
+    nodata: Option<f64>,
+    strip: &mut [u8],
+    mut valid: Option<&mut [bool]>,
 ) -> Result<()> {
-    let cells = source.width * rows;
-    let start = pixels.len();
-    pixels.resize(start + cells * bands.len(), 0);
-    let strip = &mut pixels[start..];
-    let nodata = source
-        .nodata
-        .filter(|v| (0.0..=255.0).contains(v) && v.fract() == 0.0);
-    let valid_start = valid.len();
-    if nodata.is_some() {
-        valid.resize(valid_start + cells, true);
-    }
-    let mut band_values = vec![0u8; cells];
+    let mut band_values = vec![0u8; source.width * rows];
     for (k, &b) in bands.iter().enumerate() {
         source
             .dataset
@@ -188,8 +208,8 @@ fn read_byte_strip(
         for (px, &v) in strip.chunks_exact_mut(bands.len()).zip(&band_values) {
             px[k] = v;
         }
-        if let Some(nd) = nodata {
-            for (ok, &v) in valid[valid_start..].iter_mut().zip(&band_values) {
+        if let (Some(nd), Some(valid)) = (nodata, valid.as_deref_mut()) {
+            for (ok, &v) in valid.iter_mut().zip(&band_values) {
                 *ok &= v as f64 != nd;
             }
         }
