@@ -74,25 +74,37 @@ impl Image {
     /// Span between the 1st and 99th percentiles of brightness (the mean of
     /// the bands), in 8-bit units: how much of the range the image uses.
     pub fn brightness_span(&self) -> f32 {
-        // Counted in parts of 65 536 pixels in parallel, then added up.
-        let histogram = self
+        // Band sums counted in parts of 65 536 pixels in parallel, then
+        // added up and folded to brightness levels (sum / bands).
+        fn count<const N: usize>(part: &[u8], sums: &mut [u64]) {
+            for px in part.chunks_exact(N) {
+                sums[px.iter().map(|&v| v as usize).sum::<usize>()] += 1;
+            }
+        }
+        let sums = self
             .pixels
             .par_chunks(self.bands * 65_536)
             .map(|part| {
-                let mut histogram = [0u64; 256];
-                for px in part.chunks_exact(self.bands) {
-                    let sum: u32 = px.iter().map(|&v| v as u32).sum();
-                    histogram[(sum / self.bands as u32) as usize] += 1;
+                let mut sums = vec![0u64; 255 * MAX_BANDS + 1];
+                match self.bands {
+                    1 => count::<1>(part, &mut sums),
+                    2 => count::<2>(part, &mut sums),
+                    3 => count::<3>(part, &mut sums),
+                    _ => count::<MAX_BANDS>(part, &mut sums),
                 }
-                histogram
+                sums
             })
             .reduce(
-                || [0u64; 256],
+                || vec![0u64; 255 * MAX_BANDS + 1],
                 |mut a, b| {
                     a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
                     a
                 },
             );
+        let mut histogram = [0u64; 256];
+        for (sum, &count) in sums[..=255 * self.bands].iter().enumerate() {
+            histogram[sum / self.bands] += count;
+        }
         let n = (self.width * self.height) as u64;
         let level = |fraction: f64| {
             let target = (fraction * n as f64).ceil() as u64;
