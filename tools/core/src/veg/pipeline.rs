@@ -7,7 +7,9 @@ use super::classify::{sample_signatures, Classifier, Label};
 use super::db::VegObject;
 use super::detect::{detect, Object, Placement};
 use super::samples::Sample;
-use super::segment::{segment, Region, SegmentParams, SegmentSteps, Segmentation};
+use super::segment::{
+    segment_with, Region, SegmentBuffers, SegmentParams, SegmentSteps, Segmentation,
+};
 use super::spacing::{self, MarkedCrown, MAX_CROWN_SPACING_M};
 use super::tiles::{Tile, Tiling};
 use super::Image;
@@ -434,13 +436,14 @@ pub fn extract_tiled(
     let mut marked_crowns = Vec::new();
     // A tile's segmentation serves learning and then its own analysis.
     let mut learnt: Vec<Option<Segmentation>> = tiles.iter().map(|_| None).collect();
+    let mut learn_buffers = SegmentBuffers::default();
     for (t, tile) in tiles.iter().enumerate() {
         if !owners.contains(&t) {
             continue;
         }
         let context = TileImage::of(image, tile);
         let seg_start = Instant::now();
-        let segmentation = segment(context.image(), &params)?;
+        let segmentation = segment_with(context.image(), &params, &mut learn_buffers)?;
         learn_segment_ms += seg_start.elapsed().as_secs_f64() * 1e3;
         let [x0, y0, ..] = tile.context;
         for (k, sample) in samples.iter().enumerate() {
@@ -512,37 +515,41 @@ pub fn extract_tiled(
     let done: Mutex<Vec<(usize, Result<TileResult>)>> = Mutex::new(Vec::new());
     rayon::scope(|scope| {
         for _ in 0..at_once {
-            scope.spawn(|_| loop {
-                let t = next_tile.fetch_add(1, Ordering::Relaxed);
-                let Some(tile) = tiles.get(t) else { break };
-                let segmented = locked(&learnt[t]).take();
-                let mut result = analyse_tile(
-                    image,
-                    tile,
-                    segmented,
-                    &params,
-                    &classifier,
-                    &vegetation,
-                    placement,
-                )
-                .and_then(|r| watch.step_done().map(|()| r));
-                match &mut result {
-                    Ok(r) => {
-                        let [x0, y0, x1, _] = tile.core;
-                        let side = x1 - x0;
-                        let mut map = locked(&labels_map);
-                        for (dy, row) in r.core_labels.chunks_exact(side).enumerate() {
-                            let at = (y0 + dy) * w + x0;
-                            map[at..at + side].copy_from_slice(row);
+            scope.spawn(|_| {
+                let mut buffers = SegmentBuffers::default();
+                loop {
+                    let t = next_tile.fetch_add(1, Ordering::Relaxed);
+                    let Some(tile) = tiles.get(t) else { break };
+                    let segmented = locked(&learnt[t]).take();
+                    let mut result = analyse_tile(
+                        image,
+                        tile,
+                        segmented,
+                        &mut buffers,
+                        &params,
+                        &classifier,
+                        &vegetation,
+                        placement,
+                    )
+                    .and_then(|r| watch.step_done().map(|()| r));
+                    match &mut result {
+                        Ok(r) => {
+                            let [x0, y0, x1, _] = tile.core;
+                            let side = x1 - x0;
+                            let mut map = locked(&labels_map);
+                            for (dy, row) in r.core_labels.chunks_exact(side).enumerate() {
+                                let at = (y0 + dy) * w + x0;
+                                map[at..at + side].copy_from_slice(row);
+                            }
+                            drop(map);
+                            // The map holds them now: not kept for every tile.
+                            r.core_labels = Vec::new();
                         }
-                        drop(map);
-                        // The map holds them now: not kept for every tile.
-                        r.core_labels = Vec::new();
+                        // The other workers stop after their current tile.
+                        Err(_) => next_tile.store(tiles.len(), Ordering::Relaxed),
                     }
-                    // The other workers stop after their current tile.
-                    Err(_) => next_tile.store(tiles.len(), Ordering::Relaxed),
+                    locked(&done).push((t, result));
                 }
-                locked(&done).push((t, result));
             });
         }
     });
@@ -708,13 +715,15 @@ struct TileResult {
     detect_ms: f64,
 }
 
-/// Segment (unless `segmented` is given: the tile's context already
-/// segmented while learning), classify and place on one tile's context;
-/// keep its core.
+/// Segment (in the worker's `buffers`, unless `segmented` is given: the
+/// tile's context already segmented while learning), classify and place on
+/// one tile's context; keep its core.
+#[allow(clippy::too_many_arguments)]
 fn analyse_tile(
     image: &VegImage,
     tile: &Tile,
     segmented: Option<Segmentation>,
+    buffers: &mut SegmentBuffers,
     params: &SegmentParams,
     classifier: &Classifier,
     vegetation: &[bool],
@@ -725,7 +734,7 @@ fn analyse_tile(
     let whole = tile.context == tile.core;
     let segmentation = match segmented {
         Some(s) => s,
-        None => segment(context.image(), params)?,
+        None => segment_with(context.image(), params, buffers)?,
     };
     let segment_ms = start.elapsed().as_secs_f64() * 1e3;
     let start = Instant::now();

@@ -237,8 +237,28 @@ enum TileCover {
     Coarse(u32),
 }
 
+/// Working arrays one segmentation after another reuses: the leaves, their
+/// moments and the sorted edges (together about 20 bytes a pixel). A worker
+/// that segments tile after tile keeps one, so their memory is mapped once
+/// rather than for every tile.
+#[derive(Default)]
+pub struct SegmentBuffers {
+    leaves: Vec<Leaf>,
+    moments: Vec<Moments>,
+    edges: Vec<Edge>,
+}
+
 /// Split-and-merge `image` into homogeneous 4-connected regions.
 pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
+    segment_with(image, params, &mut SegmentBuffers::default())
+}
+
+/// [`segment`] with working arrays reused from earlier segmentations.
+pub fn segment_with(
+    image: &Image,
+    params: &SegmentParams,
+    buffers: &mut SegmentBuffers,
+) -> Result<Segmentation> {
     params.check()?;
     let predicate = Predicate::new(params, image.bands);
     let (w, h) = (image.width, image.height);
@@ -249,13 +269,18 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
         ms
     };
 
-    let (leaves, leaf_moments, mut labels) = split(image, &predicate);
+    let mut leaves = std::mem::take(&mut buffers.leaves);
+    let mut leaf_moments = std::mem::take(&mut buffers.moments);
+    let mut labels = split(image, &predicate, &mut leaves, &mut leaf_moments);
     let split_ms = lap();
 
     // Merge along the region adjacency graph.
     // The edges come in (a, b) order, so a stable sort by difference
     // alone orders them by (difference, a, b).
-    let edges = sort_by_difference(adjacency(&leaves, &leaf_moments, &labels, w, h, &predicate));
+    let edges = sort_by_difference(
+        adjacency(&leaves, &leaf_moments, &labels, w, h, &predicate),
+        std::mem::take(&mut buffers.edges),
+    );
     let adjacency_ms = lap();
     let mut sets = DisjointSets::new(leaf_moments);
     sets.join_along(&edges, |x, y| predicate.homogeneous(&x.joined(y)));
@@ -277,16 +302,17 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
         .par_iter()
         .map(|&r| (r, small.data[r as usize]))
         .collect();
-    let edges: Vec<Edge> = edges
-        .into_par_iter()
-        .filter(|&(_, a, b)| {
+    let small_edges: Vec<Edge> = edges
+        .par_iter()
+        .filter(|&&(_, a, b)| {
             let (ra, na) = region_and_size[a as usize];
             let (rb, nb) = region_and_size[b as usize];
             ra != rb && (na < min || nb < min)
         })
+        .copied()
         .collect();
     drop(region_and_size);
-    small.join_along(&edges, |x, y| *x < min || *y < min);
+    small.join_along(&small_edges, |x, y| *x < min || *y < min);
     let small_regions_ms = lap();
 
     // Number regions in leaf order and describe them; their moments are the
@@ -346,6 +372,11 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
         let n = region.pixels as f64;
         region.centroid = [(sums[0] / n) as f32, (sums[1] / n) as f32];
     }
+    *buffers = SegmentBuffers {
+        leaves,
+        moments,
+        edges,
+    };
     let steps = SegmentSteps {
         split_ms,
         adjacency_ms,
@@ -358,15 +389,20 @@ pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
         height: h,
         labels,
         regions,
-        leaves: leaves.len(),
+        leaves: buffers.leaves.len(),
         steps,
     })
 }
 
 /// Split `image` into quadtree leaves: every tile in parallel, then the
-/// levels above tile size. The leaves in depth-first order, their moments,
-/// and the leaf index of every pixel.
-fn split(image: &Image, predicate: &Predicate) -> (Vec<Leaf>, Vec<Moments>, Vec<u32>) {
+/// levels above tile size. Fills `leaves` (in depth-first order) and their
+/// `moments`; returns the leaf index of every pixel.
+fn split(
+    image: &Image,
+    predicate: &Predicate,
+    leaves: &mut Vec<Leaf>,
+    moments: &mut Vec<Moments>,
+) -> Vec<u32> {
     let (w, h) = (image.width, image.height);
     let tiles_x = w.div_ceil(TILE);
     let tiles_y = h.div_ceil(TILE);
@@ -376,10 +412,9 @@ fn split(image: &Image, predicate: &Predicate) -> (Vec<Leaf>, Vec<Moments>, Vec<
             scratch.split(image, predicate, (t % tiles_x) * TILE, (t / tiles_x) * TILE)
         })
         .collect();
-    let (leaves, leaf_moments, cover) = split_coarse(&tiles, tiles_x, tiles_y, w, h, predicate);
+    let cover = split_coarse(&tiles, tiles_x, tiles_y, w, h, predicate, leaves, moments);
     drop(tiles);
-    let labels = paint(&leaves, &cover, tiles_x, w, h);
-    (leaves, leaf_moments, labels)
+    paint(leaves, &cover, tiles_x, w, h)
 }
 
 /// Per-thread buffers for splitting one tile: the moments pyramid.
@@ -463,7 +498,9 @@ impl TileScratch {
 }
 
 /// Decide the quadtree levels above tile size and gather every leaf in
-/// traversal order, with the leaves covering each tile.
+/// traversal order into `leaves` and `moments` (emptied first); returns the
+/// leaves covering each tile.
+#[allow(clippy::too_many_arguments)]
 fn split_coarse(
     tiles: &[TileSplit],
     tiles_x: usize,
@@ -471,7 +508,9 @@ fn split_coarse(
     width: usize,
     height: usize,
     predicate: &Predicate,
-) -> (Vec<Leaf>, Vec<Moments>, Vec<TileCover>) {
+    leaves: &mut Vec<Leaf>,
+    moments: &mut Vec<Moments>,
+) -> Vec<TileCover> {
     let side = tiles_x.max(tiles_y).next_power_of_two();
     let mut levels = vec![vec![Moments::default(); side * side]];
     for ty in 0..tiles_y {
@@ -491,8 +530,10 @@ fn split_coarse(
         levels.push(parent);
     }
     let most: usize = tiles.iter().map(|t| t.leaves.len()).sum();
-    let mut leaves = Vec::with_capacity(most);
-    let mut moments = Vec::with_capacity(most);
+    leaves.clear();
+    leaves.reserve(most);
+    moments.clear();
+    moments.reserve(most);
     let mut cover = vec![TileCover::Own(0, 0); tiles_x * tiles_y];
     let mut stack = vec![(levels.len() - 1, 0usize, 0usize)];
     while let Some((level, bx, by)) = stack.pop() {
@@ -530,7 +571,7 @@ fn split_coarse(
             }
         }
     }
-    (leaves, moments, cover)
+    cover
 }
 
 /// The leaf index of every pixel.
@@ -644,8 +685,9 @@ const BUCKET_BITS: u32 = 12;
 /// [`BUCKET_BITS`] bits (keeping their order), then each bucket — a few
 /// hundred edges, in cache — is sorted stably by the whole key: the same
 /// order as a stable sort of the parts joined, with one pass over them
-/// instead of one per key byte (and no copy to join them first).
-fn sort_by_difference(parts: Vec<Vec<Edge>>) -> Vec<Edge> {
+/// instead of one per key byte (and no copy to join them first). The result
+/// goes in `sorted`, whatever it held.
+fn sort_by_difference(parts: Vec<Vec<Edge>>, mut sorted: Vec<Edge>) -> Vec<Edge> {
     let bucket = |e: &Edge| (e.0 >> (32 - BUCKET_BITS)) as usize;
     let edges = || parts.iter().flatten();
     let mut next = vec![0usize; 1 << BUCKET_BITS];
@@ -658,7 +700,8 @@ fn sort_by_difference(parts: Vec<Vec<Edge>>) -> Vec<Edge> {
         *slot = start;
         start += size;
     }
-    let mut sorted = vec![(0, 0, 0); start];
+    sorted.clear();
+    sorted.resize(start, (0, 0, 0));
     for e in edges() {
         let at = &mut next[bucket(e)];
         sorted[*at] = *e;
@@ -937,11 +980,31 @@ mod tests {
         }
     }
 
+    /// Buffers reused from other segmentations (a larger image, then a
+    /// smaller one) give what fresh ones give.
+    #[test]
+    fn reused_buffers_give_the_same_segmentation() {
+        let params = SegmentParams::default();
+        let mut buffers = SegmentBuffers::default();
+        for image in [
+            crate::testdata::soap_061(),
+            blocks(300, 200, 60),
+            crate::testdata::soap_061(),
+        ] {
+            let reused = segment_with(&image, &params, &mut buffers).unwrap();
+            let fresh = segment(&image, &params).unwrap();
+            assert_eq!(reused.labels, fresh.labels);
+            assert_eq!(reused.regions, fresh.regions);
+            assert_eq!(reused.leaves, fresh.leaves);
+        }
+    }
+
     /// The number of leaves `image` splits into and the adjacency parts of
     /// its leaves.
     fn leaves_and_edges(image: &Image, params: &SegmentParams) -> (usize, Vec<Vec<Edge>>) {
         let predicate = Predicate::new(params, image.bands);
-        let (leaves, moments, labels) = split(image, &predicate);
+        let (mut leaves, mut moments) = (Vec::new(), Vec::new());
+        let labels = split(image, &predicate, &mut leaves, &mut moments);
         let (w, h) = (image.width, image.height);
         let parts = adjacency(&leaves, &moments, &labels, w, h, &predicate);
         (leaves.len(), parts)
@@ -983,7 +1046,8 @@ mod tests {
         for parts in [real, crowded] {
             let mut want = parts.concat();
             want.sort_by_key(|e| e.0);
-            assert_eq!(sort_by_difference(parts), want);
+            // The output buffer's earlier content does not matter.
+            assert_eq!(sort_by_difference(parts, vec![(1, 2, 3); 7]), want);
         }
     }
 
