@@ -283,12 +283,18 @@ pub fn segment_with(
     );
     let adjacency_ms = lap();
     let mut sets = DisjointSets::new(leaf_moments);
-    sets.join_along(&edges, |x, y| predicate.homogeneous(&x.joined(y)));
+    sets.join_along(
+        &edges,
+        |_, _| true,
+        |x, y| predicate.homogeneous(&x.joined(y)),
+    );
     let merge_ms = lap();
     // Regions still too small join their most similar neighbour. This needs
     // only pixel counts: a compact forest over the merged regions keeps the
-    // joins cache-friendly. Sets only grow, so edges between two large sets
-    // are dropped first.
+    // joins cache-friendly. Sets only grow, so an edge between two regions
+    // that were both large at the start is passed over before its leaves'
+    // sets are looked up; a byte a leaf says which, so that test stays in
+    // cache.
     let min = params.min_region_px;
     let merged = sets.roots();
     let moments = sets.data;
@@ -296,23 +302,15 @@ pub fn segment_with(
         parent: merged.clone(),
         data: moments.iter().map(|m| m.n as u32).collect(),
     };
-    // Each leaf's merged region and that region's size side by side, so the
-    // filter reads one small array rather than the moments.
-    let region_and_size: Vec<(u32, u32)> = merged
+    let in_small: Vec<bool> = merged
         .par_iter()
-        .map(|&r| (r, small.data[r as usize]))
+        .map(|&r| small.data[r as usize] < min)
         .collect();
-    let small_edges: Vec<Edge> = edges
-        .par_iter()
-        .filter(|&&(_, a, b)| {
-            let (ra, na) = region_and_size[a as usize];
-            let (rb, nb) = region_and_size[b as usize];
-            ra != rb && (na < min || nb < min)
-        })
-        .copied()
-        .collect();
-    drop(region_and_size);
-    small.join_along(&small_edges, |x, y| *x < min || *y < min);
+    small.join_along(
+        &edges,
+        |a, b| in_small[a as usize] || in_small[b as usize],
+        |x, y| *x < min || *y < min,
+    );
     let small_regions_ms = lap();
 
     // Number regions in leaf order and describe them; their moments are the
@@ -774,17 +772,24 @@ impl<T: SetData> DisjointSets<T> {
             .collect()
     }
 
-    /// Join along `edges` `(_, a, b)` in order, where `accept` takes the two
-    /// sets' data. The edges are sorted by difference, so their leaves lie
-    /// all over the sets: each join asks the cache early for the leaves of
-    /// the edge [`PREFETCH_EDGES`] ahead.
-    fn join_along(&mut self, edges: &[Edge], accept: impl Fn(&T, &T) -> bool) {
+    /// Join along the `edges` `(_, a, b)` that `take` keeps, in order, where
+    /// `accept` takes the two sets' data. The edges are sorted by
+    /// difference, so their leaves lie all over the sets: each join asks the
+    /// cache early for the leaves of the edge [`PREFETCH_EDGES`] ahead.
+    fn join_along(
+        &mut self,
+        edges: &[Edge],
+        take: impl Fn(u32, u32) -> bool,
+        accept: impl Fn(&T, &T) -> bool,
+    ) {
         for (k, &(_, a, b)) in edges.iter().enumerate() {
             if let Some(&(_, next_a, next_b)) = edges.get(k + PREFETCH_EDGES) {
                 self.prefetch(next_a);
                 self.prefetch(next_b);
             }
-            self.union_if(a, b, &accept);
+            if take(a, b) {
+                self.union_if(a, b, &accept);
+            }
         }
     }
 
