@@ -407,7 +407,8 @@ pub fn extract_tiled(
     let sample_tiles = (0..tiles.len()).filter(|t| owners.contains(t)).count();
     // Tiles analysed at once, each its pixels, opponent colours, quadtree,
     // adjacency and labels: about TILE_BYTES_PER_PIXEL bytes a pixel; and
-    // the segmentations made while learning, kept for their tiles.
+    // the segmentations made while learning (of the samples' tiles, and of
+    // up to `at_once` others segmented meanwhile), kept for their tiles.
     let at_once = rayon::current_num_threads().clamp(1, tiles.len());
     let context_pixels = tiles
         .iter()
@@ -420,85 +421,134 @@ pub fn extract_tiled(
         ),
         context_pixels
             * (at_once as u64 * TILE_BYTES_PER_PIXEL
-                + sample_tiles as u64 * SEGMENTATION_BYTES_PER_PIXEL),
+                + (sample_tiles + at_once) as u64 * SEGMENTATION_BYTES_PER_PIXEL),
         1,
         "use smaller tiles (tile_px, --tile)",
     )?;
     watch.start(1 + tiles.len());
     let wall = Instant::now();
 
-    // Learn: each sample from its tile, in marking order.
-    let start = Instant::now();
-    let mut marked: Vec<Vec<Vec<f32>>> = vec![Vec::new(); samples.len()];
-    let mut learn_segment_ms = 0.0;
-    let learn_spacing =
-        matches!(placement, Placement::Crowns { .. }) && options.crown_spacing_m.is_none();
-    let mut marked_crowns = Vec::new();
-    // A tile's segmentation serves learning and then its own analysis.
-    let mut learnt: Vec<Option<Segmentation>> = tiles.iter().map(|_| None).collect();
-    let mut learn_buffers = SegmentBuffers::default();
-    for (t, tile) in tiles.iter().enumerate() {
-        if !owners.contains(&t) {
-            continue;
-        }
-        let context = TileImage::of(image, tile);
-        let seg_start = Instant::now();
-        let segmentation = segment_with(context.image(), &params, &mut learn_buffers)?;
-        learn_segment_ms += seg_start.elapsed().as_secs_f64() * 1e3;
-        let [x0, y0, ..] = tile.context;
-        for (k, sample) in samples.iter().enumerate() {
-            if owners[k] == t {
-                let local = sample.translated(-(x0 as f64), -(y0 as f64));
-                marked[k] =
-                    sample_signatures(context.image(), &segmentation, &local, options.window_px);
-                if learn_spacing && sample.class != options.negative_class {
-                    marked_crowns.push(MarkedCrown::cut(
+    // Learn: each sample from its tile, in marking order. Meanwhile, when
+    // a thread is free, the first tiles no sample touches are segmented
+    // ahead (as many as run at once): segmentation needs nothing learnt.
+    fn locked<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+        m.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+    let segmented: Vec<Mutex<Option<Segmentation>>> =
+        tiles.iter().map(|_| Mutex::new(None)).collect();
+    let learning_done = AtomicBool::new(false);
+    let learn = || -> Result<Learnt> {
+        let start = Instant::now();
+        let mut marked: Vec<Vec<Vec<f32>>> = vec![Vec::new(); samples.len()];
+        let mut learn_segment_ms = 0.0;
+        let learn_spacing =
+            matches!(placement, Placement::Crowns { .. }) && options.crown_spacing_m.is_none();
+        let mut marked_crowns = Vec::new();
+        // A tile's segmentation serves learning and then its own analysis.
+        let mut learn_buffers = SegmentBuffers::default();
+        for (t, tile) in tiles.iter().enumerate() {
+            if !owners.contains(&t) {
+                continue;
+            }
+            let context = TileImage::of(image, tile);
+            let seg_start = Instant::now();
+            let segmentation = segment_with(context.image(), &params, &mut learn_buffers)?;
+            learn_segment_ms += seg_start.elapsed().as_secs_f64() * 1e3;
+            let [x0, y0, ..] = tile.context;
+            for (k, sample) in samples.iter().enumerate() {
+                if owners[k] == t {
+                    let local = sample.translated(-(x0 as f64), -(y0 as f64));
+                    marked[k] = sample_signatures(
                         context.image(),
-                        context.valid(image),
                         &segmentation,
                         &local,
-                        spacing::margin_px(image.pixel_m),
                         options.window_px,
-                    ));
+                    );
+                    if learn_spacing && sample.class != options.negative_class {
+                        marked_crowns.push(MarkedCrown::cut(
+                            context.image(),
+                            context.valid(image),
+                            &segmentation,
+                            &local,
+                            spacing::margin_px(image.pixel_m),
+                            options.window_px,
+                        ));
+                    }
                 }
             }
+            *locked(&segmented[t]) = Some(segmentation);
         }
-        learnt[t] = Some(segmentation);
-    }
-    let marked: Vec<(String, Vec<f32>)> = samples
-        .iter()
-        .zip(marked)
-        .flat_map(|(s, signatures)| signatures.into_iter().map(|g| (s.class.clone(), g)))
-        .collect();
-    let classifier = Classifier::learn(marked, options.window_px, options.neighbours)?;
-    let vegetation: Vec<bool> = classifier
-        .classes
-        .iter()
-        .map(|c| *c != options.negative_class)
-        .collect();
-    if !vegetation.iter().any(|&v| v) {
-        return Err(Error::Input(format!(
-            "every sample is of the negative class {:?}: mark some vegetation",
-            options.negative_class
-        )));
-    }
-    let placement = match placement {
-        Placement::Crowns { min_radius_px, .. } if learn_spacing => {
-            let spacing_m = spacing::learn_spacing_m(
-                &marked_crowns,
-                &classifier,
-                &vegetation,
-                image.pixel_m,
-                min_radius_px,
-            );
-            Placement::Crowns {
-                spacing_px: (spacing_m / image.pixel_m) as f32,
-                min_radius_px,
+        let marked: Vec<(String, Vec<f32>)> = samples
+            .iter()
+            .zip(marked)
+            .flat_map(|(s, signatures)| signatures.into_iter().map(|g| (s.class.clone(), g)))
+            .collect();
+        let classifier = Classifier::learn(marked, options.window_px, options.neighbours)?;
+        let vegetation: Vec<bool> = classifier
+            .classes
+            .iter()
+            .map(|c| *c != options.negative_class)
+            .collect();
+        if !vegetation.iter().any(|&v| v) {
+            return Err(Error::Input(format!(
+                "every sample is of the negative class {:?}: mark some vegetation",
+                options.negative_class
+            )));
+        }
+        let placement = match placement {
+            Placement::Crowns { min_radius_px, .. } if learn_spacing => {
+                let spacing_m = spacing::learn_spacing_m(
+                    &marked_crowns,
+                    &classifier,
+                    &vegetation,
+                    image.pixel_m,
+                    min_radius_px,
+                );
+                Placement::Crowns {
+                    spacing_px: (spacing_m / image.pixel_m) as f32,
+                    min_radius_px,
+                }
+            }
+            placement => placement,
+        };
+        let learn_ms = start.elapsed().as_secs_f64() * 1e3;
+        Ok(Learnt {
+            classifier,
+            vegetation,
+            placement,
+            segment_ms: learn_segment_ms,
+            ms: learn_ms,
+        })
+    };
+    let segment_ahead = || {
+        let mut buffers = SegmentBuffers::default();
+        let free = (0..tiles.len()).filter(|t| !owners.contains(t));
+        for t in free.take(at_once) {
+            if learning_done.load(Ordering::Acquire) {
+                break;
+            }
+            let context = TileImage::of(image, &tiles[t]);
+            // A failure here comes back when the tile is analysed.
+            if let Ok(s) = segment_with(context.image(), &params, &mut buffers) {
+                *locked(&segmented[t]) = Some(s);
             }
         }
-        placement => placement,
     };
-    let learn_ms = start.elapsed().as_secs_f64() * 1e3;
+    let (learnt, ()) = rayon::join(
+        || {
+            let learnt = learn();
+            learning_done.store(true, Ordering::Release);
+            learnt
+        },
+        segment_ahead,
+    );
+    let Learnt {
+        classifier,
+        vegetation,
+        placement,
+        segment_ms: learn_segment_ms,
+        ms: learn_ms,
+    } = learnt?;
     watch.step_done()?;
 
     // Classify and place, as many tiles at once as threads: each of
@@ -506,11 +556,7 @@ pub fn extract_tiled(
     // writes its core's labels (numbered within the tile) into the map.
     // A worker that panics ends the scope with its panic, so a poisoned
     // lock is never read afterwards.
-    fn locked<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-        m.lock().unwrap_or_else(PoisonError::into_inner)
-    }
     let next_tile = AtomicUsize::new(0);
-    let learnt: Vec<Mutex<Option<Segmentation>>> = learnt.into_iter().map(Mutex::new).collect();
     let labels_map = Mutex::new(vec![0u32; w * h]);
     let done: Mutex<Vec<(usize, Result<TileResult>)>> = Mutex::new(Vec::new());
     rayon::scope(|scope| {
@@ -520,7 +566,7 @@ pub fn extract_tiled(
                 loop {
                     let t = next_tile.fetch_add(1, Ordering::Relaxed);
                     let Some(tile) = tiles.get(t) else { break };
-                    let segmented = locked(&learnt[t]).take();
+                    let segmented = locked(&segmented[t]).take();
                     let mut result = analyse_tile(
                         image,
                         tile,
@@ -662,6 +708,18 @@ pub fn extract_tiled(
         objects,
         report,
     })
+}
+
+/// What learning from the samples gives.
+struct Learnt {
+    classifier: Classifier,
+    /// Per class: whether it is vegetation (not the negative class).
+    vegetation: Vec<bool>,
+    /// The placement, with the crown spacing learnt when it is.
+    placement: Placement,
+    /// Time segmenting the samples' tiles, and all of learning, ms.
+    segment_ms: f64,
+    ms: f64,
 }
 
 /// A tile's pixels: the image itself when the tile is the whole image.
