@@ -49,6 +49,17 @@ pub struct Object {
     pub score: f32,
 }
 
+/// Per-pixel working arrays of crown placement (whether a pixel is outside
+/// vegetation, its smoothed brightness, the blur's rows: 9 bytes a pixel),
+/// kept by a worker that places crowns on tile after tile so their memory
+/// is mapped once.
+#[derive(Default)]
+pub struct DetectBuffers {
+    outside: Vec<bool>,
+    value: Vec<f32>,
+    rows: Vec<f32>,
+}
+
 /// Objects for every pixel whose region's class is in `vegetation` (and
 /// that has data, where `valid` is given), sorted by row then column.
 /// `origin` is where the image's first pixel lies in a larger image it is a
@@ -61,6 +72,31 @@ pub fn detect(
     valid: Option<&[bool]>,
     placement: Placement,
     origin: [usize; 2],
+) -> Vec<Object> {
+    let mut buffers = DetectBuffers::default();
+    detect_with(
+        image,
+        segmentation,
+        labels,
+        vegetation,
+        valid,
+        placement,
+        origin,
+        &mut buffers,
+    )
+}
+
+/// [`detect`] with working arrays reused from earlier calls.
+#[allow(clippy::too_many_arguments)]
+pub fn detect_with(
+    image: &super::Image,
+    segmentation: &Segmentation,
+    labels: &[Label],
+    vegetation: &[bool],
+    valid: Option<&[bool]>,
+    placement: Placement,
+    origin: [usize; 2],
+    buffers: &mut DetectBuffers,
 ) -> Vec<Object> {
     let (w, h) = (segmentation.width, segmentation.height);
     let label_at = |i: usize| labels[segmentation.labels[i] as usize];
@@ -107,22 +143,28 @@ pub fn detect(
             spacing_px,
             min_radius_px,
         } => {
-            let outside: Vec<bool> = (0..w * h)
-                .into_par_iter()
-                .map(|i| !is_vegetation(i))
-                .collect();
+            let DetectBuffers {
+                outside,
+                value,
+                rows,
+            } = buffers;
+            outside.clear();
+            outside.par_extend((0..w * h).into_par_iter().map(|i| !is_vegetation(i)));
+            let outside: &[bool] = outside;
             // Sunlit tops: smoothed brightness, only inside vegetation.
-            let mut value: Vec<f32> = image
-                .pixels
-                .par_chunks_exact(image.bands)
-                .map(|px| super::opponent(px)[0])
-                .collect();
+            value.clear();
+            value.par_extend(
+                image
+                    .pixels
+                    .par_chunks_exact(image.bands)
+                    .map(|px| super::opponent(px)[0]),
+            );
             let blur = (0.3 * spacing_px).round() as usize;
-            let mut rows = vec![0.0f32; w * h];
-            box_blur(&mut value, &mut rows, w, h, blur);
-            box_blur(&mut value, &mut rows, w, h, blur);
-            drop(rows);
-            value.par_iter_mut().zip(&outside).for_each(|(v, &out)| {
+            // The blur writes every row's means before it reads them.
+            rows.resize(w * h, 0.0);
+            box_blur(value, rows, w, h, blur);
+            box_blur(value, rows, w, h, blur);
+            value.par_iter_mut().zip(outside).for_each(|(v, &out)| {
                 if out {
                     *v = f32::MIN;
                 }
@@ -133,10 +175,10 @@ pub fn detect(
             let r = (spacing_px.max(1.0) / 2.0).ceil() as usize;
             let limit = (2.0 * spacing_px).ceil().max(2.0) as usize;
             let min_radius = min_radius_px.max(1.0);
-            let mut candidates: Vec<(usize, f32)> = local_maxima(&value, &outside, w, h)
+            let mut candidates: Vec<(usize, f32)> = local_maxima(value, outside, w, h)
                 .into_par_iter()
-                .filter(|&i| is_window_max(&value, w, h, i % w, i / w, r))
-                .map(|i| (i, vegetation_radius(&outside, w, h, i, limit)))
+                .filter(|&i| is_window_max(value, w, h, i % w, i / w, r))
+                .map(|i| (i, vegetation_radius(outside, w, h, i, limit)))
                 .filter(|&(_, radius)| radius >= min_radius)
                 .collect();
             candidates.sort_by(|a, b| value[b.0].total_cmp(&value[a.0]).then(a.0.cmp(&b.0)));

@@ -121,9 +121,16 @@ impl Image {
     }
 
     /// The pixels of `[x0, y0, x1, y1)`, a rectangle inside the image.
-    pub fn window(&self, [x0, y0, x1, y1]: [usize; 4]) -> Image {
+    pub fn window(&self, rect: [usize; 4]) -> Image {
+        self.window_in(rect, Vec::new())
+    }
+
+    /// [`Image::window`] in `pixels` (whatever it held), e.g. an earlier
+    /// window's.
+    pub fn window_in(&self, [x0, y0, x1, y1]: [usize; 4], mut pixels: Vec<u8>) -> Image {
         let b = self.bands;
-        let mut pixels = Vec::with_capacity((x1 - x0) * (y1 - y0) * b);
+        pixels.clear();
+        pixels.reserve((x1 - x0) * (y1 - y0) * b);
         for y in y0..y1 {
             let row = y * self.width;
             pixels.extend_from_slice(&self.pixels[(row + x0) * b..(row + x1) * b]);

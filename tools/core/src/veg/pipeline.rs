@@ -5,7 +5,7 @@
 
 use super::classify::{sample_signatures, Classifier, Label};
 use super::db::VegObject;
-use super::detect::{detect, Object, Placement};
+use super::detect::{detect_with, DetectBuffers, Object, Placement};
 use super::samples::Sample;
 use super::segment::{
     segment_with, Region, SegmentBuffers, SegmentParams, SegmentSteps, Segmentation,
@@ -380,6 +380,7 @@ pub fn extract_tiled(
     tiling: Tiling,
     watch: &Watch,
 ) -> Result<Extraction> {
+    let t0 = Instant::now();
     let placement = options.placement(image.pixel_m)?;
     let brightness_span = image.image.brightness_span();
     let threshold_gain = options.threshold_gain(&image.image, samples);
@@ -426,6 +427,7 @@ pub fn extract_tiled(
         "use smaller tiles (tile_px, --tile)",
     )?;
     watch.start(1 + tiles.len());
+    eprintln!("TIMER pre {:.0}", t0.elapsed().as_secs_f64() * 1e3);
     let wall = Instant::now();
 
     // Learn: each sample from its tile, in marking order. Meanwhile, when
@@ -450,7 +452,7 @@ pub fn extract_tiled(
             if !owners.contains(&t) {
                 continue;
             }
-            let context = TileImage::of(image, tile);
+            let context = TileImage::of(image, tile, Vec::new());
             let seg_start = Instant::now();
             let segmentation = segment_with(context.image(), &params, &mut learn_buffers)?;
             learn_segment_ms += seg_start.elapsed().as_secs_f64() * 1e3;
@@ -527,7 +529,7 @@ pub fn extract_tiled(
             if learning_done.load(Ordering::Acquire) {
                 break;
             }
-            let context = TileImage::of(image, &tiles[t]);
+            let context = TileImage::of(image, &tiles[t], Vec::new());
             // A failure here comes back when the tile is analysed.
             if let Ok(s) = segment_with(context.image(), &params, &mut buffers) {
                 *locked(&segmented[t]) = Some(s);
@@ -550,6 +552,7 @@ pub fn extract_tiled(
         ms: learn_ms,
     } = learnt?;
     watch.step_done()?;
+    eprintln!("TIMER learnt {:.0}", t0.elapsed().as_secs_f64() * 1e3);
 
     // Classify and place, as many tiles at once as threads: each of
     // `at_once` workers takes the next tile as soon as its last is done, and
@@ -562,7 +565,7 @@ pub fn extract_tiled(
     rayon::scope(|scope| {
         for _ in 0..at_once {
             scope.spawn(|_| {
-                let mut buffers = SegmentBuffers::default();
+                let mut buffers = TileBuffers::default();
                 loop {
                     let t = next_tile.fetch_add(1, Ordering::Relaxed);
                     let Some(tile) = tiles.get(t) else { break };
@@ -599,6 +602,7 @@ pub fn extract_tiled(
             });
         }
     });
+    eprintln!("TIMER tiles {:.0}", t0.elapsed().as_secs_f64() * 1e3);
     let mut done = done.into_inner().unwrap_or_else(PoisonError::into_inner);
     let mut labels_map = labels_map
         .into_inner()
@@ -647,6 +651,7 @@ pub fn extract_tiled(
         ms = wall.elapsed().as_secs_f64() * 1e3,
         "vegetation extraction"
     );
+    eprintln!("TIMER assembled {:.0}", t0.elapsed().as_secs_f64() * 1e3);
     let objects: Vec<VegObject> = found
         .iter()
         .enumerate()
@@ -701,6 +706,7 @@ pub fn extract_tiled(
         detect_ms,
         total_ms: wall.elapsed().as_secs_f64() * 1e3,
     };
+    eprintln!("TIMER reported {:.0}", t0.elapsed().as_secs_f64() * 1e3);
     Ok(Extraction {
         segmentation,
         classifier,
@@ -729,7 +735,9 @@ enum TileImage<'a> {
 }
 
 impl<'a> TileImage<'a> {
-    fn of(image: &'a VegImage, tile: &Tile) -> TileImage<'a> {
+    /// The tile's context of `image`; a window is copied into `pixels`
+    /// (whatever it held).
+    fn of(image: &'a VegImage, tile: &Tile, pixels: Vec<u8>) -> TileImage<'a> {
         let (w, h) = (image.image.width, image.image.height);
         if tile.context == [0, 0, w, h] {
             return TileImage::Whole(&image.image);
@@ -740,7 +748,15 @@ impl<'a> TileImage<'a> {
                 .flat_map(|y| v[y * w + x0..y * w + x1].iter().copied())
                 .collect()
         });
-        TileImage::Window(image.image.window(tile.context), valid)
+        TileImage::Window(image.image.window_in(tile.context, pixels), valid)
+    }
+
+    /// A window's pixels, to copy the next window into.
+    fn into_pixels(self) -> Vec<u8> {
+        match self {
+            TileImage::Whole(_) => Vec::new(),
+            TileImage::Window(image, _) => image.pixels,
+        }
     }
 
     fn image(&self) -> &Image {
@@ -756,6 +772,15 @@ impl<'a> TileImage<'a> {
             TileImage::Window(_, valid) => valid.as_deref(),
         }
     }
+}
+
+/// Working arrays a worker reuses from tile to tile: segmentation's, crown
+/// placement's and the copy of the tile's pixels.
+#[derive(Default)]
+struct TileBuffers {
+    segment: SegmentBuffers,
+    detect: DetectBuffers,
+    pixels: Vec<u8>,
 }
 
 /// What one tile gives: its core's region labels (numbered from 0 among
@@ -781,18 +806,18 @@ fn analyse_tile(
     image: &VegImage,
     tile: &Tile,
     segmented: Option<Segmentation>,
-    buffers: &mut SegmentBuffers,
+    buffers: &mut TileBuffers,
     params: &SegmentParams,
     classifier: &Classifier,
     vegetation: &[bool],
     placement: Placement,
 ) -> Result<TileResult> {
-    let context = TileImage::of(image, tile);
+    let context = TileImage::of(image, tile, std::mem::take(&mut buffers.pixels));
     let start = Instant::now();
     let whole = tile.context == tile.core;
     let segmentation = match segmented {
         Some(s) => s,
-        None => segment_with(context.image(), params, buffers)?,
+        None => segment_with(context.image(), params, &mut buffers.segment)?,
     };
     let segment_ms = start.elapsed().as_secs_f64() * 1e3;
     let start = Instant::now();
@@ -800,7 +825,7 @@ fn analyse_tile(
     let classify_ms = start.elapsed().as_secs_f64() * 1e3;
     let start = Instant::now();
     let [x0, y0, ..] = tile.context;
-    let objects: Vec<Object> = detect(
+    let objects: Vec<Object> = detect_with(
         context.image(),
         &segmentation,
         &labels,
@@ -808,6 +833,7 @@ fn analyse_tile(
         context.valid(image),
         placement,
         [x0, y0],
+        &mut buffers.detect,
     )
     .into_iter()
     .map(|o| Object {
@@ -829,14 +855,17 @@ fn analyse_tile(
     let (core_labels, regions, labels) = if whole {
         (context_labels, context_regions, labels)
     } else {
-        keep_core(
+        let core = keep_core(
             tile,
-            context_labels,
+            &context_labels,
             context_width,
             context_regions,
             &labels,
-        )
+        );
+        buffers.segment.reuse_labels(context_labels);
+        core
     };
+    buffers.pixels = context.into_pixels();
     Ok(TileResult {
         core_labels,
         regions,
@@ -856,7 +885,7 @@ fn analyse_tile(
 /// context's).
 fn keep_core(
     tile: &Tile,
-    context_labels: Vec<u32>,
+    context_labels: &[u32],
     context_width: usize,
     context_regions: Vec<Region>,
     labels: &[Label],

@@ -238,14 +238,24 @@ enum TileCover {
 }
 
 /// Working arrays one segmentation after another reuses: the leaves, their
-/// moments and the sorted edges (together about 20 bytes a pixel). A worker
-/// that segments tile after tile keeps one, so their memory is mapped once
-/// rather than for every tile.
+/// moments, the sorted edges (together about 20 bytes a pixel) and, when
+/// handed back, an earlier segmentation's labels. A worker that segments
+/// tile after tile keeps one, so their memory is mapped once rather than
+/// for every tile.
 #[derive(Default)]
 pub struct SegmentBuffers {
     leaves: Vec<Leaf>,
     moments: Vec<Moments>,
     edges: Vec<Edge>,
+    labels: Vec<u32>,
+}
+
+impl SegmentBuffers {
+    /// Hand back a segmentation's labels once read: the next segmentation
+    /// numbers its pixels in them.
+    pub fn reuse_labels(&mut self, labels: Vec<u32>) {
+        self.labels = labels;
+    }
 }
 
 /// Split-and-merge `image` into homogeneous 4-connected regions.
@@ -271,7 +281,13 @@ pub fn segment_with(
 
     let mut leaves = std::mem::take(&mut buffers.leaves);
     let mut leaf_moments = std::mem::take(&mut buffers.moments);
-    let mut labels = split(image, &predicate, &mut leaves, &mut leaf_moments);
+    let mut labels = split(
+        image,
+        &predicate,
+        &mut leaves,
+        &mut leaf_moments,
+        std::mem::take(&mut buffers.labels),
+    );
     let split_ms = lap();
 
     // Merge along the region adjacency graph.
@@ -370,11 +386,9 @@ pub fn segment_with(
         let n = region.pixels as f64;
         region.centroid = [(sums[0] / n) as f32, (sums[1] / n) as f32];
     }
-    *buffers = SegmentBuffers {
-        leaves,
-        moments,
-        edges,
-    };
+    buffers.leaves = leaves;
+    buffers.moments = moments;
+    buffers.edges = edges;
     let steps = SegmentSteps {
         split_ms,
         adjacency_ms,
@@ -394,12 +408,14 @@ pub fn segment_with(
 
 /// Split `image` into quadtree leaves: every tile in parallel, then the
 /// levels above tile size. Fills `leaves` (in depth-first order) and their
-/// `moments`; returns the leaf index of every pixel.
+/// `moments`; returns the leaf index of every pixel, in `labels` (whatever
+/// it held).
 fn split(
     image: &Image,
     predicate: &Predicate,
     leaves: &mut Vec<Leaf>,
     moments: &mut Vec<Moments>,
+    labels: Vec<u32>,
 ) -> Vec<u32> {
     let (w, h) = (image.width, image.height);
     let tiles_x = w.div_ceil(TILE);
@@ -412,7 +428,7 @@ fn split(
         .collect();
     let cover = split_coarse(&tiles, tiles_x, tiles_y, w, h, predicate, leaves, moments);
     drop(tiles);
-    paint(leaves, &cover, tiles_x, w, h)
+    paint(leaves, &cover, tiles_x, w, h, labels)
 }
 
 /// Per-thread buffers for splitting one tile: the moments pyramid.
@@ -572,9 +588,17 @@ fn split_coarse(
     cover
 }
 
-/// The leaf index of every pixel.
-fn paint(leaves: &[Leaf], cover: &[TileCover], tiles_x: usize, w: usize, h: usize) -> Vec<u32> {
-    let mut labels = vec![0u32; w * h];
+/// The leaf index of every pixel, in `labels` (whatever it held).
+fn paint(
+    leaves: &[Leaf],
+    cover: &[TileCover],
+    tiles_x: usize,
+    w: usize,
+    h: usize,
+    mut labels: Vec<u32>,
+) -> Vec<u32> {
+    labels.clear();
+    labels.resize(w * h, 0);
     labels
         .par_chunks_mut(TILE * w)
         .enumerate()
@@ -986,7 +1010,8 @@ mod tests {
     }
 
     /// Buffers reused from other segmentations (a larger image, then a
-    /// smaller one) give what fresh ones give.
+    /// smaller one), with their labels handed back, give what fresh ones
+    /// give.
     #[test]
     fn reused_buffers_give_the_same_segmentation() {
         let params = SegmentParams::default();
@@ -1001,6 +1026,7 @@ mod tests {
             assert_eq!(reused.labels, fresh.labels);
             assert_eq!(reused.regions, fresh.regions);
             assert_eq!(reused.leaves, fresh.leaves);
+            buffers.reuse_labels(reused.labels);
         }
     }
 
@@ -1009,7 +1035,7 @@ mod tests {
     fn leaves_and_edges(image: &Image, params: &SegmentParams) -> (usize, Vec<Vec<Edge>>) {
         let predicate = Predicate::new(params, image.bands);
         let (mut leaves, mut moments) = (Vec::new(), Vec::new());
-        let labels = split(image, &predicate, &mut leaves, &mut moments);
+        let labels = split(image, &predicate, &mut leaves, &mut moments, Vec::new());
         let (w, h) = (image.width, image.height);
         let parts = adjacency(&leaves, &moments, &labels, w, h, &predicate);
         (leaves.len(), parts)
