@@ -570,32 +570,21 @@ pub fn extract_tiled(
                     let t = next_tile.fetch_add(1, Ordering::Relaxed);
                     let Some(tile) = tiles.get(t) else { break };
                     let segmented = locked(&segmented[t]).take();
-                    let mut result = analyse_tile(
+                    let result = analyse_tile(
                         image,
                         tile,
                         segmented,
                         &mut buffers,
+                        &labels_map,
                         &params,
                         &classifier,
                         &vegetation,
                         placement,
                     )
                     .and_then(|r| watch.step_done().map(|()| r));
-                    match &mut result {
-                        Ok(r) => {
-                            let [x0, y0, x1, _] = tile.core;
-                            let side = x1 - x0;
-                            let mut map = locked(&labels_map);
-                            for (dy, row) in r.core_labels.chunks_exact(side).enumerate() {
-                                let at = (y0 + dy) * w + x0;
-                                map[at..at + side].copy_from_slice(row);
-                            }
-                            drop(map);
-                            // The map holds them now: not kept for every tile.
-                            r.core_labels = Vec::new();
-                        }
-                        // The other workers stop after their current tile.
-                        Err(_) => next_tile.store(tiles.len(), Ordering::Relaxed),
+                    // The other workers stop after their current tile.
+                    if result.is_err() {
+                        next_tile.store(tiles.len(), Ordering::Relaxed);
                     }
                     locked(&done).push((t, result));
                 }
@@ -783,11 +772,11 @@ struct TileBuffers {
     pixels: Vec<u8>,
 }
 
-/// What one tile gives: its core's region labels (numbered from 0 among
-/// the regions its core holds), those regions and their classes, and the
-/// objects it owns in the image's pixel coordinates.
+/// What one tile gives, besides its core's region labels (numbered from 0
+/// among the regions its core holds) written into the image's map: those
+/// regions and their classes, and the objects it owns in the image's pixel
+/// coordinates.
 struct TileResult {
-    core_labels: Vec<u32>,
     regions: Vec<Region>,
     labels: Vec<Label>,
     objects: Vec<Object>,
@@ -800,13 +789,14 @@ struct TileResult {
 
 /// Segment (in the worker's `buffers`, unless `segmented` is given: the
 /// tile's context already segmented while learning), classify and place on
-/// one tile's context; keep its core.
+/// one tile's context; keep its core, whose labels go into `labels_map`.
 #[allow(clippy::too_many_arguments)]
 fn analyse_tile(
     image: &VegImage,
     tile: &Tile,
     segmented: Option<Segmentation>,
     buffers: &mut TileBuffers,
+    labels_map: &Mutex<Vec<u32>>,
     params: &SegmentParams,
     classifier: &Classifier,
     vegetation: &[bool],
@@ -852,8 +842,9 @@ fn analyse_tile(
         width: context_width,
         ..
     } = segmentation;
-    let (core_labels, regions, labels) = if whole {
-        (context_labels, context_regions, labels)
+    let (regions, labels) = if whole {
+        *labels_map.lock().unwrap_or_else(PoisonError::into_inner) = context_labels;
+        (context_regions, labels)
     } else {
         let core = keep_core(
             tile,
@@ -861,13 +852,14 @@ fn analyse_tile(
             context_width,
             context_regions,
             &labels,
+            labels_map,
+            image.image.width,
         );
         buffers.segment.reuse_labels(context_labels);
         core
     };
     buffers.pixels = context.into_pixels();
     Ok(TileResult {
-        core_labels,
         regions,
         labels,
         objects,
@@ -879,26 +871,31 @@ fn analyse_tile(
     })
 }
 
-/// The core of a tile's segmentation: its labels, renumbered among the
-/// regions the core holds (kept in index order, with their classes), each
-/// described by its pixels in the core (colour statistics stay the
-/// context's).
+/// The core of a tile's segmentation: the regions the core holds (kept in
+/// index order, with their classes), each described by its pixels in the
+/// core (colour statistics stay the context's), and its labels renumbered
+/// among them, written into the image's `map` (`map_width` wide) where the
+/// core lies.
 fn keep_core(
     tile: &Tile,
     context_labels: &[u32],
     context_width: usize,
     context_regions: Vec<Region>,
     labels: &[Label],
-) -> (Vec<u32>, Vec<Region>, Vec<Label>) {
+    map: &Mutex<Vec<u32>>,
+    map_width: usize,
+) -> (Vec<Region>, Vec<Label>) {
     let [x0, y0, ..] = tile.context;
     let [cx0, cy0, cx1, cy1] = tile.core;
+    let side = cx1 - cx0;
+    let core_rows = || {
+        (cy0..cy1).map(|y| {
+            let at = (y - y0) * context_width + (cx0 - x0);
+            &context_labels[at..at + side]
+        })
+    };
     let mut index = vec![u32::MAX; context_regions.len()];
-    let mut core_labels = Vec::with_capacity((cx1 - cx0) * (cy1 - cy0));
-    for y in cy0..cy1 {
-        let at = (y - y0) * context_width + (cx0 - x0);
-        core_labels.extend_from_slice(&context_labels[at..at + (cx1 - cx0)]);
-    }
-    for &l in &core_labels {
+    for &l in core_rows().flatten() {
         index[l as usize] = 0;
     }
     let mut kept_regions = Vec::new();
@@ -919,11 +916,14 @@ fn keep_core(
     // A run of one label at a time. Centre sums are multiples of a half far
     // below 2⁵³ (exact in f64), so a run's sum added at once gives the sums
     // of pixel after pixel bit for bit.
-    for (y, row) in (cy0 as u32..).zip(core_labels.chunks_exact_mut(cx1 - cx0)) {
-        let mut x = cx0 as u32;
-        for run in row.chunk_by_mut(|a, b| a == b) {
+    let mut map = map.lock().unwrap_or_else(PoisonError::into_inner);
+    for (y, row) in (cy0 as u32..).zip(core_rows()) {
+        let out = &mut map[y as usize * map_width + cx0..][..side];
+        let (mut x, mut at) = (cx0 as u32, 0);
+        for run in row.chunk_by(|a, b| a == b) {
             let (kept, length) = (index[run[0] as usize], run.len() as u32);
-            run.fill(kept);
+            out[at..at + run.len()].fill(kept);
+            at += run.len();
             let region = &mut kept_regions[kept as usize];
             region.pixels += length;
             region.bbox = [
@@ -942,7 +942,8 @@ fn keep_core(
         let n = region.pixels as f64;
         region.centroid = [(sums[0] / n) as f32, (sums[1] / n) as f32];
     }
-    (core_labels, kept_regions, kept_labels)
+    drop(map);
+    (kept_regions, kept_labels)
 }
 
 /// An RGBA picture for people: the image, vegetation regions tinted by class,
