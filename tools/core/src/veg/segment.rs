@@ -448,17 +448,37 @@ impl TileScratch {
     /// Split the tile whose top-left pixel is `(x0, y0)`.
     fn split(&mut self, image: &Image, predicate: &Predicate, x0: usize, y0: usize) -> TileSplit {
         let (tw, th) = (TILE.min(image.width - x0), TILE.min(image.height - y0));
-        let base = &mut self.levels[0];
-        for y in 0..TILE {
-            for x in 0..TILE {
-                base[y * TILE + x] = if x < tw && y < th {
-                    Moments::pixel(image.colour(x0 + x, y0 + y))
-                } else {
-                    Moments::default()
-                };
+        let pixel = |x: usize, y: usize| {
+            if x < tw && y < th {
+                Moments::pixel(image.colour(x0 + x, y0 + y))
+            } else {
+                Moments::default()
             }
-        }
-        for k in 1..TILE_LEVELS {
+        };
+        // Blocks of one pixel are never leaves when the smallest block is
+        // larger: then the 2×2 level is summed straight from the pixels, in
+        // the order the levels above sum their children.
+        let first = if predicate.min_level >= 1 {
+            let side = TILE / 2;
+            for y in 0..side {
+                for x in 0..side {
+                    let at = |dx: usize, dy: usize| pixel(2 * x + dx, 2 * y + dy);
+                    self.levels[1][y * side + x] = at(0, 0)
+                        .joined(&at(1, 0))
+                        .joined(&at(0, 1))
+                        .joined(&at(1, 1));
+                }
+            }
+            2
+        } else {
+            for y in 0..TILE {
+                for x in 0..TILE {
+                    self.levels[0][y * TILE + x] = pixel(x, y);
+                }
+            }
+            1
+        };
+        for k in first..TILE_LEVELS {
             let (lower, upper) = self.levels.split_at_mut(k);
             let (child, parent) = (&lower[k - 1], &mut upper[0]);
             let side = TILE >> k;
