@@ -167,8 +167,21 @@ const HELMERT_NORM: [f32; MAX_BANDS] = [0.0, std::f32::consts::SQRT_2, 2.449_489
 /// the same distance whatever the direction of the hue change.
 #[inline]
 pub fn opponent(bands: &[u8]) -> [f32; MAX_BANDS] {
+    // One body per band count, so each is unrolled (the same operations).
+    match bands.len() {
+        1 => opponent_of::<1>(bands),
+        2 => opponent_of::<2>(bands),
+        3 => opponent_of::<3>(bands),
+        _ => opponent_of::<MAX_BANDS>(bands),
+    }
+}
+
+/// [`opponent`] of the first `N` values of `bands`.
+#[inline(always)]
+fn opponent_of<const N: usize>(bands: &[u8]) -> [f32; MAX_BANDS] {
+    let bands = &bands[..N];
     let mut out = [0.0f32; MAX_BANDS];
-    let n = bands.len();
+    let n = N;
     let mut prefix = 0.0f32;
     for (k, &v) in bands.iter().enumerate() {
         let v = v as f32;
