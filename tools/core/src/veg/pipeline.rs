@@ -380,7 +380,6 @@ pub fn extract_tiled(
     tiling: Tiling,
     watch: &Watch,
 ) -> Result<Extraction> {
-    let t0 = Instant::now();
     let placement = options.placement(image.pixel_m)?;
     let brightness_span = image.image.brightness_span();
     let threshold_gain = options.threshold_gain(&image.image, samples);
@@ -408,8 +407,8 @@ pub fn extract_tiled(
     let sample_tiles = (0..tiles.len()).filter(|t| owners.contains(t)).count();
     // Tiles analysed at once, each its pixels, opponent colours, quadtree,
     // adjacency and labels: about TILE_BYTES_PER_PIXEL bytes a pixel; and
-    // the segmentations made while learning (of the samples' tiles, and of
-    // up to `at_once` others segmented meanwhile), kept for their tiles.
+    // the segmentations made while learning (the samples' tiles, and one
+    // tile for each other thread segmented meanwhile), kept for their tiles.
     let at_once = rayon::current_num_threads().clamp(1, tiles.len());
     let context_pixels = tiles
         .iter()
@@ -422,17 +421,16 @@ pub fn extract_tiled(
         ),
         context_pixels
             * (at_once as u64 * TILE_BYTES_PER_PIXEL
-                + (sample_tiles + at_once) as u64 * SEGMENTATION_BYTES_PER_PIXEL),
+                + (sample_tiles + at_once - 1) as u64 * SEGMENTATION_BYTES_PER_PIXEL),
         1,
         "use smaller tiles (tile_px, --tile)",
     )?;
     watch.start(1 + tiles.len());
-    eprintln!("TIMER pre {:.0}", t0.elapsed().as_secs_f64() * 1e3);
     let wall = Instant::now();
 
     // Learn: each sample from its tile, in marking order. Meanwhile, when
     // a thread is free, the first tiles no sample touches are segmented
-    // ahead (as many as run at once): segmentation needs nothing learnt.
+    // ahead (one for each other thread): segmentation needs nothing learnt.
     fn locked<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
         m.lock().unwrap_or_else(PoisonError::into_inner)
     }
@@ -525,7 +523,7 @@ pub fn extract_tiled(
     let segment_ahead = || {
         let mut buffers = SegmentBuffers::default();
         let free = (0..tiles.len()).filter(|t| !owners.contains(t));
-        for t in free.take(at_once) {
+        for t in free.take(at_once - 1) {
             if learning_done.load(Ordering::Acquire) {
                 break;
             }
@@ -552,7 +550,6 @@ pub fn extract_tiled(
         ms: learn_ms,
     } = learnt?;
     watch.step_done()?;
-    eprintln!("TIMER learnt {:.0}", t0.elapsed().as_secs_f64() * 1e3);
 
     // Classify and place, as many tiles at once as threads: each of
     // `at_once` workers takes the next tile as soon as its last is done, and
@@ -591,7 +588,6 @@ pub fn extract_tiled(
             });
         }
     });
-    eprintln!("TIMER tiles {:.0}", t0.elapsed().as_secs_f64() * 1e3);
     let mut done = done.into_inner().unwrap_or_else(PoisonError::into_inner);
     let mut labels_map = labels_map
         .into_inner()
@@ -640,7 +636,6 @@ pub fn extract_tiled(
         ms = wall.elapsed().as_secs_f64() * 1e3,
         "vegetation extraction"
     );
-    eprintln!("TIMER assembled {:.0}", t0.elapsed().as_secs_f64() * 1e3);
     let objects: Vec<VegObject> = found
         .iter()
         .enumerate()
@@ -695,7 +690,6 @@ pub fn extract_tiled(
         detect_ms,
         total_ms: wall.elapsed().as_secs_f64() * 1e3,
     };
-    eprintln!("TIMER reported {:.0}", t0.elapsed().as_secs_f64() * 1e3);
     Ok(Extraction {
         segmentation,
         classifier,
