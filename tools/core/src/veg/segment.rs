@@ -837,7 +837,8 @@ impl<T: SetData> DisjointSets<T> {
         }
     }
 
-    /// Ask the cache for `x`'s parent and data.
+    /// Ask the cache for `x`'s parent and data (both ends of it: moments
+    /// mostly straddle two cache lines).
     fn prefetch(&self, x: u32) {
         #[cfg(target_arch = "x86_64")]
         {
@@ -848,7 +849,9 @@ impl<T: SetData> DisjointSets<T> {
                 // (it never faults); the pointers are in bounds anyway.
                 unsafe {
                     _mm_prefetch::<_MM_HINT_T0>(self.parent[x..].as_ptr().cast());
-                    _mm_prefetch::<_MM_HINT_T0>(self.data[x..].as_ptr().cast());
+                    let data: *const i8 = self.data[x..].as_ptr().cast();
+                    _mm_prefetch::<_MM_HINT_T0>(data);
+                    _mm_prefetch::<_MM_HINT_T0>(data.wrapping_add(size_of::<T>() - 1));
                 }
             }
         }
