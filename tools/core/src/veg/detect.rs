@@ -64,31 +64,9 @@ pub struct DetectBuffers {
 /// that has data, where `valid` is given), sorted by row then column.
 /// `origin` is where the image's first pixel lies in a larger image it is a
 /// tile of (`[0, 0]` for a whole image): the fill grid is that image's.
-pub fn detect(
-    image: &super::Image,
-    segmentation: &Segmentation,
-    labels: &[Label],
-    vegetation: &[bool],
-    valid: Option<&[bool]>,
-    placement: Placement,
-    origin: [usize; 2],
-) -> Vec<Object> {
-    let mut buffers = DetectBuffers::default();
-    detect_with(
-        image,
-        segmentation,
-        labels,
-        vegetation,
-        valid,
-        placement,
-        origin,
-        &mut buffers,
-    )
-}
-
-/// [`detect`] with working arrays reused from earlier calls.
+/// `buffers` may hold an earlier call's arrays, to be reused.
 #[allow(clippy::too_many_arguments)]
-pub fn detect_with(
+pub fn detect(
     image: &super::Image,
     segmentation: &Segmentation,
     labels: &[Label],
@@ -472,28 +450,31 @@ mod tests {
             spacing_px: 2.0,
             diameter_px: 2.0,
         };
-        let all = detect(&image, &segmentation, &labels, &[true], None, fill, [0, 0]);
+        let mut buffers = DetectBuffers::default();
+        let mut place = |vegetation: &[bool], valid: Option<&[bool]>| {
+            let origin = [0, 0];
+            detect(
+                &image,
+                &segmentation,
+                &labels,
+                vegetation,
+                valid,
+                fill,
+                origin,
+                &mut buffers,
+            )
+        };
+        let all = place(&[true], None);
         // One object per 2×2 pixels.
         assert_eq!(all.len(), w * h / 4);
-        assert_eq!(
-            all,
-            detect(&image, &segmentation, &labels, &[true], None, fill, [0, 0])
-        );
+        assert_eq!(all, place(&[true], None));
         // No data in the left half: objects only on the right.
         let valid: Vec<bool> = (0..w * h).map(|i| i % w >= 20).collect();
-        let right = detect(
-            &image,
-            &segmentation,
-            &labels,
-            &[true],
-            Some(&valid),
-            fill,
-            [0, 0],
-        );
+        let right = place(&[true], Some(&valid));
         assert!(right.iter().all(|o| o.x >= 20.0));
         assert_eq!(right.len(), all.iter().filter(|o| o.x >= 20.0).count());
         // A class that is not vegetation gets nothing.
-        assert!(detect(&image, &segmentation, &labels, &[false], None, fill, [0, 0]).is_empty());
+        assert!(place(&[false], None).is_empty());
     }
 
     #[test]

@@ -5,11 +5,9 @@
 
 use super::classify::{sample_signatures, Classifier, Label};
 use super::db::VegObject;
-use super::detect::{detect_with, DetectBuffers, Object, Placement};
+use super::detect::{detect, DetectBuffers, Object, Placement};
 use super::samples::Sample;
-use super::segment::{
-    segment_with, Region, SegmentBuffers, SegmentParams, SegmentSteps, Segmentation,
-};
+use super::segment::{segment, Region, SegmentBuffers, SegmentParams, SegmentSteps, Segmentation};
 use super::spacing::{self, MarkedCrown, MAX_CROWN_SPACING_M};
 use super::tiles::{Tile, Tiling};
 use super::Image;
@@ -452,7 +450,7 @@ pub fn extract_tiled(
             }
             let context = TileImage::of(image, tile, Vec::new());
             let seg_start = Instant::now();
-            let segmentation = segment_with(context.image(), &params, &mut learn_buffers)?;
+            let segmentation = segment(context.image(), &params, &mut learn_buffers)?;
             learn_segment_ms += seg_start.elapsed().as_secs_f64() * 1e3;
             let [x0, y0, ..] = tile.context;
             for (k, sample) in samples.iter().enumerate() {
@@ -529,7 +527,7 @@ pub fn extract_tiled(
             }
             let context = TileImage::of(image, &tiles[t], Vec::new());
             // A failure here comes back when the tile is analysed.
-            if let Ok(s) = segment_with(context.image(), &params, &mut buffers) {
+            if let Ok(s) = segment(context.image(), &params, &mut buffers) {
                 *locked(&segmented[t]) = Some(s);
             }
         }
@@ -801,7 +799,7 @@ fn analyse_tile(
     let whole = tile.context == tile.core;
     let segmentation = match segmented {
         Some(s) => s,
-        None => segment_with(context.image(), params, &mut buffers.segment)?,
+        None => segment(context.image(), params, &mut buffers.segment)?,
     };
     let segment_ms = start.elapsed().as_secs_f64() * 1e3;
     let start = Instant::now();
@@ -809,7 +807,7 @@ fn analyse_tile(
     let classify_ms = start.elapsed().as_secs_f64() * 1e3;
     let start = Instant::now();
     let [x0, y0, ..] = tile.context;
-    let objects: Vec<Object> = detect_with(
+    let objects: Vec<Object> = detect(
         context.image(),
         &segmentation,
         &labels,

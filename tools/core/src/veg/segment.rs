@@ -258,13 +258,9 @@ impl SegmentBuffers {
     }
 }
 
-/// Split-and-merge `image` into homogeneous 4-connected regions.
-pub fn segment(image: &Image, params: &SegmentParams) -> Result<Segmentation> {
-    segment_with(image, params, &mut SegmentBuffers::default())
-}
-
-/// [`segment`] with working arrays reused from earlier segmentations.
-pub fn segment_with(
+/// Split-and-merge `image` into homogeneous 4-connected regions. `buffers`
+/// may hold an earlier segmentation's working arrays, to be reused.
+pub fn segment(
     image: &Image,
     params: &SegmentParams,
     buffers: &mut SegmentBuffers,
@@ -966,7 +962,7 @@ mod tests {
                 min_block_px: 1,
                 ..Default::default()
             };
-            let s = segment(&image, &params).unwrap();
+            let s = segment(&image, &params, &mut SegmentBuffers::default()).unwrap();
             assert_partition(&s);
             let distinct = if w >= 3 && h >= 2 { 3 } else { s.regions.len() };
             assert_eq!(s.regions.len(), distinct, "{w}×{h}");
@@ -980,7 +976,7 @@ mod tests {
             min_region_px: 1,
             ..Default::default()
         };
-        let s = segment(&image, &params).unwrap();
+        let s = segment(&image, &params, &mut SegmentBuffers::default()).unwrap();
         assert_partition(&s);
         // Uniform noise of 0..10 per band (chroma std ≈ 2.9) stays within the
         // thresholds: three regions.
@@ -995,7 +991,7 @@ mod tests {
             min_region_px: 4,
             min_block_px: 1,
         };
-        let s = segment(&image, &tight).unwrap();
+        let s = segment(&image, &tight, &mut SegmentBuffers::default()).unwrap();
         assert!(s.regions.len() > 3);
         assert_partition(&s);
         assert!(s.regions.iter().all(|r| r.pixels >= 4));
@@ -1010,7 +1006,7 @@ mod tests {
                 .num_threads(threads)
                 .build()
                 .unwrap()
-                .install(|| segment(&image, &params).unwrap())
+                .install(|| segment(&image, &params, &mut SegmentBuffers::default()).unwrap())
         };
         let (a, b) = (run(1), run(3));
         assert_eq!(a.labels, b.labels);
@@ -1025,7 +1021,7 @@ mod tests {
                 min_block_px,
                 ..Default::default()
             };
-            let s = segment(&image, &params).unwrap();
+            let s = segment(&image, &params, &mut SegmentBuffers::default()).unwrap();
             assert_partition(&s);
             assert!(s.regions.len() < s.leaves, "merging joined nothing");
             assert!(s.regions.iter().all(|r| r.pixels >= params.min_region_px));
@@ -1044,8 +1040,8 @@ mod tests {
             blocks(300, 200, 60),
             crate::testdata::soap_061(),
         ] {
-            let reused = segment_with(&image, &params, &mut buffers).unwrap();
-            let fresh = segment(&image, &params).unwrap();
+            let reused = segment(&image, &params, &mut buffers).unwrap();
+            let fresh = segment(&image, &params, &mut SegmentBuffers::default()).unwrap();
             assert_eq!(reused.labels, fresh.labels);
             assert_eq!(reused.regions, fresh.regions);
             assert_eq!(reused.leaves, fresh.leaves);
@@ -1118,7 +1114,7 @@ mod tests {
                 ..Default::default()
             },
         ] {
-            assert!(segment(&image, &params).is_err());
+            assert!(segment(&image, &params, &mut SegmentBuffers::default()).is_err());
         }
     }
 }

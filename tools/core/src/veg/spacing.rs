@@ -7,7 +7,7 @@
 //! learnt classifier, and crowns are placed on it at every candidate spacing.
 
 use super::classify::{Classifier, Label};
-use super::detect::{detect, Placement};
+use super::detect::{detect, DetectBuffers, Placement};
 use super::haar::region_signature;
 use super::samples::Sample;
 use super::segment::{SegmentSteps, Segmentation};
@@ -96,6 +96,7 @@ impl MarkedCrown {
             self.valid.as_deref(),
             placement,
             [0, 0],
+            &mut DetectBuffers::default(),
         )
         .iter()
         .filter(|o| self.sample.contains(o.x, o.y))
