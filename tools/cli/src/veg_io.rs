@@ -72,7 +72,7 @@ pub fn read_image(
     )?;
     // Stretch ranges from a view of the whole image decimated to at most
     // STRETCH_VIEW_CELLS (the whole image when smaller); then the pixels in
-    // strips of rows, so the f64 copy never holds more than a strip.
+    // strips of rows, so the f64 copies hold a strip per thread at most.
     let stretch = stretch_or_default(stretch, source.band_type == GdalDataType::UInt8);
     let ranges = match stretch {
         None => vec![(0.0, 255.0); bands.len()],

@@ -429,9 +429,6 @@ pub fn extract_tiled(
     // Learn: each sample from its tile, in marking order. Meanwhile, when
     // a thread is free, the first tiles no sample touches are segmented
     // ahead (one for each other thread): segmentation needs nothing learnt.
-    fn locked<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-        m.lock().unwrap_or_else(PoisonError::into_inner)
-    }
     let segmented: Vec<Mutex<Option<Segmentation>>> =
         tiles.iter().map(|_| Mutex::new(None)).collect();
     let learning_done = AtomicBool::new(false);
@@ -552,8 +549,6 @@ pub fn extract_tiled(
     // Classify and place, as many tiles at once as threads: each of
     // `at_once` workers takes the next tile as soon as its last is done, and
     // writes its core's labels (numbered within the tile) into the map.
-    // A worker that panics ends the scope with its panic, so a poisoned
-    // lock is never read afterwards.
     let next_tile = AtomicUsize::new(0);
     let labels_map = Mutex::new(vec![0u32; w * h]);
     let done: Mutex<Vec<(usize, Result<TileResult>)>> = Mutex::new(Vec::new());
@@ -697,6 +692,12 @@ pub fn extract_tiled(
     })
 }
 
+/// A lock's guard. A worker that panics ends its scope with its panic, so
+/// a poisoned lock is never read for its content afterwards.
+fn locked<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
 /// What learning from the samples gives.
 struct Learnt {
     classifier: Classifier,
@@ -835,7 +836,7 @@ fn analyse_tile(
         ..
     } = segmentation;
     let (regions, labels) = if whole {
-        *labels_map.lock().unwrap_or_else(PoisonError::into_inner) = context_labels;
+        *locked(labels_map) = context_labels;
         (context_regions, labels)
     } else {
         let core = keep_core(
@@ -908,14 +909,13 @@ fn keep_core(
     // A run of one label at a time. Centre sums are multiples of a half far
     // below 2⁵³ (exact in f64), so a run's sum added at once gives the sums
     // of pixel after pixel bit for bit.
-    let mut map = map.lock().unwrap_or_else(PoisonError::into_inner);
+    let mut map = locked(map);
     for (y, row) in (cy0 as u32..).zip(core_rows()) {
-        let out = &mut map[y as usize * map_width + cx0..][..side];
-        let (mut x, mut at) = (cx0 as u32, 0);
+        let map_row = &mut map[y as usize * map_width..][..map_width];
+        let mut x = cx0 as u32;
         for run in row.chunk_by(|a, b| a == b) {
             let (kept, length) = (index[run[0] as usize], run.len() as u32);
-            out[at..at + run.len()].fill(kept);
-            at += run.len();
+            map_row[x as usize..][..run.len()].fill(kept);
             let region = &mut kept_regions[kept as usize];
             region.pixels += length;
             region.bbox = [

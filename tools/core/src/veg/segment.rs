@@ -720,11 +720,13 @@ const BUCKET_BITS: u32 = 12;
 
 /// The edges of all `parts`, in part order, sorted stably by difference.
 /// One counting pass scatters them to buckets of their key's top
-/// [`BUCKET_BITS`] bits (keeping their order), then each bucket — a few
-/// hundred edges, in cache — is sorted stably by the whole key: the same
-/// order as a stable sort of the parts joined, with one pass over them
-/// instead of one per key byte (and no copy to join them first). The result
-/// goes in `sorted`, whatever it held.
+/// [`BUCKET_BITS`] bits (keeping their order), then each bucket is sorted
+/// stably by the whole key, in L2 cache (on real imagery the differences
+/// fill about 170 buckets of some 40 000 edges each: the top bits are the
+/// float's exponent and three mantissa bits): the same order as a stable
+/// sort of the parts joined, with two passes over them all in memory
+/// where one radix sort of the whole array makes four, and no copy to join
+/// them first. The result goes in `sorted`, whatever it held.
 fn sort_by_difference(parts: Vec<Vec<Edge>>, mut sorted: Vec<Edge>) -> Vec<Edge> {
     let bucket = |e: &Edge| (e.0 >> (32 - BUCKET_BITS)) as usize;
     let edges = || parts.iter().flatten();
