@@ -63,12 +63,11 @@ const LANES: usize = 8;
 struct Scratch {
     /// The signature's features standardised.
     standard: Vec<f32>,
-    /// Squared distance to every learnt signature (padded to [`LANES`]).
-    distances: Vec<f32>,
-    /// The smallest distances of each class, sorted.
-    smallest: Vec<f32>,
-    /// Learnt signatures per class.
-    found: Vec<usize>,
+    /// Per lane, the smallest distances its learnt signatures of one class
+    /// gave, sorted: `nearest_in_lanes[j][lane]` the `j`-th smallest.
+    nearest_in_lanes: Vec<[f32; LANES]>,
+    /// The smallest distances of one class over all lanes, sorted.
+    smallest: Vec<[f32; 1]>,
     /// Mean distance to each class's nearest signatures.
     nearest: Vec<f32>,
 }
@@ -83,14 +82,17 @@ pub struct Classifier {
     pub classes: Vec<String>,
     /// Per feature: 1 / spread over all learnt signatures.
     inverse_scale: Vec<f32>,
-    /// Class index of every learnt signature.
-    example_class: Vec<usize>,
-    /// The standardised learnt signatures, feature-major: feature `f` of
-    /// signature `e` at `f · stride + e`, `stride` the number of signatures
-    /// rounded up to [`LANES`] (padded with zeros), so one feature's values
-    /// for all signatures are contiguous and their distances accumulate in
-    /// lanes.
+    /// Learnt signatures of each class.
+    class_signatures: Vec<usize>,
+    /// The standardised learnt signatures, feature-major and grouped by
+    /// class: feature `f` of stored signature `e` at `f · stride + e`. Each
+    /// class's signatures take whole groups of [`LANES`] (the last padded
+    /// with infinite features, whose distance is infinite), so one
+    /// feature's values are contiguous and a group's distances accumulate
+    /// in lanes.
     example_features: Vec<f32>,
+    /// The groups of [`LANES`] stored signatures each class takes.
+    class_groups: Vec<std::ops::Range<usize>>,
     /// Smallest window side a signature is taken over (pixels).
     window_px: u32,
     /// How many nearest signatures of each class its distance averages:
@@ -140,27 +142,41 @@ impl Classifier {
                 1.0 / var.sqrt().max(1e-3)
             })
             .collect();
-        let example_class: Vec<usize> = raw.iter().map(|(c, _)| *c).collect();
-        let class_neighbours = (0..classes.len())
-            .map(|c| {
-                let signatures = example_class.iter().filter(|&&e| e == c).count();
-                (signatures / NEIGHBOURS_SHARE).clamp(1, neighbours.max(1))
-            })
+        let mut class_signatures = vec![0; classes.len()];
+        for (class, _) in &raw {
+            class_signatures[*class] += 1;
+        }
+        let class_neighbours = class_signatures
+            .iter()
+            .map(|&signatures| (signatures / NEIGHBOURS_SHARE).clamp(1, neighbours.max(1)))
             .collect();
-        let padding = raw.len().next_multiple_of(LANES) - raw.len();
+        // Stored order: class by class, each padded to whole groups.
+        let mut stored: Vec<Option<&[f32]>> = Vec::new();
+        let mut class_groups = Vec::with_capacity(classes.len());
+        for class in 0..classes.len() {
+            let first = stored.len() / LANES;
+            stored.extend(
+                raw.iter()
+                    .filter(|(c, _)| *c == class)
+                    .map(|(_, s)| Some(s.as_slice())),
+            );
+            stored.resize(stored.len().next_multiple_of(LANES), None);
+            class_groups.push(first..stored.len() / LANES);
+        }
         let example_features = (0..features)
             .flat_map(|f| {
                 let scale = inverse_scale[f];
-                raw.iter()
-                    .map(move |(_, s)| s[f] * scale)
-                    .chain(std::iter::repeat_n(0.0, padding))
+                stored
+                    .iter()
+                    .map(move |s| s.map_or(f32::INFINITY, |s| s[f] * scale))
             })
             .collect();
         Ok(Classifier {
             classes,
             inverse_scale,
-            example_class,
+            class_signatures,
             example_features,
+            class_groups,
             window_px,
             class_neighbours,
         })
@@ -168,11 +184,7 @@ impl Classifier {
 
     /// Number of learnt signatures per class.
     pub fn signatures_per_class(&self) -> Vec<usize> {
-        let mut counts = vec![0; self.classes.len()];
-        for &c in &self.example_class {
-            counts[c] += 1;
-        }
-        counts
+        self.class_signatures.clone()
     }
 
     /// Class of one signature: the class whose `neighbours` nearest learnt
@@ -192,53 +204,15 @@ impl Classifier {
 
     /// [`Classifier::classify`] with buffers reused between calls.
     fn classify_with(&self, signature: &[f32], scratch: &mut Scratch) -> Label {
-        let Scratch {
-            standard,
-            distances,
-            smallest,
-            found,
-            nearest,
-        } = scratch;
-        standard.clear();
-        standard.extend(
+        scratch.standard.clear();
+        scratch.standard.extend(
             signature
                 .iter()
                 .zip(&self.inverse_scale)
                 .map(|(v, s)| v * s),
         );
-        distances.clear();
-        distances.resize(self.example_class.len().next_multiple_of(LANES), 0.0);
-        self.squared_distances(standard, distances);
-        // The `k` smallest distances per class, kept sorted by insertion.
-        let k = self.class_neighbours.iter().copied().max().unwrap_or(1);
-        smallest.clear();
-        smallest.resize(self.classes.len() * k, f32::INFINITY);
-        found.clear();
-        found.resize(self.classes.len(), 0);
-        for (&class, &d) in self.example_class.iter().zip(distances.iter()) {
-            let list = &mut smallest[class * k..(class + 1) * k];
-            if d < list[k - 1] {
-                // Shift the larger ones up a place (the last drops out) and
-                // put `d` after the last that is not larger, as a few moves
-                // (the list is a handful long: no call to copy memory).
-                let mut at = k - 1;
-                while at > 0 && list[at - 1] > d {
-                    list[at] = list[at - 1];
-                    at -= 1;
-                }
-                list[at] = d;
-            }
-            found[class] += 1;
-        }
-        nearest.clear();
-        nearest.extend((0..self.classes.len()).map(|c| {
-            let n = found[c].min(self.class_neighbours[c]).max(1);
-            smallest[c * k..c * k + n]
-                .iter()
-                .map(|d| d.sqrt())
-                .sum::<f32>()
-                / n as f32
-        }));
+        self.class_distances(scratch);
+        let nearest = &scratch.nearest;
         let (best, d1) = nearest
             .iter()
             .enumerate()
@@ -260,19 +234,21 @@ impl Classifier {
         Label { class: best, score }
     }
 
-    /// Squared distances from the standardised features `standard` to every
-    /// learnt signature (`distances` holds one per padded signature).
-    fn squared_distances(&self, standard: &[f32], distances: &mut [f32]) {
+    /// Each class's distance from the standardised features in
+    /// `scratch.standard`, into `scratch.nearest`: the mean of the square
+    /// roots of its `class_neighbours` smallest squared distances, in
+    /// ascending order.
+    fn class_distances(&self, scratch: &mut Scratch) {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: the machine has AVX2 (checked just above).
-            unsafe { self.squared_distances_avx2(standard, distances) };
+            unsafe { self.class_distances_avx2(scratch) };
             return;
         }
-        self.squared_distances_in_lanes(standard, distances);
+        self.class_distances_in_lanes(scratch);
     }
 
-    /// [`Classifier::squared_distances_in_lanes`] compiled for AVX2: a
+    /// [`Classifier::class_distances_in_lanes`] compiled for AVX2: a
     /// group's eight sums in one register (the same operations, each
     /// rounded as before: no fused multiply-add).
     ///
@@ -280,24 +256,47 @@ impl Classifier {
     /// The machine must have AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn squared_distances_avx2(&self, standard: &[f32], distances: &mut [f32]) {
-        self.squared_distances_in_lanes(standard, distances);
+    unsafe fn class_distances_avx2(&self, scratch: &mut Scratch) {
+        self.class_distances_in_lanes(scratch);
     }
 
-    /// Squared distances to [`LANES`] learnt signatures at a time, summed
-    /// in registers in feature order.
+    /// [`Classifier::class_distances`] with [`LANES`] learnt signatures at
+    /// a time: their squared distances summed in registers in feature
+    /// order, each lane keeping its own smallest few, and the class's
+    /// smallest taken from the lanes' at the end (the same values, hence
+    /// the same sums, as one sorted list over all signatures).
     #[inline(always)]
-    fn squared_distances_in_lanes(&self, standard: &[f32], distances: &mut [f32]) {
-        let stride = distances.len();
-        for (group, out) in distances.chunks_exact_mut(LANES).enumerate() {
-            let mut sum = [0.0f32; LANES];
-            for (column, &value) in self.example_features.chunks_exact(stride).zip(standard) {
-                let lanes = &column[group * LANES..][..LANES];
-                for (acc, &e) in sum.iter_mut().zip(lanes) {
-                    *acc += (e - value) * (e - value);
+    fn class_distances_in_lanes(&self, scratch: &mut Scratch) {
+        let Scratch {
+            standard,
+            nearest_in_lanes,
+            smallest,
+            nearest,
+        } = scratch;
+        let stride = self.class_groups.last().map_or(0, |g| g.end * LANES);
+        nearest.clear();
+        for (groups, &k) in self.class_groups.iter().zip(&self.class_neighbours) {
+            nearest_in_lanes.clear();
+            nearest_in_lanes.resize(k, [f32::INFINITY; LANES]);
+            for group in groups.clone() {
+                let mut sum = [0.0f32; LANES];
+                for (column, &value) in self.example_features.chunks_exact(stride).zip(&*standard) {
+                    let lanes = &column[group * LANES..][..LANES];
+                    for (acc, &e) in sum.iter_mut().zip(lanes) {
+                        *acc += (e - value) * (e - value);
+                    }
+                }
+                keep_smallest(nearest_in_lanes, sum);
+            }
+            smallest.clear();
+            smallest.resize(k, [f32::INFINITY]);
+            for lane in 0..LANES {
+                for row in nearest_in_lanes.iter() {
+                    keep_smallest(smallest, [row[lane]]);
                 }
             }
-            out.copy_from_slice(&sum);
+            let total: f32 = smallest.iter().map(|[d]| d.sqrt()).sum();
+            nearest.push(total / k as f32);
         }
     }
 
@@ -313,17 +312,35 @@ impl Classifier {
     }
 }
 
+/// Put `value` into `sorted`, lane by lane: each lane of `sorted` holds
+/// the smallest values it was given, ascending; a value no smaller than
+/// the lane's last (or NaN) leaves it as it was. Compare-and-swap down the
+/// list, without branches, so the lanes go side by side.
+#[inline(always)]
+fn keep_smallest<const L: usize>(sorted: &mut [[f32; L]], value: [f32; L]) {
+    let mut carry = value;
+    for slot in sorted {
+        for (kept, carried) in slot.iter_mut().zip(carry.iter_mut()) {
+            let smaller = *carried < *kept;
+            let (low, high) = if smaller {
+                (*carried, *kept)
+            } else {
+                (*kept, *carried)
+            };
+            *kept = low;
+            *carried = high;
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// The AVX2 build of the distances rounds as the plain one, bit for bit.
-    #[cfg(target_arch = "x86_64")]
+    /// The class distances in lanes, plain and compiled for AVX2, are bit
+    /// for bit those of one sorted list of every signature's distance.
     #[test]
-    fn distances_compiled_for_avx2_are_the_plain_ones() {
-        if !std::is_x86_feature_detected!("avx2") {
-            return;
-        }
+    fn class_distances_in_lanes_are_those_of_one_sorted_list() {
         let mut state = 0x9e37_79b9u32;
         let mut next = || {
             state ^= state << 13;
@@ -331,24 +348,60 @@ mod tests {
             state ^= state << 5;
             (state % 2000) as f32 / 7.0 - 100.0
         };
-        let marked: Vec<(String, Vec<f32>)> = (0..21)
+        // Classes of 29, 11 and 2 signatures, interleaved as marked: the
+        // groups are padded, the neighbours 3, 3 and 1.
+        let class_of = |k: usize| match k {
+            k if k < 22 => k % 2,
+            k if k < 40 => 0,
+            _ => 2,
+        };
+        let marked: Vec<(String, Vec<f32>)> = (0..42)
             .map(|k| {
                 (
-                    format!("class {}", k % 3),
-                    (0..48).map(|_| next()).collect(),
+                    format!("class {}", class_of(k)),
+                    (0..39).map(|_| next()).collect(),
                 )
             })
             .collect();
-        let classifier = Classifier::learn(marked, 8, 3).unwrap();
-        let standard: Vec<f32> = (0..48).map(|_| next()).collect();
-        let mut plain = vec![0.0; 24];
-        let mut avx2 = vec![0.0; 24];
-        classifier.squared_distances_in_lanes(&standard, &mut plain);
-        // SAFETY: the machine has AVX2 (checked above).
-        unsafe { classifier.squared_distances_avx2(&standard, &mut avx2) };
+        let classifier = Classifier::learn(marked.clone(), 8, 3).unwrap();
+        assert_eq!(classifier.signatures_per_class(), [29, 11, 2]);
+        assert_eq!(classifier.class_neighbours, [3, 3, 1]);
+        let mut scratch = Scratch {
+            standard: (0..39).map(|_| next()).collect(),
+            ..Scratch::default()
+        };
+        let expected: Vec<f32> = (0..3)
+            .map(|class| {
+                let name = format!("class {class}");
+                let mut distances: Vec<f32> = marked
+                    .iter()
+                    .filter(|(c, _)| *c == name)
+                    .map(|(_, s)| {
+                        s.iter()
+                            .zip(&classifier.inverse_scale)
+                            .zip(&scratch.standard)
+                            .fold(0.0, |sum, ((v, scale), value)| {
+                                let e = v * scale;
+                                sum + (e - value) * (e - value)
+                            })
+                    })
+                    .collect();
+                distances.sort_by(f32::total_cmp);
+                let k = classifier.class_neighbours[class];
+                distances[..k].iter().map(|d| d.sqrt()).sum::<f32>() / k as f32
+            })
+            .collect();
         let bits = |v: &[f32]| v.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
-        assert_eq!(bits(&plain), bits(&avx2));
-        assert!(plain[..21].iter().all(|&d| d > 0.0));
+        classifier.class_distances_in_lanes(&mut scratch);
+        assert_eq!(bits(&scratch.nearest), bits(&expected));
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            scratch.nearest.clear();
+            // SAFETY: the machine has AVX2 (checked just above).
+            unsafe { classifier.class_distances_avx2(&mut scratch) };
+            assert_eq!(bits(&scratch.nearest), bits(&expected));
+        }
+        assert!(expected.iter().all(|d| d.is_finite() && *d > 0.0));
     }
 
     /// A class marked by two signatures (its canopy and a clearing in the
