@@ -473,8 +473,9 @@ pub fn detect(
         &bundle.manifest.crs.wkt,
     )?;
     let samples: Vec<Sample> = relevo_core::veg::samples::parse_csv(samples_csv, w, h)?;
-    let extraction = pipeline::extract_watched(&image, &samples, options, watch)?;
-    let overlay = pipeline::overlay(&image, &extraction, &options.negative_class);
+    let extraction =
+        pipeline::extract_watched(&image, &samples, options, pipeline::RegionMap::Keep, watch)?;
+    let overlay = pipeline::overlay(&image, &extraction, &options.negative_class)?;
     Ok(Detection {
         objects: extraction.objects,
         overlay,

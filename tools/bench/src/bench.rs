@@ -381,7 +381,9 @@ fn mesh_bound(
 /// images up to `max_side`² beside scikit-image's felzenszwalb (when Python
 /// with scikit-image is installed).
 pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: bool) -> Result<()> {
-    use relevo_core::veg::pipeline::{extract, VegImage, VegOptions};
+    use relevo_core::veg::pipeline::{
+        extract, extract_watched, RegionMap, VegImage, VegOptions, Watch,
+    };
     use relevo_core::veg::{baseline, eval};
 
     let options = VegOptions::default();
@@ -432,6 +434,7 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
     let scratch = tempfile_dir()?;
     let script = repo.join("tools/py/felzenszwalb_bench.py");
     let relevo = relevo_binary()?;
+    let watch = Watch::default();
     let mut sides = vec![0usize];
     sides.extend(
         [2500usize, 5000, 10000]
@@ -458,15 +461,16 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
         };
         let mut runs_done = Vec::new();
         for _ in 0..runs {
+            // As `veg detect` without a labels raster: no region map.
             let start = Instant::now();
-            let r = extract(&veg_image, &samples, &options)?;
+            let r = extract_watched(&veg_image, &samples, &options, RegionMap::Skip, &watch)?;
             runs_done.push((start.elapsed().as_secs_f64() * 1e3, r));
         }
         runs_done.sort_by(|a, b| a.0.total_cmp(&b.0));
         let (total_ms, tiled) = runs_done.swap_remove(runs_done.len() / 2);
         drop(runs_done);
         let report = &tiled.report;
-        let steps = tiled.segmentation.steps;
+        let steps = tiled.steps;
         let points = |e: &relevo_core::veg::pipeline::Extraction| -> Vec<(f64, f64, f32)> {
             e.objects.iter().map(|o| (o.x, o.y, o.score)).collect()
         };

@@ -361,14 +361,14 @@ fn outer_rings(geometry: &Geometry, out: &mut Vec<(Vec<(f64, f64)>, bool)>) {
 /// without image data (a no-data collar) are no-data (0) in both bands,
 /// belonging to no region and no class.
 pub fn write_labels(path: &Path, image: &VegImage, extraction: &Extraction) -> Result<()> {
-    let seg = &extraction.segmentation;
+    let region_map = extraction.pixel_regions()?;
     let valid = |i: usize| image.valid.as_ref().is_none_or(|v| v[i]);
     let regions =
-        seg.labels
+        region_map
             .iter()
             .enumerate()
             .map(|(i, &r)| if valid(i) { r as f64 + 1.0 } else { f64::NAN });
-    let classes = seg.labels.iter().enumerate().map(|(i, &r)| {
+    let classes = region_map.iter().enumerate().map(|(i, &r)| {
         if valid(i) {
             extraction.labels[r as usize].class as f64 + 1.0
         } else {
@@ -376,12 +376,12 @@ pub fn write_labels(path: &Path, image: &VegImage, extraction: &Extraction) -> R
         }
     });
     let data: Vec<f64> = regions.chain(classes).collect();
-    let raster = Raster::from_data(seg.width, seg.height, 2, data);
+    let raster = Raster::from_data(image.image.width, image.image.height, 2, data);
     let grid = GridSpec {
         crs_wkt: image.crs_wkt.clone(),
         geotransform: image.geotransform.unwrap_or(GeoTransform::IDENTITY),
-        width: seg.width,
-        height: seg.height,
+        width: image.image.width,
+        height: image.image.height,
     };
     gdalio::write_geotiff(path, &raster, &grid, GdalDataType::UInt32, Some(0.0))
 }

@@ -239,7 +239,14 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
         .map(|path| veg_io::read_land_cover(path, &a.land_cover_field, &image))
         .transpose()?;
     let options = a.options();
-    let extraction = extract_with_progress(&image, &samples, &options)
+    // Only the labels raster, the overlay and the land-cover figures read
+    // the region of every pixel.
+    let region_map = if a.labels.is_some() || a.overlay.is_some() || land_cover_labels.is_some() {
+        pipeline::RegionMap::Keep
+    } else {
+        pipeline::RegionMap::Skip
+    };
+    let extraction = extract_with_progress(&image, &samples, &options, region_map)
         .with_context(|| format!("{}", a.image.display()))?;
     output::write_atomic(&a.out, db::to_csv(&extraction.objects).as_bytes())?;
     if let Some(path) = &a.gpkg {
@@ -249,7 +256,7 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
         veg_io::write_labels(path, &image, &extraction)?;
     }
     if let Some(path) = &a.overlay {
-        let rgba = pipeline::overlay(&image, &extraction, &options.negative_class);
+        let rgba = pipeline::overlay(&image, &extraction, &options.negative_class)?;
         let png = encode_rgba(&rgba, image.image.width, image.image.height)?;
         output::write_atomic(path, &png)?;
     }
@@ -258,14 +265,15 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
     let land_cover = match &land_cover_labels {
         Some(labels) => {
             let names: Vec<(&str, bool)> = class_kinds(&extraction).collect();
-            let seg = &extraction.segmentation;
+            let region_map = extraction.pixel_regions()?;
+            let (w, h) = (image.image.width, image.image.height);
             let valid = |i: usize| image.valid.as_ref().is_none_or(|v| v[i]);
-            let ours = eval::land_cover(labels, seg.width, seg.height, |i| {
-                valid(i).then(|| names[extraction.labels[seg.labels[i] as usize].class])
+            let ours = eval::land_cover(labels, w, h, |i| {
+                valid(i).then(|| names[extraction.labels[region_map[i] as usize].class])
             });
             let baseline = (image.image.bands >= 3).then(|| {
                 let green = baseline::excess_green_mask(&image.image);
-                eval::land_cover(labels, seg.width, seg.height, |i| {
+                eval::land_cover(labels, w, h, |i| {
                     valid(i).then_some(if green[i] {
                         ("excess green", true)
                     } else {
@@ -348,11 +356,13 @@ fn extract_with_progress(
     image: &pipeline::VegImage,
     samples: &[samples::Sample],
     options: &VegOptions,
+    region_map: pipeline::RegionMap,
 ) -> relevo_core::Result<pipeline::Extraction> {
     let watch = pipeline::Watch::default();
     let bar = crate::progress::bar(1, "vegetation");
     let result = std::thread::scope(|scope| {
-        let worker = scope.spawn(|| pipeline::extract_watched(image, samples, options, &watch));
+        let worker =
+            scope.spawn(|| pipeline::extract_watched(image, samples, options, region_map, &watch));
         while !worker.is_finished() {
             let (done, all) = watch.progress();
             bar.set_length(all.max(1) as u64);

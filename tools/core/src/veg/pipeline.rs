@@ -258,11 +258,36 @@ impl VegImage {
 
 /// Everything one extraction produced.
 pub struct Extraction {
-    pub segmentation: Segmentation,
+    /// Every region of the image, numbered tile by tile in tile order.
+    pub regions: Vec<Region>,
+    /// The region index of every pixel, row-major (`report.width` wide),
+    /// when the extraction was asked to keep it ([`RegionMap::Keep`]).
+    pub region_map: Option<Vec<u32>>,
+    /// Where segmentation's time went, summed over tiles.
+    pub steps: SegmentSteps,
     pub classifier: Classifier,
+    /// The class of every region.
     pub labels: Vec<Label>,
     pub objects: Vec<VegObject>,
     pub report: Report,
+}
+
+impl Extraction {
+    /// [`Extraction::region_map`], or an error saying it was not kept.
+    pub fn pixel_regions(&self) -> Result<&[u32]> {
+        self.region_map.as_deref().ok_or_else(|| {
+            Error::Input("the vegetation extraction kept no region map (RegionMap::Skip)".into())
+        })
+    }
+}
+
+/// Whether an extraction keeps the region of every pixel, for what reads
+/// the image pixel by pixel afterwards (a labels raster, an overlay, a
+/// per-pixel evaluation): 4 bytes a pixel, written as tiles finish.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RegionMap {
+    Keep,
+    Skip,
 }
 
 /// What `veg detect --json` prints.
@@ -347,9 +372,10 @@ impl Watch {
     }
 }
 
-/// Segment, learn from the samples, classify every region and place objects.
+/// Segment, learn from the samples, classify every region and place
+/// objects, keeping the region map.
 pub fn extract(image: &VegImage, samples: &[Sample], options: &VegOptions) -> Result<Extraction> {
-    extract_watched(image, samples, options, &Watch::default())
+    extract_watched(image, samples, options, RegionMap::Keep, &Watch::default())
 }
 
 /// [`extract`], reporting each step to `watch` and stopping when it is
@@ -364,10 +390,12 @@ pub fn extract_watched(
     image: &VegImage,
     samples: &[Sample],
     options: &VegOptions,
+    region_map: RegionMap,
     watch: &Watch,
 ) -> Result<Extraction> {
     let placement = options.placement(image.pixel_m)?;
-    extract_tiled(image, samples, options, options.tiling(placement)?, watch)
+    let tiling = options.tiling(placement)?;
+    extract_tiled(image, samples, options, tiling, region_map, watch)
 }
 
 /// [`extract_watched`] with a given tiling.
@@ -376,6 +404,7 @@ pub fn extract_tiled(
     samples: &[Sample],
     options: &VegOptions,
     tiling: Tiling,
+    region_map: RegionMap,
     watch: &Watch,
 ) -> Result<Extraction> {
     let placement = options.placement(image.pixel_m)?;
@@ -550,7 +579,7 @@ pub fn extract_tiled(
     // `at_once` workers takes the next tile as soon as its last is done, and
     // writes its core's labels (numbered within the tile) into the map.
     let next_tile = AtomicUsize::new(0);
-    let labels_map = Mutex::new(vec![0u32; w * h]);
+    let labels_map = (region_map == RegionMap::Keep).then(|| Mutex::new(vec![0u32; w * h]));
     let done: Mutex<Vec<(usize, Result<TileResult>)>> = Mutex::new(Vec::new());
     rayon::scope(|scope| {
         for _ in 0..at_once {
@@ -565,7 +594,7 @@ pub fn extract_tiled(
                         tile,
                         segmented,
                         &mut buffers,
-                        &labels_map,
+                        labels_map.as_ref(),
                         &params,
                         &classifier,
                         &vegetation,
@@ -582,9 +611,8 @@ pub fn extract_tiled(
         }
     });
     let mut done = done.into_inner().unwrap_or_else(PoisonError::into_inner);
-    let mut labels_map = labels_map
-        .into_inner()
-        .unwrap_or_else(PoisonError::into_inner);
+    let mut labels_map =
+        labels_map.map(|map| map.into_inner().unwrap_or_else(PoisonError::into_inner));
     // Number the regions in tile order. Tiles are missing only after a
     // tile's error, which the loop returns.
     done.sort_by_key(|(t, _)| *t);
@@ -607,25 +635,19 @@ pub fn extract_tiled(
         classify_ms += r.classify_ms;
         detect_ms += r.detect_ms;
     }
-    for (tile, offset) in tiles.iter().zip(offsets) {
-        let [x0, y0, x1, y1] = tile.core;
-        labels_map[y0 * w..y1 * w]
-            .par_chunks_mut(w)
-            .for_each(|row| row[x0..x1].iter_mut().for_each(|l| *l += offset));
+    if let Some(map) = &mut labels_map {
+        for (tile, offset) in tiles.iter().zip(offsets) {
+            let [x0, y0, x1, y1] = tile.core;
+            map[y0 * w..y1 * w]
+                .par_chunks_mut(w)
+                .for_each(|row| row[x0..x1].iter_mut().for_each(|l| *l += offset));
+        }
     }
     found.sort_by(|a, b| a.y.total_cmp(&b.y).then(a.x.total_cmp(&b.x)));
-    let segmentation = Segmentation {
-        width: w,
-        height: h,
-        labels: labels_map,
-        regions,
-        leaves,
-        steps,
-    };
     tracing::info!(
         tiles = tiles.len(),
-        leaves = segmentation.leaves,
-        regions = segmentation.regions.len(),
+        leaves,
+        regions = regions.len(),
         ms = wall.elapsed().as_secs_f64() * 1e3,
         "vegetation extraction"
     );
@@ -653,7 +675,7 @@ pub fn extract_tiled(
             let of_class = || {
                 labels
                     .iter()
-                    .zip(&segmentation.regions)
+                    .zip(&regions)
                     .filter(move |(l, _)| l.class == c)
             };
             ClassReport {
@@ -674,8 +696,8 @@ pub fn extract_tiled(
         threshold_gain,
         placement,
         tiles: tiles.len(),
-        leaves: segmentation.leaves,
-        regions: segmentation.regions.len(),
+        leaves,
+        regions: regions.len(),
         classes,
         objects: objects.len(),
         segment_ms: segment_ms + learn_segment_ms,
@@ -684,7 +706,9 @@ pub fn extract_tiled(
         total_ms: wall.elapsed().as_secs_f64() * 1e3,
     };
     Ok(Extraction {
-        segmentation,
+        regions,
+        region_map: labels_map,
+        steps,
         classifier,
         labels,
         objects,
@@ -789,7 +813,7 @@ fn analyse_tile(
     tile: &Tile,
     segmented: Option<Segmentation>,
     buffers: &mut TileBuffers,
-    labels_map: &Mutex<Vec<u32>>,
+    labels_map: Option<&Mutex<Vec<u32>>>,
     params: &SegmentParams,
     classifier: &Classifier,
     vegetation: &[bool],
@@ -836,7 +860,9 @@ fn analyse_tile(
         ..
     } = segmentation;
     let (regions, labels) = if whole {
-        *locked(labels_map) = context_labels;
+        if let Some(map) = labels_map {
+            *locked(map) = context_labels;
+        }
         (context_regions, labels)
     } else {
         let core = keep_core(
@@ -868,14 +894,14 @@ fn analyse_tile(
 /// index order, with their classes), each described by its pixels in the
 /// core (colour statistics stay the context's), and its labels renumbered
 /// among them, written into the image's `map` (`map_width` wide) where the
-/// core lies.
+/// core lies, when there is one.
 fn keep_core(
     tile: &Tile,
     context_labels: &[u32],
     context_width: usize,
     context_regions: Vec<Region>,
     labels: &[Label],
-    map: &Mutex<Vec<u32>>,
+    map: Option<&Mutex<Vec<u32>>>,
     map_width: usize,
 ) -> (Vec<Region>, Vec<Label>) {
     let [x0, y0, ..] = tile.context;
@@ -909,13 +935,17 @@ fn keep_core(
     // A run of one label at a time. Centre sums are multiples of a half far
     // below 2⁵³ (exact in f64), so a run's sum added at once gives the sums
     // of pixel after pixel bit for bit.
-    let mut map = locked(map);
+    let mut map = map.map(locked);
     for (y, row) in (cy0 as u32..).zip(core_rows()) {
-        let map_row = &mut map[y as usize * map_width..][..map_width];
+        let mut map_row = map
+            .as_deref_mut()
+            .map(|m| &mut m[y as usize * map_width..][..map_width]);
         let mut x = cx0 as u32;
         for run in row.chunk_by(|a, b| a == b) {
             let (kept, length) = (index[run[0] as usize], run.len() as u32);
-            map_row[x as usize..][..run.len()].fill(kept);
+            if let Some(map_row) = map_row.as_deref_mut() {
+                map_row[x as usize..][..run.len()].fill(kept);
+            }
             let region = &mut kept_regions[kept as usize];
             region.pixels += length;
             region.bbox = [
@@ -942,7 +972,7 @@ fn keep_core(
 /// region borders darkened, and each object as a red ring of its size (a
 /// single red pixel when smaller than 3 pixels, as in fill mode on coarse
 /// imagery).
-pub fn overlay(image: &VegImage, extraction: &Extraction, negative: &str) -> Vec<u8> {
+pub fn overlay(image: &VegImage, extraction: &Extraction, negative: &str) -> Result<Vec<u8>> {
     const TINTS: [[u8; 3]; 6] = [
         [255, 220, 0],
         [255, 60, 200],
@@ -952,7 +982,7 @@ pub fn overlay(image: &VegImage, extraction: &Extraction, negative: &str) -> Vec
         [200, 120, 255],
     ];
     let img = &image.image;
-    let seg = &extraction.segmentation;
+    let region_map = extraction.pixel_regions()?;
     let (w, h) = (img.width, img.height);
     let mut rgba = vec![255u8; w * h * 4];
     let tint_of = |class: usize| {
@@ -963,14 +993,14 @@ pub fn overlay(image: &VegImage, extraction: &Extraction, negative: &str) -> Vec
             let i = y * w + x;
             let px = &img.pixels[i * img.bands..(i + 1) * img.bands];
             let mut rgb = [px[0], px[1.min(img.bands - 1)], px[2.min(img.bands - 1)]];
-            let region = seg.labels[i];
+            let region = region_map[i];
             if let Some(t) = tint_of(extraction.labels[region as usize].class) {
                 for c in 0..3 {
                     rgb[c] = ((rgb[c] as u16 * 3 + t[c] as u16) / 4) as u8;
                 }
             }
-            let border = (x + 1 < w && seg.labels[i + 1] != region)
-                || (y + 1 < h && seg.labels[i + w] != region);
+            let border = (x + 1 < w && region_map[i + 1] != region)
+                || (y + 1 < h && region_map[i + w] != region);
             if border {
                 rgb = rgb.map(|v| v / 2);
             }
@@ -1000,7 +1030,7 @@ pub fn overlay(image: &VegImage, extraction: &Extraction, negative: &str) -> Vec
             }
         }
     }
-    rgba
+    Ok(rgba)
 }
 
 #[cfg(test)]
@@ -1032,16 +1062,16 @@ mod tests {
         let f1 = soap_061_f1(&found);
         assert!(f1 >= 0.60, "F1 {f1}");
         // Every object sits on a region of a vegetation class, inside the image.
-        let seg = &found.segmentation;
+        let region_map = found.pixel_regions().unwrap();
         for o in &found.objects {
             let (x, y) = (o.x as usize, o.y as usize);
             assert!(x < 400 && y < 400);
-            let class = found.labels[seg.labels[y * 400 + x] as usize].class;
+            let class = found.labels[region_map[y * 400 + x] as usize].class;
             assert_ne!(found.classifier.classes[class], options.negative_class);
         }
         assert_eq!(found.report.objects, found.objects.len());
         // The overlay is the image's size and marks the objects in red.
-        let rgba = overlay(&image, &found, &options.negative_class);
+        let rgba = overlay(&image, &found, &options.negative_class).unwrap();
         assert_eq!(rgba.len(), 400 * 400 * 4);
         assert!(rgba.chunks_exact(4).any(|p| p[..3] == [255, 0, 0]));
     }
@@ -1110,18 +1140,18 @@ mod tests {
         assert_eq!(whole.report.tiles, 1);
         assert_eq!(tiled.report.tiles, 4);
         // Every pixel belongs to one region, and regions count their pixels.
-        let seg = &tiled.segmentation;
-        assert_eq!(seg.labels.len(), 400 * 400);
-        let mut pixels = vec![0u32; seg.regions.len()];
-        for &l in &seg.labels {
+        let region_map = tiled.pixel_regions().unwrap();
+        assert_eq!(region_map.len(), 400 * 400);
+        let mut pixels = vec![0u32; tiled.regions.len()];
+        for &l in region_map {
             pixels[l as usize] += 1;
         }
-        assert!(seg
+        assert!(tiled
             .regions
             .iter()
             .zip(&pixels)
             .all(|(r, &n)| r.pixels == n && n > 0));
-        assert_eq!(tiled.labels.len(), seg.regions.len());
+        assert_eq!(tiled.labels.len(), tiled.regions.len());
         // The crowns: found again, none twice.
         let near =
             |a: &VegObject, b: &VegObject| (a.x - b.x).abs() <= 1.0 && (a.y - b.y).abs() <= 1.0;
@@ -1151,6 +1181,30 @@ mod tests {
         );
     }
 
+    /// Without the region map, an extraction finds the same regions,
+    /// classes and objects, tiled or whole.
+    #[test]
+    fn skipping_the_region_map_changes_nothing_else() {
+        let (image, samples) = testdata::soap_061_marked();
+        for tile_px in [MIN_TILE_PX, 400] {
+            let options = VegOptions {
+                tile_px,
+                ..VegOptions::default()
+            };
+            let watch = Watch::default();
+            let kept = extract(&image, &samples, &options).unwrap();
+            let skipped =
+                extract_watched(&image, &samples, &options, RegionMap::Skip, &watch).unwrap();
+            assert!(kept.region_map.is_some() && skipped.region_map.is_none());
+            assert!(skipped.pixel_regions().is_err());
+            assert!(overlay(&image, &skipped, &options.negative_class).is_err());
+            assert_eq!(kept.regions, skipped.regions);
+            assert_eq!(kept.labels, skipped.labels);
+            assert_eq!(kept.objects, skipped.objects);
+            assert!(!kept.objects.is_empty());
+        }
+    }
+
     /// Tiles go to workers as each finishes, so they finish in any order:
     /// the regions, labels and objects must not depend on it.
     #[test]
@@ -1171,8 +1225,8 @@ mod tests {
         assert_eq!(one.report.tiles, 4);
         for threads in [2, 3, 5] {
             let many = run(threads);
-            assert_eq!(one.segmentation.labels, many.segmentation.labels);
-            assert_eq!(one.segmentation.regions, many.segmentation.regions);
+            assert_eq!(one.region_map, many.region_map);
+            assert_eq!(one.regions, many.regions);
             assert_eq!(one.labels, many.labels);
             assert_eq!(one.objects, many.objects);
         }
@@ -1190,7 +1244,14 @@ mod tests {
     fn a_watch_follows_the_stages_and_cancels_at_the_next() {
         let (image, samples) = testdata::soap_061_marked();
         let watch = Watch::default();
-        let whole = extract_watched(&image, &samples, &VegOptions::default(), &watch).unwrap();
+        let whole = extract_watched(
+            &image,
+            &samples,
+            &VegOptions::default(),
+            RegionMap::Keep,
+            &watch,
+        )
+        .unwrap();
         assert_eq!(watch.fraction(), 1.0);
         assert_eq!(
             whole.objects,
@@ -1200,7 +1261,13 @@ mod tests {
         );
         let cancelled = Watch::default();
         cancelled.cancel();
-        let Err(e) = extract_watched(&image, &samples, &VegOptions::default(), &cancelled) else {
+        let Err(e) = extract_watched(
+            &image,
+            &samples,
+            &VegOptions::default(),
+            RegionMap::Keep,
+            &cancelled,
+        ) else {
             panic!("a cancelled extraction finished");
         };
         assert!(e.to_string().contains("cancelled"), "{e}");
