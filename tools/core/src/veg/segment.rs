@@ -125,21 +125,40 @@ impl SegmentSteps {
     }
 }
 
-/// Count, sums and sums of squares of the opponent channels of some pixels.
-#[derive(Debug, Clone, Copy, Default)]
-struct Moments {
+/// Count, sums and sums of squares of the `N` opponent channels of some
+/// pixels: as many channels as the image has bands, so that the arrays of
+/// them (a leaf's, a region's) hold nothing unused — 56 bytes for RGB.
+#[derive(Debug, Clone, Copy)]
+#[repr(C)]
+struct Moments<const N: usize> {
     n: f64,
-    sum: [f64; MAX_BANDS],
-    sumsq: [f64; MAX_BANDS],
+    sum: [f64; N],
+    sumsq: [f64; N],
 }
 
-impl Moments {
-    fn pixel(colour: [f32; MAX_BANDS]) -> Moments {
+impl<const N: usize> Default for Moments<N> {
+    fn default() -> Self {
+        Moments {
+            n: 0.0,
+            sum: [0.0; N],
+            sumsq: [0.0; N],
+        }
+    }
+}
+
+// SAFETY: `Moments` is `repr(C)` and all `f64`: no padding, and any bits
+// are some value (zeros are the empty moments).
+unsafe impl<const N: usize> bytemuck::Zeroable for Moments<N> {}
+// SAFETY: as above; `Copy` and `'static`.
+unsafe impl<const N: usize> bytemuck::Pod for Moments<N> {}
+
+impl<const N: usize> Moments<N> {
+    fn pixel(colour: [f32; MAX_BANDS]) -> Moments<N> {
         let mut m = Moments {
             n: 1.0,
             ..Default::default()
         };
-        for (c, &v) in colour.iter().enumerate() {
+        for (c, &v) in colour[..N].iter().enumerate() {
             let v = v as f64;
             m.sum[c] = v;
             m.sumsq[c] = v * v;
@@ -147,15 +166,15 @@ impl Moments {
         m
     }
 
-    fn add(&mut self, other: &Moments) {
+    fn add(&mut self, other: &Moments<N>) {
         self.n += other.n;
-        for c in 0..MAX_BANDS {
+        for c in 0..N {
             self.sum[c] += other.sum[c];
             self.sumsq[c] += other.sumsq[c];
         }
     }
 
-    fn joined(mut self, other: &Moments) -> Moments {
+    fn joined(mut self, other: &Moments<N>) -> Moments<N> {
         self.add(other);
         self
     }
@@ -169,9 +188,9 @@ impl Moments {
     }
 }
 
-/// The homogeneity predicate: variance per channel within its limit.
+/// The homogeneity predicate: variance per channel within its limit
+/// (brightness, then chroma for every other channel).
 struct Predicate {
-    channels: usize,
     /// Pyramid level of the smallest block (log2 of its side).
     min_level: usize,
     limit_variance: [f64; MAX_BANDS],
@@ -180,10 +199,10 @@ struct Predicate {
 }
 
 impl Predicate {
-    fn new(params: &SegmentParams, channels: usize) -> Predicate {
+    fn new(params: &SegmentParams) -> Predicate {
         let mut limit_variance = [0.0; MAX_BANDS];
         let mut inverse_std = [0.0; MAX_BANDS];
-        for c in 0..channels {
+        for c in 0..MAX_BANDS {
             let limit = if c == 0 {
                 params.brightness_std
             } else {
@@ -193,20 +212,19 @@ impl Predicate {
             inverse_std[c] = 1.0 / limit.max(0.5);
         }
         Predicate {
-            channels,
             min_level: params.min_block_px.trailing_zeros() as usize,
             limit_variance,
             inverse_std,
         }
     }
 
-    fn homogeneous(&self, m: &Moments) -> bool {
-        (0..self.channels).all(|c| m.variance(c) <= self.limit_variance[c] + 1e-9)
+    fn homogeneous<const N: usize>(&self, m: &Moments<N>) -> bool {
+        (0..N).all(|c| m.variance(c) <= self.limit_variance[c] + 1e-9)
     }
 
     /// Squared distance between region means in units of the thresholds.
-    fn difference(&self, a: &Moments, b: &Moments) -> f32 {
-        (0..self.channels)
+    fn difference<const N: usize>(&self, a: &Moments<N>, b: &Moments<N>) -> f32 {
+        (0..N)
             .map(|c| ((a.mean(c) - b.mean(c)) * self.inverse_std[c]).powi(2))
             .sum::<f64>() as f32
     }
@@ -222,10 +240,10 @@ struct Leaf {
 }
 
 /// What splitting one tile gives.
-struct TileSplit {
-    moments: Moments,
+struct TileSplit<const N: usize> {
+    moments: Moments<N>,
     leaves: Vec<Leaf>,
-    leaf_moments: Vec<Moments>,
+    leaf_moments: Vec<Moments<N>>,
 }
 
 /// Which leaves cover a tile after the coarse levels are decided.
@@ -245,7 +263,9 @@ enum TileCover {
 #[derive(Default)]
 pub struct SegmentBuffers {
     leaves: Vec<Leaf>,
-    moments: Vec<Moments>,
+    /// The leaves' moments as their `f64` values (their channel count is
+    /// the image's).
+    moments: Vec<f64>,
     edges: Vec<Edge>,
     labels: Vec<u32>,
 }
@@ -255,6 +275,19 @@ impl SegmentBuffers {
     /// numbers its pixels in them.
     pub fn reuse_labels(&mut self, labels: Vec<u32>) {
         self.labels = labels;
+    }
+
+    /// The moments' array, emptied, for `N` channels (a new one when it
+    /// last held another count, whose size may not divide it).
+    fn take_moments<const N: usize>(&mut self) -> Vec<Moments<N>> {
+        let mut values = std::mem::take(&mut self.moments);
+        values.clear();
+        bytemuck::allocation::try_cast_vec(values).unwrap_or_default()
+    }
+
+    /// Keep the moments' array for the next segmentation.
+    fn keep_moments<const N: usize>(&mut self, moments: Vec<Moments<N>>) {
+        self.moments = bytemuck::allocation::try_cast_vec(moments).unwrap_or_default();
     }
 }
 
@@ -266,7 +299,22 @@ pub fn segment(
     buffers: &mut SegmentBuffers,
 ) -> Result<Segmentation> {
     params.check()?;
-    let predicate = Predicate::new(params, image.bands);
+    // One body per channel count, so the moments hold no unused channel.
+    match image.bands {
+        1 => segment_channels::<1>(image, params, buffers),
+        2 => segment_channels::<2>(image, params, buffers),
+        3 => segment_channels::<3>(image, params, buffers),
+        _ => segment_channels::<MAX_BANDS>(image, params, buffers),
+    }
+}
+
+/// [`segment`] of an image of `N` channels.
+fn segment_channels<const N: usize>(
+    image: &Image,
+    params: &SegmentParams,
+    buffers: &mut SegmentBuffers,
+) -> Result<Segmentation> {
+    let predicate = Predicate::new(params);
     let (w, h) = (image.width, image.height);
     let mut clock = std::time::Instant::now();
     let mut lap = || {
@@ -276,7 +324,7 @@ pub fn segment(
     };
 
     let mut leaves = std::mem::take(&mut buffers.leaves);
-    let mut leaf_moments = std::mem::take(&mut buffers.moments);
+    let mut leaf_moments = buffers.take_moments::<N>();
     let mut labels = split(
         image,
         &predicate,
@@ -338,7 +386,7 @@ pub fn segment(
         }
         region_of_leaf.push(region_of_root[root]);
     }
-    let mut region_moments = vec![Moments::default(); region_count as usize];
+    let mut region_moments = vec![Moments::<N>::default(); region_count as usize];
     for (k, m) in moments.iter().enumerate() {
         if merged[k] == k as u32 {
             region_moments[region_of_leaf[k] as usize].add(m);
@@ -383,7 +431,7 @@ pub fn segment(
         region.centroid = [(sums[0] / n) as f32, (sums[1] / n) as f32];
     }
     buffers.leaves = leaves;
-    buffers.moments = moments;
+    buffers.keep_moments(moments);
     buffers.edges = edges;
     let steps = SegmentSteps {
         split_ms,
@@ -406,17 +454,17 @@ pub fn segment(
 /// levels above tile size. Fills `leaves` (in depth-first order) and their
 /// `moments`; returns the leaf index of every pixel, in `labels` (whatever
 /// it held).
-fn split(
+fn split<const N: usize>(
     image: &Image,
     predicate: &Predicate,
     leaves: &mut Vec<Leaf>,
-    moments: &mut Vec<Moments>,
+    moments: &mut Vec<Moments<N>>,
     labels: Vec<u32>,
 ) -> Vec<u32> {
     let (w, h) = (image.width, image.height);
     let tiles_x = w.div_ceil(TILE);
     let tiles_y = h.div_ceil(TILE);
-    let tiles: Vec<TileSplit> = (0..tiles_x * tiles_y)
+    let tiles: Vec<TileSplit<N>> = (0..tiles_x * tiles_y)
         .into_par_iter()
         .map_init(TileScratch::new, |scratch, t| {
             scratch.split(image, predicate, (t % tiles_x) * TILE, (t / tiles_x) * TILE)
@@ -428,12 +476,12 @@ fn split(
 }
 
 /// Per-thread buffers for splitting one tile: the moments pyramid.
-struct TileScratch {
-    levels: Vec<Vec<Moments>>,
+struct TileScratch<const N: usize> {
+    levels: Vec<Vec<Moments<N>>>,
 }
 
-impl TileScratch {
-    fn new() -> TileScratch {
+impl<const N: usize> TileScratch<N> {
+    fn new() -> TileScratch<N> {
         TileScratch {
             levels: (0..TILE_LEVELS)
                 .map(|k| vec![Moments::default(); (TILE >> k) * (TILE >> k)])
@@ -442,7 +490,13 @@ impl TileScratch {
     }
 
     /// Split the tile whose top-left pixel is `(x0, y0)`.
-    fn split(&mut self, image: &Image, predicate: &Predicate, x0: usize, y0: usize) -> TileSplit {
+    fn split(
+        &mut self,
+        image: &Image,
+        predicate: &Predicate,
+        x0: usize,
+        y0: usize,
+    ) -> TileSplit<N> {
         let (tw, th) = (TILE.min(image.width - x0), TILE.min(image.height - y0));
         let pixel = |x: usize, y: usize| {
             if x < tw && y < th {
@@ -503,7 +557,7 @@ impl TileScratch {
         bx: usize,
         by: usize,
         tile: (usize, usize, usize, usize),
-        out: &mut TileSplit,
+        out: &mut TileSplit<N>,
     ) {
         let m = &self.levels[level][by * (TILE >> level) + bx];
         if m.n == 0.0 {
@@ -531,15 +585,15 @@ impl TileScratch {
 /// traversal order into `leaves` and `moments` (emptied first); returns the
 /// leaves covering each tile.
 #[allow(clippy::too_many_arguments)]
-fn split_coarse(
-    tiles: &[TileSplit],
+fn split_coarse<const N: usize>(
+    tiles: &[TileSplit<N>],
     tiles_x: usize,
     tiles_y: usize,
     width: usize,
     height: usize,
     predicate: &Predicate,
     leaves: &mut Vec<Leaf>,
-    moments: &mut Vec<Moments>,
+    moments: &mut Vec<Moments<N>>,
 ) -> Vec<TileCover> {
     let side = tiles_x.max(tiles_y).next_power_of_two();
     let mut levels = vec![vec![Moments::default(); side * side]];
@@ -550,7 +604,7 @@ fn split_coarse(
     }
     while let Some(child) = levels.last().filter(|level| level.len() > 1) {
         let s = (child.len() as f64).sqrt() as usize / 2;
-        let parent: Vec<Moments> = (0..s * s)
+        let parent: Vec<Moments<N>> = (0..s * s)
             .map(|i| {
                 let (x, y) = (i % s, i / s);
                 let at = |dx: usize, dy: usize| &child[(2 * y + dy) * 2 * s + 2 * x + dx];
@@ -668,9 +722,9 @@ const ADJACENCY_PART: usize = 4096;
 /// lie in the left and right, or top and bottom, children of their smallest
 /// common block), so `a` is the leaf whose border was walked; each leaf's
 /// own edges are sorted by `b`.
-fn adjacency(
+fn adjacency<const N: usize>(
     leaves: &[Leaf],
-    moments: &[Moments],
+    moments: &[Moments<N>],
     labels: &[u32],
     w: usize,
     h: usize,
@@ -768,7 +822,7 @@ trait SetData: Copy + Send + Sync {
     fn joined(&self, other: &Self) -> Self;
 }
 
-impl SetData for Moments {
+impl<const N: usize> SetData for Moments<N> {
     fn pixels(&self) -> f64 {
         self.n
     }
@@ -1054,8 +1108,8 @@ mod tests {
     /// The number of leaves `image` splits into and the adjacency parts of
     /// its leaves.
     fn leaves_and_edges(image: &Image, params: &SegmentParams) -> (usize, Vec<Vec<Edge>>) {
-        let predicate = Predicate::new(params, image.bands);
-        let (mut leaves, mut moments) = (Vec::new(), Vec::new());
+        let predicate = Predicate::new(params);
+        let (mut leaves, mut moments) = (Vec::new(), Vec::<Moments<3>>::new());
         let labels = split(image, &predicate, &mut leaves, &mut moments, Vec::new());
         let (w, h) = (image.width, image.height);
         let parts = adjacency(&leaves, &moments, &labels, w, h, &predicate);
