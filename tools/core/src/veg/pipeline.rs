@@ -378,8 +378,8 @@ pub fn extract(image: &VegImage, samples: &[Sample], options: &VegOptions) -> Re
     extract_watched(image, samples, options, RegionMap::Keep, &Watch::default())
 }
 
-/// [`extract`], reporting each step to `watch` and stopping when it is
-/// cancelled.
+/// [`extract`], keeping the region map or not as `region_map` says,
+/// reporting each step to `watch` and stopping when it is cancelled.
 ///
 /// The image is analysed in tiles of `options.tile_px` ([`Tiling`]): an
 /// image no larger than a tile is analysed whole; a larger

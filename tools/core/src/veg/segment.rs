@@ -1091,10 +1091,24 @@ mod tests {
     fn reused_buffers_give_the_same_segmentation() {
         let params = SegmentParams::default();
         let mut buffers = SegmentBuffers::default();
+        // The same image with its bands picked or repeated: the moments'
+        // array passes between channel counts.
+        let with_bands = |image: &Image, picked: &[usize]| {
+            let pixels = image
+                .pixels
+                .chunks_exact(image.bands)
+                .flat_map(|px| picked.iter().map(|&b| px[b]))
+                .collect();
+            Image::new(image.width, image.height, picked.len(), pixels).unwrap()
+        };
+        let soap = crate::testdata::soap_061();
         for image in [
-            crate::testdata::soap_061(),
+            soap.clone(),
             blocks(300, 200, 60),
-            crate::testdata::soap_061(),
+            with_bands(&soap, &[1]),
+            with_bands(&soap, &[0, 1, 2, 1]),
+            soap.clone(),
+            with_bands(&soap, &[2, 0]),
         ] {
             let reused = segment(&image, &params, &mut buffers).unwrap();
             let fresh = segment(&image, &params, &mut SegmentBuffers::default()).unwrap();
