@@ -183,8 +183,8 @@ impl Classifier {
     }
 
     /// Number of learnt signatures per class.
-    pub fn signatures_per_class(&self) -> Vec<usize> {
-        self.class_signatures.clone()
+    pub fn signatures_per_class(&self) -> &[usize] {
+        &self.class_signatures
     }
 
     /// Class of one signature: the class whose `neighbours` nearest learnt

@@ -18,6 +18,33 @@
 //!   report, overlay), as every program runs it.
 //! - [`baseline`]: excess-green detection, to measure against.
 
+/// `$body` with `$n` a constant equal to the band count `$bands` (1, 2 or
+/// 3; [`MAX_BANDS`] for any more): one compiled body per band count, so the
+/// loops over bands that run per pixel or per leaf are unrolled and hold
+/// nothing for bands the image lacks.
+macro_rules! with_band_count {
+    ($bands:expr, $n:ident => $body:expr) => {
+        match $bands {
+            1 => {
+                const $n: usize = 1;
+                $body
+            }
+            2 => {
+                const $n: usize = 2;
+                $body
+            }
+            3 => {
+                const $n: usize = 3;
+                $body
+            }
+            _ => {
+                const $n: usize = $crate::veg::MAX_BANDS;
+                $body
+            }
+        }
+    };
+}
+
 pub mod baseline;
 pub mod classify;
 pub mod db;
@@ -86,12 +113,7 @@ impl Image {
             .par_chunks(self.bands * 65_536)
             .map(|part| {
                 let mut sums = vec![0u64; 255 * MAX_BANDS + 1];
-                match self.bands {
-                    1 => count::<1>(part, &mut sums),
-                    2 => count::<2>(part, &mut sums),
-                    3 => count::<3>(part, &mut sums),
-                    _ => count::<MAX_BANDS>(part, &mut sums),
-                }
+                with_band_count!(self.bands, N => count::<N>(part, &mut sums));
                 sums
             })
             .reduce(
@@ -120,14 +142,9 @@ impl Image {
         level(0.99) - level(0.01)
     }
 
-    /// The pixels of `[x0, y0, x1, y1)`, a rectangle inside the image.
-    pub fn window(&self, rect: [usize; 4]) -> Image {
-        self.window_in(rect, Vec::new())
-    }
-
-    /// [`Image::window`] in `pixels` (whatever it held), e.g. an earlier
-    /// window's.
-    pub fn window_in(&self, [x0, y0, x1, y1]: [usize; 4], mut pixels: Vec<u8>) -> Image {
+    /// The pixels of `[x0, y0, x1, y1)`, a rectangle inside the image,
+    /// copied into `pixels` (whatever it held, e.g. an earlier window's).
+    pub fn window(&self, [x0, y0, x1, y1]: [usize; 4], mut pixels: Vec<u8>) -> Image {
         let b = self.bands;
         pixels.clear();
         pixels.reserve((x1 - x0) * (y1 - y0) * b);
@@ -167,13 +184,8 @@ const HELMERT_NORM: [f32; MAX_BANDS] = [0.0, std::f32::consts::SQRT_2, 2.449_489
 /// the same distance whatever the direction of the hue change.
 #[inline]
 pub fn opponent(bands: &[u8]) -> [f32; MAX_BANDS] {
-    // One body per band count, so each is unrolled (the same operations).
-    match bands.len() {
-        1 => opponent_of::<1>(bands),
-        2 => opponent_of::<2>(bands),
-        3 => opponent_of::<3>(bands),
-        _ => opponent_of::<MAX_BANDS>(bands),
-    }
+    // Unrolled per band count (the same operations).
+    with_band_count!(bands.len(), N => opponent_of::<N>(bands))
 }
 
 /// [`opponent`] of the first `N` values of `bands`.

@@ -754,7 +754,7 @@ impl<'a> TileImage<'a> {
                 .flat_map(|y| v[y * w + x0..y * w + x1].iter().copied())
                 .collect()
         });
-        TileImage::Window(image.image.window_in(tile.context, pixels), valid)
+        TileImage::Window(image.image.window(tile.context, pixels), valid)
     }
 
     /// A window's pixels, to copy the next window into.
@@ -790,7 +790,8 @@ struct TileBuffers {
 }
 
 /// What one tile gives, besides its core's region labels (numbered from 0
-/// among the regions its core holds) written into the image's map: those
+/// among the regions its core holds) written into the image's map when it
+/// is kept: those
 /// regions and their classes, and the objects it owns in the image's pixel
 /// coordinates.
 struct TileResult {

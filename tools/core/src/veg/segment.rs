@@ -300,12 +300,7 @@ pub fn segment(
 ) -> Result<Segmentation> {
     params.check()?;
     // One body per channel count, so the moments hold no unused channel.
-    match image.bands {
-        1 => segment_channels::<1>(image, params, buffers),
-        2 => segment_channels::<2>(image, params, buffers),
-        3 => segment_channels::<3>(image, params, buffers),
-        _ => segment_channels::<MAX_BANDS>(image, params, buffers),
-    }
+    with_band_count!(image.bands, N => segment_channels::<N>(image, params, buffers))
 }
 
 /// [`segment`] of an image of `N` channels.
@@ -1084,9 +1079,9 @@ mod tests {
         }
     }
 
-    /// Buffers reused from other segmentations (a larger image, then a
-    /// smaller one), with their labels handed back, give what fresh ones
-    /// give.
+    /// Buffers reused from other segmentations (larger and smaller images,
+    /// of one to four bands), with their labels handed back, give what
+    /// fresh ones give.
     #[test]
     fn reused_buffers_give_the_same_segmentation() {
         let params = SegmentParams::default();

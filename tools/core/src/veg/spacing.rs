@@ -71,7 +71,7 @@ impl MarkedCrown {
             .map(|&r| region_signature(image, segmentation, r as usize, window_px))
             .collect();
         MarkedCrown {
-            image: image.window([x0, y0, x1, y1]),
+            image: image.window([x0, y0, x1, y1], Vec::new()),
             valid: window_valid,
             segmentation: Segmentation {
                 width: x1 - x0,
