@@ -23,7 +23,7 @@ use std::process::ExitCode;
     after_help = "Examples:
   cargo run --release -p relevo-bench -- ingest --json
   cargo run --release -p relevo-bench -- hierarchy --max-side 8193 --runs 3
-  cargo run --release -p relevo-bench -- render --json --runs 3
+  cargo run --release -p relevo-bench -- render --json --runs 10
   cargo run --release -p relevo-bench -- veg --json --runs 3 --max-side 10000
   cargo run --release -p relevo-bench -- veg-protocol --json
   cargo run --release -p relevo-bench -- view --json --runs 3
@@ -53,12 +53,13 @@ enum BenchCommand {
         max_side: usize,
     },
     /// The floating-horizon raycast: each configuration, level and pitched,
-    /// at 1920×1080 and 1280×720, far 1024, 8 headings, with its PSNR against
-    /// the full-resolution render, beside the classic voxel-space loop and
-    /// the time to merely write a frame (the memory floor).
+    /// at 1920×1080 and 1280×720, far 1024, 8 headings, each a flight of
+    /// `--runs` frames turning 0.5° a frame, with its PSNR against the
+    /// full-resolution render, beside the classic voxel-space loop and the
+    /// time to merely write a frame (the memory floor).
     #[command(after_help = "Examples:
   relevo-bench render
-  relevo-bench render --json --runs 3
+  relevo-bench render --json --runs 10
   relevo-bench render --grid srtm --size 1920x1080 --mode growing
   relevo-bench render --grid grenoble --bundle out/grenoble.relevo --size 1920x1080
   RAYON_NUM_THREADS=1 perf record -- relevo-bench render --grid srtm --size 1920x1080 --mode raycast --runs 50")]

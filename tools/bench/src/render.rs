@@ -31,16 +31,25 @@ struct Grid {
     drape: Option<ColorSource>,
 }
 
-/// The camera of heading `k`: from the grid's centre, 100 m above its
-/// highest point, looking down either by the projection-plane shift (incl at
-/// 70 % of the height, pitch 0) or by a real pitch (centred plane).
-fn camera(grid: &Grid, k: usize, size: [u32; 2], pitch_deg: f64) -> Camera {
+/// Degrees the camera turns from one timed frame to the next: a viewer
+/// turning at 30°/s and 60 frames a second. Each heading's frames are a
+/// short flight, so that consecutive frames share most of what they read,
+/// as a viewer's do; the first frame after the jump to a new heading is
+/// timed apart (see [`Timing`]).
+const TURN_PER_FRAME_DEG: f64 = 0.5;
+
+/// The camera of heading `k`, frame `j` of its flight: from the grid's
+/// centre, 100 m above its highest point, turned by `j` ×
+/// [`TURN_PER_FRAME_DEG`], looking down either by the projection-plane
+/// shift (incl at 70 % of the height, pitch 0) or by a real pitch (centred
+/// plane).
+fn camera(grid: &Grid, k: usize, j: usize, size: [u32; 2], pitch_deg: f64) -> Camera {
     let extent = (grid.side - 1) as f64 * grid.cell_m;
     let top = grid.heights.iter().copied().fold(f32::MIN, f32::max) as f64;
     let incl = if pitch_deg == 0.0 { 0.7 } else { 0.5 };
     Camera {
         position: glam::DVec3::new(extent * 0.5, extent * 0.5, top + 100.0),
-        heading_deg: k as f64 * 360.0 / HEADINGS as f64,
+        heading_deg: k as f64 * 360.0 / HEADINGS as f64 + j as f64 * TURN_PER_FRAME_DEG,
         pitch_deg,
         incl_px: size[1] as f64 * incl,
         fov_x_deg: 60.0,
@@ -123,7 +132,8 @@ impl ClassicVoxelSpace {
 }
 
 /// Raycast figures: each configuration at 1920×1080 and 1280×720, far 1024
-/// cells, the median over 8 headings × `runs`, with its PSNR against the
+/// cells, the median over 8 headings' flights of `runs` frames (and of
+/// their first frames, after the jump to the heading), with its PSNR against the
 /// full-resolution level or pitched render, beside the classic loop and the
 /// frame write floor.
 /// `grid` keeps only the grids whose name contains it, `size` (e.g.
@@ -270,7 +280,7 @@ pub fn render(
             // The reference frames of each heading and pitch.
             let mut references: Vec<(f64, Vec<Frame>)> = Vec::new();
             for (name, options, pitch) in &configs {
-                let mut times = Vec::new();
+                let mut timing = Timing::default();
                 let mut quality = Vec::new();
                 let reference = references.iter().position(|(p, _)| p == pitch);
                 let shown = mode.is_none_or(|part| {
@@ -286,14 +296,17 @@ pub fn render(
                 }
                 let mut frames = Vec::new();
                 for k in 0..HEADINGS {
-                    let cam = camera(grid, k, size, *pitch);
-                    // Warm the buffers. A reference left out still gives the
-                    // others their PSNR, untimed.
-                    renderer.render(&terrain, &cam, options)?;
-                    for _ in 0..if shown { runs } else { 0 } {
-                        let start = Instant::now();
-                        renderer.render(&terrain, &cam, options)?;
-                        times.push(start.elapsed().as_secs_f64() * 1e3);
+                    let flight = |j| camera(grid, k, j, size, *pitch);
+                    let mut draw = |cam: &Camera| {
+                        renderer.render(&terrain, cam, options)?;
+                        anyhow::Ok(())
+                    };
+                    if shown {
+                        timing.fly(runs, flight, &mut draw)?;
+                    } else {
+                        // A reference left out still gives the others their
+                        // PSNR (the flight's last frame), untimed.
+                        draw(&flight(runs))?;
                     }
                     let frame = renderer.frame();
                     match reference {
@@ -307,16 +320,17 @@ pub fn render(
                 if !shown {
                     continue;
                 }
-                let ms = median(&times);
+                let (ms, after_jump_ms) = timing.medians();
                 // The worst heading's PSNR (infinite: the same image).
                 let psnr_db = quality.iter().copied().fold(f64::INFINITY, f64::min);
                 emit(
                     json_lines,
                     json!({"bench": "render", "grid": grid.name, "mode": name, "width": size[0],
                            "height": size[1], "far": 1024, "pitch_deg": pitch, "threads": threads,
-                           "ms": ms, "psnr_db": if psnr_db.is_finite() { json!(psnr_db) } else { json!("equal") }}),
+                           "ms": ms, "after_jump_ms": after_jump_ms,
+                           "psnr_db": if psnr_db.is_finite() { json!(psnr_db) } else { json!("equal") }}),
                     format!(
-                        "{:>15} {}×{} {name:>36}: {ms:7.2} ms/frame, PSNR {}",
+                        "{:>15} {}×{} {name:>36}: {ms:7.2} ms/frame ({after_jump_ms:5.2} after a jump), PSNR {}",
                         grid.name,
                         size[0],
                         size[1],
@@ -359,23 +373,22 @@ pub fn render(
                     continue;
                 }
                 let mut classic = ClassicVoxelSpace { strips: Vec::new() };
-                let mut times = Vec::new();
+                let mut timing = Timing::default();
                 for k in 0..HEADINGS {
-                    let cam = camera(grid, k, size, 0.0);
-                    classic.render(grid, &shade, &cam, threads);
-                    for _ in 0..runs {
-                        let start = Instant::now();
-                        classic.render(grid, &shade, &cam, threads);
-                        times.push(start.elapsed().as_secs_f64() * 1e3);
-                    }
+                    let flight = |j| camera(grid, k, j, size, 0.0);
+                    timing.fly(runs, flight, |cam| {
+                        classic.render(grid, &shade, cam, threads);
+                        Ok(())
+                    })?;
                 }
-                let ms = median(&times);
+                let (ms, after_jump_ms) = timing.medians();
                 emit(
                     json_lines,
                     json!({"bench": "render", "grid": grid.name, "mode": "classic voxel space",
-                           "threads": threads, "width": size[0], "height": size[1], "far": 1024, "ms": ms}),
+                           "threads": threads, "width": size[0], "height": size[1], "far": 1024,
+                           "ms": ms, "after_jump_ms": after_jump_ms}),
                     format!(
-                        "{:>15} {}×{} {:>36}: {ms:7.2} ms/frame ({threads} thread{}, no depth)",
+                        "{:>15} {}×{} {:>36}: {ms:7.2} ms/frame ({after_jump_ms:5.2} after a jump; {threads} thread{}, no depth)",
                         grid.name,
                         size[0],
                         size[1],
@@ -387,6 +400,46 @@ pub fn render(
         }
     }
     Ok(())
+}
+
+/// Frame times of one configuration over the headings' flights.
+#[derive(Default)]
+struct Timing {
+    /// Every flight frame after the first, milliseconds.
+    flight_ms: Vec<f64>,
+    /// Each heading's first frame, drawn after the jump from the last
+    /// heading (45°, or from the configuration before), milliseconds.
+    after_jump_ms: Vec<f64>,
+}
+
+impl Timing {
+    /// Time `draw` over frames 0..=`runs` of one heading's flight, frame
+    /// j seen by `flight(j)` (made before its timing starts).
+    fn fly(
+        &mut self,
+        runs: usize,
+        flight: impl Fn(usize) -> Camera,
+        mut draw: impl FnMut(&Camera) -> Result<()>,
+    ) -> Result<()> {
+        for j in 0..=runs {
+            let camera = flight(j);
+            let start = Instant::now();
+            draw(&camera)?;
+            let ms = start.elapsed().as_secs_f64() * 1e3;
+            if j == 0 {
+                self.after_jump_ms.push(ms);
+            } else {
+                self.flight_ms.push(ms);
+            }
+        }
+        Ok(())
+    }
+
+    /// The medians of the flight's frames and of the first frames after a
+    /// jump.
+    fn medians(&self) -> (f64, f64) {
+        (median(&self.flight_ms), median(&self.after_jump_ms))
+    }
 }
 
 /// The name of the memory floor's figure.
