@@ -29,6 +29,30 @@ struct Grid {
     mask: Vec<u8>,
     cell_m: f64,
     drape: Option<ColorSource>,
+    /// The highest height, metres (the cameras fly 100 m above it).
+    top_m: f64,
+}
+
+impl Grid {
+    fn new(
+        name: String,
+        side: usize,
+        heights: Vec<f32>,
+        mask: Vec<u8>,
+        cell_m: f64,
+        drape: Option<ColorSource>,
+    ) -> Self {
+        let top_m = heights.iter().copied().fold(f32::MIN, f32::max) as f64;
+        Grid {
+            name,
+            side,
+            heights,
+            mask,
+            cell_m,
+            drape,
+            top_m,
+        }
+    }
 }
 
 /// Degrees the camera turns from one timed frame to the next: a viewer
@@ -45,10 +69,9 @@ const TURN_PER_FRAME_DEG: f64 = 0.5;
 /// plane).
 fn camera(grid: &Grid, k: usize, j: usize, size: [u32; 2], pitch_deg: f64) -> Camera {
     let extent = (grid.side - 1) as f64 * grid.cell_m;
-    let top = grid.heights.iter().copied().fold(f32::MIN, f32::max) as f64;
     let incl = if pitch_deg == 0.0 { 0.7 } else { 0.5 };
     Camera {
-        position: glam::DVec3::new(extent * 0.5, extent * 0.5, top + 100.0),
+        position: glam::DVec3::new(extent * 0.5, extent * 0.5, grid.top_m + 100.0),
         heading_deg: k as f64 * 360.0 / HEADINGS as f64 + j as f64 * TURN_PER_FRAME_DEG,
         pitch_deg,
         incl_px: size[1] as f64 * incl,
@@ -162,25 +185,25 @@ pub fn render(
     let wanted = |name: &str| grid.is_none_or(|part| name.contains(part));
     let mut grids = Vec::new();
     if wanted("fractal 4097²") {
-        grids.push(Grid {
-            name: "fractal 4097²".into(),
-            side: 4097,
-            heights: fractal_heights(4097, 1),
-            mask: vec![1u8; 4097 * 4097],
-            cell_m: 30.0,
-            drape: None,
-        });
+        grids.push(Grid::new(
+            "fractal 4097²".into(),
+            4097,
+            fractal_heights(4097, 1),
+            vec![1u8; 4097 * 4097],
+            30.0,
+            None,
+        ));
     }
     if wanted("srtm_ref 1025²") {
         let srtm = srtm_padded(data)?;
-        grids.push(Grid {
-            name: "srtm_ref 1025²".into(),
-            side: srtm.side,
-            heights: srtm.heights,
-            mask: srtm.mask,
-            cell_m: 90.0,
-            drape: None,
-        });
+        grids.push(Grid::new(
+            "srtm_ref 1025²".into(),
+            srtm.side,
+            srtm.heights,
+            srtm.mask,
+            90.0,
+            None,
+        ));
     }
     if let Some(path) = bundle {
         let bundle = Bundle::open(path)?;
@@ -197,14 +220,14 @@ pub fn render(
         );
         let name = format!("{name} {}² (drape)", frame.side);
         if wanted(&name) {
-            grids.push(Grid {
+            grids.push(Grid::new(
                 name,
-                side: frame.side,
-                heights: bundle.heights()?.to_vec(),
-                mask: bundle.mask()?.to_vec(),
-                cell_m: frame.cell_size_m,
+                frame.side,
+                bundle.heights()?.to_vec(),
+                bundle.mask()?.to_vec(),
+                frame.cell_size_m,
                 drape,
-            });
+            ));
         }
     }
     if grids.is_empty() {
