@@ -33,26 +33,9 @@ struct Grid {
     top_m: f64,
 }
 
-impl Grid {
-    fn new(
-        name: String,
-        side: usize,
-        heights: Vec<f32>,
-        mask: Vec<u8>,
-        cell_m: f64,
-        drape: Option<ColorSource>,
-    ) -> Self {
-        let top_m = heights.iter().copied().fold(f32::MIN, f32::max) as f64;
-        Grid {
-            name,
-            side,
-            heights,
-            mask,
-            cell_m,
-            drape,
-            top_m,
-        }
-    }
+/// The highest of `heights`, metres.
+fn highest_m(heights: &[f32]) -> f64 {
+    heights.iter().copied().fold(f32::MIN, f32::max) as f64
 }
 
 /// Degrees the camera turns from one timed frame to the next: a viewer
@@ -185,25 +168,28 @@ pub fn render(
     let wanted = |name: &str| grid.is_none_or(|part| name.contains(part));
     let mut grids = Vec::new();
     if wanted("fractal 4097²") {
-        grids.push(Grid::new(
-            "fractal 4097²".into(),
-            4097,
-            fractal_heights(4097, 1),
-            vec![1u8; 4097 * 4097],
-            30.0,
-            None,
-        ));
+        let heights = fractal_heights(4097, 1);
+        grids.push(Grid {
+            name: "fractal 4097²".into(),
+            side: 4097,
+            top_m: highest_m(&heights),
+            heights,
+            mask: vec![1u8; 4097 * 4097],
+            cell_m: 30.0,
+            drape: None,
+        });
     }
     if wanted("srtm_ref 1025²") {
         let srtm = srtm_padded(data)?;
-        grids.push(Grid::new(
-            "srtm_ref 1025²".into(),
-            srtm.side,
-            srtm.heights,
-            srtm.mask,
-            90.0,
-            None,
-        ));
+        grids.push(Grid {
+            name: "srtm_ref 1025²".into(),
+            side: srtm.side,
+            top_m: highest_m(&srtm.heights),
+            heights: srtm.heights,
+            mask: srtm.mask,
+            cell_m: 90.0,
+            drape: None,
+        });
     }
     if let Some(path) = bundle {
         let bundle = Bundle::open(path)?;
@@ -220,14 +206,16 @@ pub fn render(
         );
         let name = format!("{name} {}² (drape)", frame.side);
         if wanted(&name) {
-            grids.push(Grid::new(
+            let heights = bundle.heights()?;
+            grids.push(Grid {
                 name,
-                frame.side,
-                bundle.heights()?.to_vec(),
-                bundle.mask()?.to_vec(),
-                frame.cell_size_m,
+                side: frame.side,
+                top_m: highest_m(&heights),
+                heights: heights.to_vec(),
+                mask: bundle.mask()?.to_vec(),
+                cell_m: frame.cell_size_m,
                 drape,
-            ));
+            });
         }
     }
     if grids.is_empty() {
