@@ -334,24 +334,28 @@ pub fn render(
                 let (ms, after_jump_ms) = timing.medians();
                 // The worst heading's PSNR (infinite: the same image).
                 let psnr_db = quality.iter().copied().fold(f64::INFINITY, f64::min);
+                // The reference itself, its PSNR in dB, or "equal".
+                let psnr_json = match reference {
+                    None => json!("reference"),
+                    Some(_) if psnr_db.is_finite() => json!(psnr_db),
+                    Some(_) => json!("equal"),
+                };
+                let psnr_text = psnr_json.as_f64().map_or_else(
+                    || psnr_json.as_str().unwrap_or_default().to_string(),
+                    |db| format!("{db:.1} dB"),
+                );
                 emit(
                     json_lines,
                     json!({"bench": "render", "grid": grid.name, "mode": name, "width": size[0],
                            "height": size[1], "far": 1024, "pitch_deg": pitch, "threads": threads,
                            "ms": ms, "after_jump_ms": after_jump_ms,
-                           "psnr_db": if psnr_db.is_finite() { json!(psnr_db) } else { json!("equal") }}),
+                           "psnr_db": psnr_json}),
                     format!(
                         "{:>15} {}×{} {name:>36}: {ms:7.2} ms/frame ({after_jump_ms:5.2} after a jump), PSNR {}",
                         grid.name,
                         size[0],
                         size[1],
-                        if reference.is_none() {
-                            "reference".to_string()
-                        } else if psnr_db.is_finite() {
-                            format!("{psnr_db:.1} dB")
-                        } else {
-                            "equal".to_string()
-                        }
+                        psnr_text
                     ),
                 );
             }
