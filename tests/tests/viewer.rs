@@ -6,9 +6,9 @@
 use relevo_core::horizon::{distance_of_depth, Band};
 use relevo_tests::{compare_with_reference, prep_region, repo};
 use relevo_view::flight::Flight;
-use relevo_view::gpu::{Mode, Settings};
 use relevo_view::headless::{device, render_once};
 use relevo_view::scene::Scene;
+use relevo_view::settings::{Mode, Settings};
 use std::path::Path;
 
 const SIZE: [u32; 2] = [480, 270];
@@ -87,7 +87,7 @@ fn headless_frames_of_each_mode_match_their_references() {
                 mode: Mode::Raycast,
                 ..Default::default()
             };
-            s.raycast.bands = relevo_view::gpu::detailed_bands();
+            s.raycast.bands = relevo_view::settings::detailed_bands();
             s
         }),
     ];
@@ -179,7 +179,7 @@ fn headless_frames_of_each_mode_match_their_references() {
         (
             "mesh_vegetation_list",
             Settings {
-                vegetation: relevo_view::gpu::VegetationSelection::List,
+                vegetation: relevo_view::settings::VegetationSelection::List,
                 ..vegetation(Mode::Mesh, false)
             },
             forest,
@@ -187,7 +187,7 @@ fn headless_frames_of_each_mode_match_their_references() {
         (
             "mesh_vegetation_blobs",
             Settings {
-                vegetation: relevo_view::gpu::VegetationSelection::Blobs { side_m: 1000.0 },
+                vegetation: relevo_view::settings::VegetationSelection::Blobs { side_m: 1000.0 },
                 ..vegetation(Mode::Mesh, false)
             },
             forest,
@@ -358,7 +358,7 @@ fn vegetation_is_drawn_from_the_cut_and_composited_through_the_depth() {
         // The plain list draws every object one by one: the clusters stand
         // in for them with about the same coverage, with far fewer draws.
         let list = Settings {
-            vegetation: relevo_view::gpu::VegetationSelection::List,
+            vegetation: relevo_view::settings::VegetationSelection::List,
             ..settings.clone()
         };
         let (each, list_stats) =
@@ -390,7 +390,7 @@ fn vegetation_is_drawn_from_the_cut_and_composited_through_the_depth() {
 #[test]
 fn the_hud_counts_the_objects_in_view_and_impostors_stand_on_the_mesh_drawn() {
     use relevo_core::cluster::cut::{box_distance, box_in_frustum};
-    use relevo_view::gpu::VegetationSelection;
+    use relevo_view::settings::VegetationSelection;
     let d = tempfile::tempdir().unwrap();
     let mut scene = olinda(d.path());
     let (device, queue) = lavapipe();
@@ -623,9 +623,10 @@ fn samples_marked_on_the_drape_detect_accept_and_recluster() {
     );
     let mut tab = SamplesTab::new(&bundle);
     let before = tab.detections.len();
-    // The region's own samples (the drape is the Landsat image on the DEM's
-    // grid, within a pixel of it): three forest, four counter-examples.
-    for (class, r) in [
+    // The tab opens with the samples prep kept: the region's own (marked on
+    // the Landsat file, carried onto the drape — the same image on the DEM's
+    // grid, within a pixel of it), three forest, four counter-examples.
+    let region_samples = [
         ("forest", [60.0, 60.0, 120.0, 110.0]),
         ("forest", [200.0, 190.0, 220.0, 205.0]),
         ("forest", [285.0, 8.0, 315.0, 28.0]),
@@ -633,8 +634,13 @@ fn samples_marked_on_the_drape_detect_accept_and_recluster() {
         ("other", [280.0, 250.0, 320.0, 300.0]),
         ("other", [250.0, 80.0, 290.0, 120.0]),
         ("other", [150.0, 230.0, 200.0, 260.0]),
-    ] {
-        tab.samples.push((class.to_string(), r));
+    ];
+    assert_eq!(tab.samples.len(), region_samples.len(), "{}", tab.status);
+    for ((class, kept), (want_class, want)) in tab.samples.iter().zip(region_samples) {
+        assert_eq!(class, want_class);
+        for (k, w) in kept.iter().zip(want) {
+            assert!((k - w).abs() <= 1.5, "{kept:?} is not {want:?}");
+        }
     }
     tab.detect();
     let start = std::time::Instant::now();
@@ -653,7 +659,7 @@ fn samples_marked_on_the_drape_detect_accept_and_recluster() {
 
     let reopened = relevo_core::bundle::Bundle::open(&bundle).unwrap();
     assert_eq!(
-        relevo_core::bundle::validate(&reopened),
+        relevo_core::validation::validate(&reopened),
         Vec::<String>::new()
     );
     assert_eq!(reopened.vegetation().unwrap().unwrap().len(), detected);

@@ -4,10 +4,12 @@
 //! renders use; what is on screen comes from relevo-core.
 
 use crate::flight::{Controls, Flight};
-use crate::gpu::{self, FrameStats, Mode, Settings};
+use crate::gpu::{self, FrameStats};
 use crate::hud;
+use crate::keys::{self, Action, Axis, Input};
 use crate::samples::SamplesTab;
 use crate::scene::Scene;
+use crate::settings::{self, Mode, Settings};
 use eframe::egui;
 use eframe::egui_wgpu::{self, wgpu};
 use relevo_core::horizon;
@@ -18,34 +20,10 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
-/// The keys, in the order the help overlay lists them. No two share a key
-/// (the seed's `w` wireframe, `t` texture and F1 objects are kept, so
-/// flying uses the arrows, not WASD).
-pub const KEYS: &[(&str, &str)] = &[
-    ("↑ ↓", "fly forward / back"),
-    ("← →", "turn left / right"),
-    ("PgUp PgDn", "climb / sink along the terrain normal"),
-    ("drag", "turn and look up / down"),
-    (
-        "right-drag",
-        "orbit about the ground point under the pointer",
-    ),
-    ("scroll", "zoom towards the ground point under the pointer"),
-    ("+ −", "faster / slower"),
-    ("[ ]", "finer / coarser mesh (τ)"),
-    ("m", "mesh / raycast"),
-    ("w", "wireframe"),
-    ("t", "drape texture"),
-    ("g", "geomorphing"),
-    ("f", "terrain following"),
-    ("F1", "objects and vegetation"),
-    ("F12", "vegetation as sprites / billboards"),
-    ("c", "impostors' alpha (off: whole quads)"),
-    ("b", "impostors' filtering (blur)"),
-    ("p", "copy the camera pose string"),
-    ("Home", "home view"),
-    ("h", "this help"),
-];
+/// A side-panel label with the key that does the same: "wireframe (w)".
+fn with_key(text: &str, action: Action) -> String {
+    format!("{text} ({})", keys::label_of(action))
+}
 
 /// Frames the frame-time plot keeps.
 const HISTORY: usize = 240;
@@ -88,7 +66,7 @@ pub struct ViewerApp {
     last_frame: Option<Instant>,
     pub stats: FrameStats,
     pub show_help: bool,
-    /// The typed camera string in the side panel.
+    /// The side panel's camera string: the current camera, or what is being typed.
     pub camera_text: String,
     /// A camera to move to once the view's size is known.
     pending_pose: Option<CameraPose>,
@@ -255,79 +233,77 @@ impl ViewerApp {
         })
     }
 
-    /// Apply the keys pressed this frame; returns the held flight controls.
+    /// Apply the keys pressed this frame (the list of [`keys::BINDINGS`]);
+    /// returns the held flight controls.
     fn keys(&mut self, ctx: &egui::Context) -> Controls {
-        use egui::Key;
         let mut controls = Controls::default();
-        let typing = ctx.egui_wants_keyboard_input();
+        if ctx.egui_wants_keyboard_input() {
+            return controls;
+        }
+        let mut pressed = Vec::new();
         ctx.input(|i| {
-            if typing {
-                return;
+            for binding in keys::BINDINGS {
+                match binding.input {
+                    Input::Held(axis, plus, minus) => {
+                        let value = f64::from(u8::from(i.key_down(plus)))
+                            - f64::from(u8::from(i.key_down(minus)));
+                        match axis {
+                            Axis::Forward => controls.forward = value,
+                            Axis::Turn => controls.turn = value,
+                            Axis::Climb => controls.climb = value,
+                        }
+                    }
+                    Input::Pressed(keys) => pressed.extend(
+                        keys.iter()
+                            .filter(|&&(key, _)| i.key_pressed(key))
+                            .map(|&(_, action)| action),
+                    ),
+                    Input::Pointer => {}
+                }
             }
-            let axis = |plus: Key, minus: Key| {
-                f64::from(u8::from(i.key_down(plus))) - f64::from(u8::from(i.key_down(minus)))
-            };
-            controls.forward = axis(Key::ArrowUp, Key::ArrowDown);
-            controls.turn = axis(Key::ArrowRight, Key::ArrowLeft);
-            controls.climb = axis(Key::PageUp, Key::PageDown);
-            let s = &mut self.settings;
-            if i.key_pressed(Key::M) {
+        });
+        for action in pressed {
+            self.apply(action, ctx);
+        }
+        controls
+    }
+
+    /// Do what a key pressed once asks.
+    fn apply(&mut self, action: Action, ctx: &egui::Context) {
+        let s = &mut self.settings;
+        match action {
+            Action::MeshOrRaycast => {
                 s.mode = match s.mode {
                     Mode::Mesh => Mode::Raycast,
                     Mode::Raycast | Mode::ZBuffer(_) => Mode::Mesh,
                 };
             }
-            if i.key_pressed(Key::W) {
-                s.wireframe = !s.wireframe;
-            }
-            if i.key_pressed(Key::T) {
-                s.texture = !s.texture;
-            }
-            if i.key_pressed(Key::G) {
-                s.morph = !s.morph;
-            }
-            if i.key_pressed(Key::OpenBracket) {
-                s.tau_px = (s.tau_px / 1.5).max(0.25);
-            }
-            if i.key_pressed(Key::CloseBracket) {
-                s.tau_px = (s.tau_px * 1.5).min(64.0);
-            }
-            if i.key_pressed(Key::F1) {
-                s.objects = !s.objects;
-            }
-            if i.key_pressed(Key::F12) {
-                s.sprites = !s.sprites;
-            }
-            if i.key_pressed(Key::C) {
-                s.alpha = !s.alpha;
-            }
-            if i.key_pressed(Key::B) {
-                s.blur = !s.blur;
-            }
-            if i.key_pressed(Key::H) {
-                self.show_help = !self.show_help;
-            }
-            if let Some(f) = &mut self.flight {
-                if i.key_pressed(Key::Plus) || i.key_pressed(Key::Equals) {
-                    f.speed_mps = (f.speed_mps * 1.5).min(50_000.0);
-                }
-                if i.key_pressed(Key::Minus) {
-                    f.speed_mps = (f.speed_mps / 1.5).max(1.0);
-                }
-                if i.key_pressed(Key::F) {
-                    f.follow_terrain = !f.follow_terrain;
+            Action::Wireframe => s.wireframe = !s.wireframe,
+            Action::Texture => s.texture = !s.texture,
+            Action::Geomorphing => s.morph = !s.morph,
+            Action::FinerMesh => s.tau_px = (s.tau_px / 1.5).max(0.25),
+            Action::CoarserMesh => s.tau_px = (s.tau_px * 1.5).min(64.0),
+            Action::Objects => s.objects = !s.objects,
+            Action::Sprites => s.sprites = !s.sprites,
+            Action::ImpostorAlpha => s.alpha = !s.alpha,
+            Action::ImpostorBlur => s.blur = !s.blur,
+            Action::Help => self.show_help = !self.show_help,
+            Action::Faster | Action::Slower | Action::TerrainFollowing => {
+                if let Some(f) = &mut self.flight {
+                    match action {
+                        Action::Faster => f.speed_mps = (f.speed_mps * 1.5).min(50_000.0),
+                        Action::Slower => f.speed_mps = (f.speed_mps / 1.5).max(1.0),
+                        _ => f.follow_terrain = !f.follow_terrain,
+                    }
                 }
             }
-        });
-        if !typing && ctx.input(|i| i.key_pressed(Key::Home)) {
-            if let Some(scene) = &self.scene {
-                self.flight = Some(Flight::home(scene));
+            Action::Home => {
+                if let Some(scene) = &self.scene {
+                    self.flight = Some(Flight::home(scene));
+                }
             }
+            Action::CopyCamera => self.copy_camera(ctx),
         }
-        if !typing && ctx.input(|i| i.key_pressed(Key::P)) {
-            self.copy_camera(ctx);
-        }
-        controls
     }
 
     fn copy_camera(&self, ctx: &egui::Context) {
@@ -362,10 +338,10 @@ impl ViewerApp {
                 .logarithmic(true)
                 .text("τ (px)"),
         );
-        ui.checkbox(&mut s.morph, "geomorphing (g)");
+        ui.checkbox(&mut s.morph, with_key("geomorphing", Action::Geomorphing));
         ui.checkbox(&mut s.cull, "frustum culling");
-        ui.checkbox(&mut s.wireframe, "wireframe (w)");
-        ui.checkbox(&mut s.texture, "drape texture (t)");
+        ui.checkbox(&mut s.wireframe, with_key("wireframe", Action::Wireframe));
+        ui.checkbox(&mut s.texture, with_key("drape texture", Action::Texture));
         ui.label("Raycast");
         let mut bands = s.raycast.bands.len() > 1 || s.raycast.bands.iter().any(|b| b.subvoxel);
         if ui
@@ -373,7 +349,7 @@ impl ViewerApp {
             .changed()
         {
             s.raycast.bands = if bands {
-                gpu::detailed_bands()
+                settings::detailed_bands()
             } else {
                 horizon::RenderOptions::default().bands
             };
@@ -395,23 +371,39 @@ impl ViewerApp {
                     .logarithmic(true)
                     .text("speed (m/s)"),
             );
-            ui.checkbox(&mut f.follow_terrain, "terrain following (f)");
+            ui.checkbox(
+                &mut f.follow_terrain,
+                with_key("terrain following", Action::TerrainFollowing),
+            );
             ui.add(egui::Slider::new(&mut f.fov_x_deg, 20.0..=120.0).text("field of view (°)"));
         }
-        ui.checkbox(&mut self.settings.objects, "objects and vegetation (F1)");
+        ui.checkbox(
+            &mut self.settings.objects,
+            with_key("objects and vegetation", Action::Objects),
+        );
         ui.checkbox(&mut self.settings.terrain, "terrain");
         if let Some(vegetation) = self.scene.as_ref().and_then(|s| s.vegetation.as_ref()) {
             vegetation_panel(ui, &mut self.settings, vegetation);
         }
         ui.separator();
         let label = ui.label("Camera X,Y,Z,HEADING[,PITCHdeg][,INCL]");
-        ui.text_edit_singleline(&mut self.camera_text)
+        // The field shows the camera as it flies, except while being edited.
+        let field = ui.make_persistent_id("camera");
+        if !ui.memory(|m| m.has_focus(field)) {
+            if let (Some(scene), Some(flight)) = (&self.scene, &self.flight) {
+                self.camera_text = flight.pose(scene, self.stats.height.max(1)).to_string();
+            }
+        }
+        ui.add(egui::TextEdit::singleline(&mut self.camera_text).id(field))
             .labelled_by(label.id);
         ui.horizontal(|ui| {
             if ui.button("Go").clicked() {
                 self.go_to_typed_camera();
             }
-            if ui.button("Copy camera (c)").clicked() {
+            if ui
+                .button(with_key("Copy camera", Action::CopyCamera))
+                .clicked()
+            {
                 self.copy_camera(ui.ctx());
             }
             if ui.button("Home").clicked() {
@@ -585,7 +577,10 @@ impl ViewerApp {
             .collapsible(false)
             .show(ctx, |ui| {
                 egui::Grid::new("keys").striped(true).show(ui, |ui| {
-                    for (key, what) in KEYS {
+                    for keys::Binding {
+                        label: key, what, ..
+                    } in keys::BINDINGS
+                    {
                         ui.monospace(*key);
                         ui.label(*what);
                         ui.end_row();
@@ -723,7 +718,7 @@ pub fn run(start: Start) -> anyhow::Result<()> {
 /// The vegetation controls: the selection, sprites, alpha, blur, the view
 /// angle, and the cut's bands as the bundle was baked for them.
 fn vegetation_panel(ui: &mut egui::Ui, s: &mut Settings, vegetation: &crate::scene::Vegetation) {
-    use crate::gpu::VegetationSelection;
+    use crate::settings::VegetationSelection;
     ui.separator();
     ui.label("Vegetation");
     ui.horizontal(|ui| {
@@ -735,9 +730,9 @@ fn vegetation_panel(ui: &mut egui::Ui, s: &mut Settings, vegetation: &crate::sce
             "blobs 3 km",
         );
     });
-    ui.checkbox(&mut s.sprites, "sprites (F12)");
-    ui.checkbox(&mut s.alpha, "alpha (c)");
-    ui.checkbox(&mut s.blur, "blur (b)");
+    ui.checkbox(&mut s.sprites, with_key("sprites", Action::Sprites));
+    ui.checkbox(&mut s.alpha, with_key("alpha", Action::ImpostorAlpha));
+    ui.checkbox(&mut s.blur, with_key("blur", Action::ImpostorBlur));
     ui.add(egui::Slider::new(&mut s.view_angle_deg, 0.0..=90.0).text("top view above (°)"));
     ui.checkbox(
         &mut s.automatic_view_angle,

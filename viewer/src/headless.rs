@@ -3,12 +3,10 @@
 //! buffer), at any size the GPU allows.
 
 use crate::flight::Flight;
-use crate::gpu::{
-    FrameStats, Mode, Readback, Renderer, Settings, Targets, VegetationSelection, COLOUR_FORMAT,
-    DEPTH_FORMAT,
-};
+use crate::gpu::{FrameStats, Readback, Renderer, Targets, COLOUR_FORMAT, DEPTH_FORMAT};
 use crate::hud;
 use crate::scene::Scene;
+use crate::settings::{Mode, Settings, VegetationSelection};
 use anyhow::{bail, Context, Result};
 use eframe::egui;
 use eframe::egui_wgpu::{self, wgpu};
@@ -16,7 +14,7 @@ use relevo_core::horizon::{Arithmetic, Band};
 use relevo_core::raster::png::encode_rgba;
 use relevo_core::scene::{self, CameraPose};
 use serde::Serialize;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 #[derive(clap::Args, Debug)]
@@ -38,7 +36,7 @@ pub struct RenderArgs {
         allow_hyphen_values = true
     )]
     pub camera: Option<String>,
-    /// Image size, WIDTHxHEIGHT.
+    /// Image size, WIDTHxHEIGHT (`--tab samples` fits the drape into it).
     #[arg(long, default_value = "1280x720", value_parser = scene::parse_size)]
     pub size: [u32; 2],
     /// Horizontal field of view, degrees.
@@ -59,7 +57,7 @@ pub struct RenderArgs {
     /// Mesh mode: a shaded height ramp instead of the drape.
     #[arg(long)]
     pub no_texture: bool,
-    /// Raycast mode: distance bands UNTIL_M:SLICES_PER_CELL[:sub], e.g. 3000:4:sub,inf:1.
+    /// Raycast mode: distance bands UNTIL_M:SLICES_PER_CELL or UNTIL_M:SLICES_PER_CELL:sub, e.g. 3000:4:sub,inf:1.
     #[arg(long, value_parser = scene::parse_bands)]
     pub bands: Option<Bands>,
     /// Raycast mode: 16.16 fixed-point inner loop.
@@ -78,7 +76,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub no_terrain: bool,
     /// What chooses the bundle's vegetation: quadtree (relevo-core's cut),
-    /// or the baselines list and blobs[:SIDE_M].
+    /// or the baselines list and blobs or blobs:SIDE_M.
     #[arg(long, default_value = "quadtree", value_parser = VegetationSelection::parse)]
     pub vegetation: VegetationSelection,
     /// No objects or vegetation.
@@ -263,20 +261,13 @@ pub fn render_once(
 }
 
 pub fn run(a: RenderArgs) -> Result<()> {
-    for path in std::iter::once(&a.out).chain(&a.depth).chain(&a.stats) {
-        if path.exists() && !a.force {
-            bail!(
-                "{}: already exists (pass --force to replace it)",
-                path.display()
-            );
-        }
-    }
-    if !(a.fov > 0.0 && a.fov < 179.0) {
-        bail!("--fov must be between 0 and 179 degrees, got {}", a.fov);
-    }
-    if !(a.far >= 2.0 && a.far.is_finite()) {
-        bail!("--far must be at least 2 cells, got {}", a.far);
-    }
+    let outputs: Vec<&Path> = std::iter::once(&a.out)
+        .chain(&a.depth)
+        .chain(&a.stats)
+        .map(PathBuf::as_path)
+        .collect();
+    relevo_core::atomic::check_outputs(&outputs, a.force)?;
+    scene::check_view_limits(a.fov, a.far)?;
     if !(a.tau >= 0.0 && a.tau.is_finite()) {
         bail!(
             "--tau must be a non-negative number of pixels, got {}",
@@ -377,8 +368,11 @@ pub fn run(a: RenderArgs) -> Result<()> {
     Ok(())
 }
 
+/// What the samples tab's image is framed on: egui's dark panel grey.
+const TAB_BACKGROUND: [u8; 4] = [27, 27, 27, 255];
+
 /// `relevo-view render --tab samples`: the samples tab's image written as
-/// a PNG.
+/// a PNG of `--size`.
 fn render_samples_tab(a: &RenderArgs) -> Result<()> {
     let csv = match &a.samples {
         Some(path) => std::fs::read_to_string(path)
@@ -397,10 +391,13 @@ fn render_samples_tab(a: &RenderArgs) -> Result<()> {
         }
     };
     let (rgba, [w, h], objects) = crate::samples::render_tab(&a.bundle, &csv)?;
-    let png = encode_rgba(&rgba, w, h)?;
+    // The drape fitted into --size, as the tab shows it in the window.
+    let [out_w, out_h] = a.size.map(|side| side as usize);
+    let framed = relevo_core::raster::fit::fit_rgba(&rgba, w, h, out_w, out_h, TAB_BACKGROUND)?;
+    let png = encode_rgba(&framed, out_w, out_h)?;
     relevo_core::atomic::write_file(&a.out, &png)?;
     println!(
-        "{}: {w}×{h} samples tab of {}, {objects} objects detected",
+        "{}: {out_w}×{out_h} samples tab of {} (its {w}×{h} drape fitted), {objects} objects detected",
         a.out.display(),
         a.bundle.display()
     );

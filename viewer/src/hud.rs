@@ -4,8 +4,9 @@
 //! `relevo-view render --hud` paints the same lines into the image.
 
 use crate::flight::Flight;
-use crate::gpu::{FrameStats, Mode, Settings};
+use crate::gpu::FrameStats;
 use crate::scene::Scene;
+use crate::settings::{Mode, Settings};
 use eframe::egui;
 
 /// What the HUD reports.
@@ -63,13 +64,14 @@ pub fn lines(r: &Readings) -> Vec<String> {
     if let Some(v) = r.scene.and_then(|scene| scene.vegetation.as_ref()) {
         if s.objects {
             lines.push(format!(
-                "vegetation ({}{}): {} objects represented, {} impostors drawn ({} views), {:.2} ms",
+                "vegetation ({}{}): {} objects represented",
                 s.vegetation,
                 if s.sprites { ", sprites" } else { "" },
                 r.stats.vegetation_represented,
-                r.stats.impostors,
-                r.stats.impostor_views,
-                r.stats.cut_ms
+            ));
+            lines.push(format!(
+                "  {} impostors drawn ({} views), cut {:.2} ms",
+                r.stats.impostors, r.stats.impostor_views, r.stats.cut_ms
             ));
             let per_depth: Vec<String> = v
                 .list
@@ -86,12 +88,15 @@ pub fn lines(r: &Readings) -> Vec<String> {
                 .map(|b| format!("{:.0}m:{}", b.until_m, b.max_cluster))
                 .collect();
             lines.push(format!(
-                "clusters by depth {}   bands {}   top view {}",
+                "  clusters by depth {}",
                 if per_depth.is_empty() {
                     "none".to_string()
                 } else {
                     per_depth.join(" ")
                 },
+            ));
+            lines.push(format!(
+                "  bands {}   top view {}",
                 bands.join(" "),
                 if s.automatic_view_angle {
                     "where it shows more".to_string()
@@ -119,16 +124,22 @@ pub fn paint(
     history: usize,
 ) {
     let font = egui::FontId::monospace(13.0);
+    let galleys: Vec<_> = lines
+        .iter()
+        .map(|line| painter.layout_no_wrap(line.clone(), font.clone(), egui::Color32::WHITE))
+        .collect();
+    // As wide as the longest line (at least 430 px), within the view.
+    let widest = galleys.iter().map(|g| g.size().x).fold(0.0, f32::max);
+    let width = (widest + 16.0).max(430.0).min(rect.width() - 16.0);
     let height = 16.0 * lines.len() as f32 + 60.0;
     let panel =
-        egui::Rect::from_min_size(rect.min + egui::vec2(8.0, 8.0), egui::vec2(430.0, height));
+        egui::Rect::from_min_size(rect.min + egui::vec2(8.0, 8.0), egui::vec2(width, height));
     painter.rect_filled(panel, 4.0, egui::Color32::from_black_alpha(150));
-    for (k, line) in lines.iter().enumerate() {
-        painter.text(
+    let text = painter.with_clip_rect(panel);
+    for (k, galley) in galleys.into_iter().enumerate() {
+        text.galley(
             panel.min + egui::vec2(8.0, 6.0 + 16.0 * k as f32),
-            egui::Align2::LEFT_TOP,
-            line,
-            font.clone(),
+            galley,
             egui::Color32::WHITE,
         );
     }

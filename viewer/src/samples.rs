@@ -8,6 +8,7 @@
 
 use eframe::egui;
 use relevo_core::bundle::Bundle;
+use relevo_core::cluster::model::ModelSource;
 use relevo_core::cluster::store::{self, NewVegetation};
 use relevo_core::veg::db::VegObject;
 use relevo_core::veg::pipeline::{self, VegImage, VegOptions, Watch};
@@ -130,13 +131,16 @@ impl SamplesTab {
         }
     }
 
-    /// The samples as the CSV `samples::parse_csv` reads.
+    /// The samples as the CSV `samples::parse_csv` reads, in whole pixels.
+    /// The rectangles already lie on the drape (drawn on it, or read from a
+    /// file checked against its size), so nothing is clipped.
     pub fn samples_csv(&self) -> String {
-        let mut csv = String::from("class;xmin;ymin;xmax;ymax\n");
-        for (class, [x0, y0, x1, y1]) in &self.samples {
-            csv.push_str(&format!("{class};{x0:.0};{y0:.0};{x1:.0};{y1:.0}\n"));
-        }
-        csv
+        let rectangles: Vec<Sample> = self
+            .samples
+            .iter()
+            .map(|(class, bounds)| Sample::rectangle(class, bounds.map(|v| f64::from(v).round())))
+            .collect();
+        relevo_core::veg::samples::to_csv(&rectangles, usize::MAX, usize::MAX)
     }
 
     /// Start detection on the drape with the marked samples.
@@ -184,13 +188,10 @@ impl SamplesTab {
         let bundle = Bundle::open(&self.bundle)?;
         let (options, models) = match store::read_index(&bundle)? {
             Some(index) => {
-                let models: BTreeMap<String, String> = index
+                let models: BTreeMap<String, ModelSource> = index
                     .classes
                     .iter()
-                    .map(|c| {
-                        let model = c.model.strip_prefix("procedural:").unwrap_or(&c.model);
-                        (c.name.clone(), model.to_string())
-                    })
+                    .map(|c| (c.name.clone(), c.model.clone()))
                     .collect();
                 (index.options, models)
             }
@@ -512,15 +513,9 @@ pub fn render_tab(
     let found = detect(bundle, samples_csv, &options, &Watch::default())?;
     let mut rgba = found.overlay;
     for sample in relevo_core::veg::samples::parse_csv(samples_csv, w, h)? {
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [0f64; 2]);
-        for p in &sample.polygon {
-            for k in 0..2 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
-        }
-        let (x0, x1) = (lo[0].max(0.0) as usize, (hi[0] as usize).min(w - 1));
-        let (y0, y1) = (lo[1].max(0.0) as usize, (hi[1] as usize).min(h - 1));
+        let [x0, y0, x1, y1] = sample.bounds();
+        let (x0, x1) = (x0.max(0.0) as usize, (x1 as usize).min(w - 1));
+        let (y0, y1) = (y0.max(0.0) as usize, (y1 as usize).min(h - 1));
         for y in y0..=y1 {
             for x in x0..=x1 {
                 if y == y0 || y == y1 || x == x0 || x == x1 {

@@ -4,7 +4,7 @@
 //! vegetation clusters. Everything the
 //! viewer computes about terrain goes through these core types.
 
-use crate::gpu::{Settings, VegetationSelection};
+use crate::settings::{Settings, VegetationSelection};
 use anyhow::{Context, Result};
 use relevo_core::bundle::{Array, Bundle, LpArray};
 use relevo_core::camera::Camera;

@@ -10,7 +10,7 @@ use eframe::egui::Key;
 use egui_kittest::kittest::Queryable;
 use egui_kittest::Harness;
 use relevo_view::app::ViewerApp;
-use relevo_view::gpu::Mode;
+use relevo_view::settings::Mode;
 
 /// The viewer's window on `bundle`, 1000×640, drawn by the wgpu renderer
 /// on lavapipe unless a driver is pinned.
@@ -230,7 +230,7 @@ fn samples_are_dragged_detected_and_accepted_in_the_window() {
     assert_eq!(harness.state().error(), None);
     let reopened = relevo_core::bundle::Bundle::open(&bundle).unwrap();
     assert_eq!(
-        relevo_core::bundle::validate(&reopened),
+        relevo_core::validation::validate(&reopened),
         Vec::<String>::new()
     );
     assert_eq!(reopened.vegetation().unwrap().unwrap().len(), found);

@@ -5,7 +5,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
-use common::grenoble_bundle;
+use common::{grenoble_bundle, grenoble_bundle_with_drape};
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -198,6 +198,7 @@ fn bad_bundles_are_refused_with_their_name() {
         (vec!["--camera", "1,2"], "--camera"),
         (vec!["--fov", "0"], "--fov"),
         (vec!["--size", "0x5"], "WIDTHxHEIGHT"),
+        (vec!["--depth", out_png.to_str().unwrap()], "named twice"),
     ] {
         let mut all: Vec<&std::ffi::OsStr> = vec![
             "render".as_ref(),
@@ -210,4 +211,55 @@ fn bad_bundles_are_refused_with_their_name() {
         assert!(!out.status.success());
         assert!(String::from_utf8_lossy(&out.stderr).contains(needle));
     }
+}
+
+/// `relevo-view render --tab samples` writes the image at `--size`, the
+/// drape fitted in it as the tab shows it (a square drape in a wide frame:
+/// background left and right, the drape in the middle).
+#[test]
+fn the_samples_tab_renders_at_the_size_asked() {
+    let dir = tempfile::tempdir().unwrap();
+    let bundle = grenoble_bundle_with_drape(dir.path());
+    let samples = dir.path().join("samples.csv");
+    std::fs::write(
+        &samples,
+        "class;xmin;ymin;xmax;ymax\nforest;20;20;40;40\nother;100;100;130;130\n",
+    )
+    .unwrap();
+    let shot = dir.path().join("tab.png");
+    let out = viewer(
+        &[
+            "render".as_ref(),
+            bundle.as_os_str(),
+            "--tab".as_ref(),
+            "samples".as_ref(),
+            "--samples".as_ref(),
+            samples.as_os_str(),
+            "--size".as_ref(),
+            "320x200".as_ref(),
+            "--out".as_ref(),
+            shot.as_os_str(),
+        ],
+        false,
+        dir.path(),
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (rgba, w, h) = decode_png(&shot);
+    assert_eq!((w, h), (320, 200));
+    let pixel = |x: usize, y: usize| &rgba[(y * w + x) * 4..(y * w + x) * 4 + 4];
+    assert_eq!(
+        pixel(5, 100),
+        [27, 27, 27, 255],
+        "background left of the drape"
+    );
+    assert_eq!(pixel(314, 100), [27, 27, 27, 255], "background right of it");
+    assert_ne!(
+        pixel(160, 100),
+        [27, 27, 27, 255],
+        "the drape in the middle"
+    );
 }

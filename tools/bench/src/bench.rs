@@ -1,7 +1,8 @@
-//! The benchmark runners: measured figures, side by side with reference
+//! The ingest, hierarchy and vegetation runners: measured figures, side by side with reference
 //! tools, as text or one JSON object per line. Timings are medians of
 //! repeated runs of release builds; nothing here is asserted by tests.
 
+use crate::measure::{emit, median, median_ms, srtm_padded, tempfile_dir};
 use anyhow::{bail, Context, Result};
 use relevo::ingest::gdalio;
 use relevo::ingest::stitch::{stitch, StitchOptions};
@@ -13,37 +14,6 @@ use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
-
-/// Median of a non-empty set of values (mean of the middle two when even).
-pub fn median(values: &[f64]) -> f64 {
-    let mut v = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        (v[n / 2 - 1] + v[n / 2]) / 2.0
-    }
-}
-
-/// Median wall time in milliseconds of `runs` calls of `f`.
-pub fn median_ms(runs: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
-    let mut times = Vec::with_capacity(runs);
-    for _ in 0..runs {
-        let start = Instant::now();
-        f()?;
-        times.push(start.elapsed().as_secs_f64() * 1e3);
-    }
-    Ok(median(&times))
-}
-
-pub fn emit(json_lines: bool, value: serde_json::Value, text: String) {
-    if json_lines {
-        println!("{value}");
-    } else {
-        println!("{text}");
-    }
-}
 
 /// Ingest figures: `prep` on the sample region, and `stitch` on the Landsat
 /// overlap against gdalwarp doing the same job.
@@ -145,27 +115,6 @@ pub fn ingest(repo: &Path, data: &Path, runs: usize, json_lines: bool) -> Result
     Ok(())
 }
 
-/// A fresh scratch folder under the system temp dir.
-pub fn tempfile_dir() -> Result<PathBuf> {
-    let dir = std::env::temp_dir().join(format!("relevo-bench-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).with_context(|| dir.display().to_string())?;
-    Ok(dir)
-}
-
-/// The raw srtm_ref DEM (1000², no reprojection) padded to 1025².
-pub fn srtm_padded(data: &Path) -> Result<relevo_core::grid::HeightGrid> {
-    use relevo_core::grid::{HeightGrid, Squaring};
-    let srtm = gdalio::open(&data.join("dem/srtm_ref.tif"))?;
-    let raw = srtm.read(srtm.nodata)?;
-    Ok(HeightGrid::square(
-        raw.band(0),
-        raw.width,
-        raw.height,
-        relevo_core::geo::GeoTransform::IDENTITY,
-        Squaring::Pad,
-    ))
-}
-
 /// Hierarchy figures: ours beside @mapbox/martini on the same grids, and
 /// view-dependent refinement on each grid.
 pub fn hierarchy(
@@ -219,7 +168,7 @@ pub fn hierarchy(
                 .arg(&file)
                 .arg(side.to_string())
                 .output()
-                .context("cannot run node (scripts/setup installs it and martini)")?;
+                .context("cannot run node (scripts/setup-test installs it and martini)")?;
             if !out.status.success() {
                 bail!(
                     "martini benchmark failed: {}",

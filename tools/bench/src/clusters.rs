@@ -3,7 +3,7 @@
 //! sample region, and at 10k–1M objects over a 4097² terrain — with the
 //! selection time, and the bake's time and atlas bytes.
 
-use crate::bench::{emit, median, tempfile_dir};
+use crate::measure::{emit, median, tempfile_dir};
 use anyhow::{Context, Result};
 use glam::DVec3;
 use relevo::prep::region::Region;
@@ -354,7 +354,7 @@ pub fn pictures(repo: &Path, out: &Path) -> Result<()> {
         .iter()
         .map(|k| ClassSource {
             name: k.name().into(),
-            source: format!("procedural:{}", k.name()),
+            source: relevo_core::cluster::model::ModelSource::Procedural(*k),
             model: k.model(1),
         })
         .collect();

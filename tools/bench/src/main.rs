@@ -6,6 +6,7 @@
 
 mod bench;
 mod clusters;
+mod measure;
 mod render;
 mod veg_protocol;
 mod view;
@@ -39,7 +40,7 @@ enum BenchCommand {
     /// `prep` on the sample region; `stitch` on the Landsat overlap beside gdalwarp.
     #[command(after_help = "Examples:
   relevo-bench ingest
-  relevo-bench ingest --json --runs 7 --data ../shared/data")]
+  relevo-bench ingest --json --runs 7")]
     Ingest(BenchArgs),
     /// LP errors and radii beside @mapbox/martini; view-dependent refinement.
     #[command(after_help = "Examples:
@@ -100,7 +101,7 @@ enum BenchCommand {
     /// contrast-changed copies.
     #[command(after_help = "Examples:
   relevo-bench veg-protocol
-  relevo-bench veg-protocol --json --data ../shared/data")]
+  relevo-bench veg-protocol --json")]
     VegProtocol(BenchArgs),
     /// The viewer's vegetation on the GPU found (lavapipe without one), at
     /// 1280×720: the seed's tables 4.1–4.5 (billboards against sprites,
@@ -160,12 +161,21 @@ struct BenchArgs {
     /// Runs per figure; the median is reported.
     #[arg(long, default_value_t = 5)]
     runs: usize,
-    /// The shared real-data folder (tiles/, dem/, …).
-    #[arg(long, env = "RELEVO_SHARED_DATA", default_value = "../shared/data")]
+    /// The real inputs (tiles/, dem/, …) that scripts/fetch-data extracts
+    /// from their registry packages.
+    #[arg(long, env = "RELEVO_SHARED_DATA", default_value_os_t = fetched_data())]
     data: PathBuf,
     /// The Relevo repository (for data/olinda).
     #[arg(long, default_value = ".")]
     repo: PathBuf,
+}
+
+/// Where scripts/fetch-data puts the real inputs: `~/.cache/relevo/data`.
+fn fetched_data() -> PathBuf {
+    std::env::var_os("HOME")
+        .map(PathBuf::from)
+        .unwrap_or_default()
+        .join(".cache/relevo/data")
 }
 
 fn main() -> ExitCode {

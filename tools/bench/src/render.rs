@@ -4,7 +4,7 @@
 //! loop as the baseline and the time to merely write a frame as the memory
 //! floor.
 
-use crate::bench::{emit, median, srtm_padded};
+use crate::measure::{emit, median, srtm_padded};
 use anyhow::Result;
 use rayon::prelude::*;
 use relevo_core::bundle::Bundle;

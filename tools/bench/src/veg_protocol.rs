@@ -8,7 +8,7 @@
 //! averages, the crown spacing); the best F1 on the tuning image wins, ties
 //! going to the grid point nearest the shipped defaults.
 
-use crate::bench::emit;
+use crate::measure::emit;
 use anyhow::Result;
 use relevo_core::veg::eval::{self, Evaluation};
 use relevo_core::veg::pipeline::{extract, Contrast, VegImage, VegOptions};

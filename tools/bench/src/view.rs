@@ -5,7 +5,7 @@
 //! upload, objects) and the comparison of table 3.1/8.3 (raycast against
 //! each Z-buffer representation).
 
-use crate::bench::{emit, median};
+use crate::measure::{emit, median};
 use anyhow::{Context, Result};
 use relevo::prep::prep;
 use relevo::prep::region::Region;
@@ -15,9 +15,10 @@ use relevo_core::grid::{fractal_heights, HeightGrid};
 use relevo_core::horizon::Arithmetic;
 use relevo_core::zbuffer::{self, Representation};
 use relevo_view::flight::Flight;
-use relevo_view::gpu::{FrameStats, Mode, Renderer, Settings, VegetationSelection};
+use relevo_view::gpu::{FrameStats, Renderer};
 use relevo_view::headless::{device, wait_for_gpu};
 use relevo_view::scene::Scene;
+use relevo_view::settings::{Mode, Settings, VegetationSelection};
 use serde_json::json;
 use std::path::Path;
 use std::time::Instant;
@@ -32,7 +33,7 @@ pub fn view(
     max_side: usize,
     json_lines: bool,
 ) -> Result<()> {
-    let scratch = crate::bench::tempfile_dir()?;
+    let scratch = crate::measure::tempfile_dir()?;
     let (device, queue, adapter) = device()?;
     emit(
         json_lines,
@@ -119,7 +120,7 @@ pub fn view(
                 mode: Mode::Raycast,
                 ..Default::default()
             };
-            bands.raycast.bands = relevo_view::gpu::detailed_bands();
+            bands.raycast.bands = relevo_view::settings::detailed_bands();
             configs.push(("raycast bands+sub".into(), bands));
             if side * side <= zbuffer::MAX_VERTICES {
                 for r in Representation::ALL {

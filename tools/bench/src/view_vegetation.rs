@@ -5,7 +5,7 @@
 //! 1M) for the plain list, blobs and the quadtree cut. A frame is timed
 //! from the start of its CPU work until the GPU has finished it.
 
-use crate::bench::{emit, median};
+use crate::measure::{emit, median};
 use anyhow::{Context, Result};
 use glam::DVec3;
 use relevo::prep::prep;
@@ -17,9 +17,10 @@ use relevo_core::cluster::cut::CutOptions;
 use relevo_core::cluster::store::{rewrite_bundle, NewVegetation};
 use relevo_core::geo::TerrainFrame;
 use relevo_core::veg::db::VegObject;
-use relevo_view::gpu::{Device, FrameStats, Mode, Queue, Renderer, Settings, VegetationSelection};
+use relevo_view::gpu::{Device, FrameStats, Queue, Renderer};
 use relevo_view::headless::{device, wait_for_gpu};
 use relevo_view::scene::Scene;
+use relevo_view::settings::{Mode, Settings, VegetationSelection};
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -121,7 +122,7 @@ struct Bench {
 }
 
 pub fn run(repo: &Path, runs: usize, max_objects: usize, json: bool) -> Result<()> {
-    let scratch = crate::bench::tempfile_dir()?;
+    let scratch = crate::measure::tempfile_dir()?;
     let (device, queue, adapter) = device()?;
     emit(
         json,

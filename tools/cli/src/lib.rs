@@ -6,10 +6,12 @@
 //! - [`commands`]: the argument tree, the dispatch, one file per subcommand.
 //! - [`ingest`]: GDAL reading, warping and writing; CRSs; stitching tiles.
 //! - [`prep`]: the stage list that builds a bundle, and REGION.toml.
+//! - [`clusters`]: baking clusters with progress, and their report.
 //! - [`veg_io`]: vegetation inputs and exports through GDAL.
 //! - [`output`]: the existing-output check and atomic writes every writer uses.
 //! - [`progress`]: progress bars.
 
+pub mod clusters;
 pub mod commands;
 pub mod ingest;
 pub mod output;

@@ -1,37 +1,16 @@
 //! Every file a command writes goes through here: outputs are checked
 //! before any work (an existing file is kept unless `--force`, a missing
-//! folder is named), and written as `.NAME.partial` then renamed, so a
+//! folder is named, two outputs on one path are refused), and written as `.NAME.partial` then renamed, so a
 //! reader never sees half a file.
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use std::path::Path;
 
-/// Refuse to replace `out` without `force`, and name a missing output folder,
-/// before any work is done.
-pub fn check(out: &Path, force: bool) -> Result<()> {
-    if out.exists() && !force {
-        bail!(
-            "{}: already exists (pass --force to replace it)",
-            out.display()
-        );
-    }
-    check_folder(out)
-}
-
-/// Name a missing output folder before any work is done.
-pub fn check_folder(out: &Path) -> Result<()> {
-    let parent = out
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    if !parent.is_dir() {
-        bail!(
-            "{}: cannot write, folder {} does not exist",
-            out.display(),
-            parent.display()
-        );
-    }
-    Ok(())
+/// Refuse, before any work, outputs that cannot all be written: an existing
+/// file without `force`, a missing folder, two outputs on one path
+/// (relevo-core's check, which the viewer uses too).
+pub fn check(outputs: &[&Path], force: bool) -> Result<()> {
+    Ok(relevo_core::atomic::check_outputs(outputs, force)?)
 }
 
 /// Write `bytes` to `path` through a partial file renamed into place.

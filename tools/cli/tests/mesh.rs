@@ -19,14 +19,14 @@ fn glb_json(path: &Path) -> Value {
     serde_json::from_slice(&bytes[20..20 + len]).unwrap()
 }
 
-/// Run the Khronos validator (installed by scripts/setup) on a .glb.
+/// Run the Khronos validator (installed by scripts/setup-test) on a .glb.
 fn khronos_validate(path: &Path) -> Value {
     let script = repo("tools/js/validate-gltf.mjs");
     let out = Command::new("node")
         .arg(script)
         .arg(path)
         .output()
-        .expect("node is installed by scripts/setup");
+        .expect("node is installed by scripts/setup-test");
     let report: Value = serde_json::from_slice(&out.stdout)
         .unwrap_or_else(|_| panic!("validator output: {}", String::from_utf8_lossy(&out.stderr)));
     assert!(

@@ -1,9 +1,72 @@
 //! Whole files or nothing: every file Relevo writes outside a bundle goes
 //! to a partial file beside its path (`.NAME.partial`) that is renamed onto
-//! the path only when complete, so a reader never sees half a file.
+//! the path only when complete, so a reader never sees half a file. Before
+//! any work, [`check_outputs`] refuses outputs that would replace a file
+//! unasked, land in a missing folder, or overwrite each other.
 
 use crate::{Error, Result};
 use std::path::{Path, PathBuf};
+
+/// Refuse, before any work, the outputs of one command that cannot all be
+/// written: an existing file without `force`, a folder that does not exist,
+/// or two outputs on one path (the second would silently replace the
+/// first). Both binaries check their outputs here, in the same words.
+///
+/// ```
+/// use relevo_core::atomic::check_outputs;
+/// use std::path::Path;
+/// let dir = std::env::temp_dir();
+/// let (a, b) = (dir.join("relevo-doc-a.png"), dir.join("relevo-doc-b.f32"));
+/// assert!(check_outputs(&[&a, &b], false).is_ok());
+/// assert!(check_outputs(&[&a, &a], true).unwrap_err().to_string().contains("twice"));
+/// assert!(check_outputs(&[Path::new("/no/such/dir/x.png")], true).is_err());
+/// ```
+pub fn check_outputs(outputs: &[&Path], force: bool) -> Result<()> {
+    for (k, out) in outputs.iter().enumerate() {
+        if outputs[..k].iter().any(|earlier| same_path(earlier, out)) {
+            return Err(Error::invalid(
+                out,
+                "named twice as an output (each output needs its own path)",
+            ));
+        }
+        if out.exists() && !force {
+            return Err(Error::invalid(
+                out,
+                "already exists (pass --force to replace it)",
+            ));
+        }
+        let parent = out
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        if !parent.is_dir() {
+            return Err(Error::invalid(
+                out,
+                format!("cannot write, folder {} does not exist", parent.display()),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Do two output paths name one file (also through `.` or a link to an
+/// existing folder)?
+fn same_path(a: &Path, b: &Path) -> bool {
+    let resolved = |p: &Path| {
+        let name = p.file_name().map(|n| n.to_os_string());
+        let parent = p
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        (
+            parent
+                .canonicalize()
+                .unwrap_or_else(|_| parent.to_path_buf()),
+            name,
+        )
+    };
+    a == b || resolved(a) == resolved(b)
+}
 
 /// `DIR/.NAME.partial` beside `path`.
 pub fn partial_path(path: &Path) -> PathBuf {

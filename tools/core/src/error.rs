@@ -1,19 +1,16 @@
 use std::path::PathBuf;
 
-/// Everything that can go wrong inside relevo-core.
+/// Everything that can go wrong inside relevo-core. Each message is whole:
+/// the underlying error is part of the text, not a separate source, so a
+/// printer of the error chain (`{:#}`) does not repeat it.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    #[error("{path}: {source}")]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-    #[error("{path}: invalid manifest: {source}")]
+    #[error("{path}: {io}")]
+    Io { path: PathBuf, io: std::io::Error },
+    #[error("{path}: invalid manifest: {json}")]
     Manifest {
         path: PathBuf,
-        #[source]
-        source: serde_json::Error,
+        json: serde_json::Error,
     },
     #[error("{path}: {message}")]
     Invalid { path: PathBuf, message: String },
@@ -25,7 +22,7 @@ impl Error {
     pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io {
             path: path.into(),
-            source,
+            io: source,
         }
     }
     pub(crate) fn invalid(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {

@@ -162,7 +162,7 @@ fn nearest_fill(values: &[f64], width: usize, height: usize) -> Vec<f64> {
     let mut out = values.to_vec();
     let mut queue: VecDeque<usize> = (0..values.len()).filter(|&i| !values[i].is_nan()).collect();
     while let Some(i) = queue.pop_front() {
-        for n in crate::raster::neighbours4(i, width, height) {
+        for n in neighbours4(i, width, height) {
             if out[n].is_nan() {
                 out[n] = out[i];
                 queue.push_back(n);
@@ -181,6 +181,20 @@ fn bilinear(values: &[f64], width: usize, height: usize, x: f64, y: f64) -> f64 
     let top = at(x0, y0) * (1.0 - fx) + at(x1, y0) * fx;
     let bottom = at(x0, y1) * (1.0 - fx) + at(x1, y1) * fx;
     top * (1.0 - fy) + bottom * fy
+}
+
+/// The up-to-four edge neighbours of cell `i` (row-major) of a
+/// `width`×`height` grid.
+pub fn neighbours4(i: usize, width: usize, height: usize) -> impl Iterator<Item = usize> {
+    let (c, r) = (i % width, i / width);
+    [
+        (c > 0).then(|| i - 1),
+        (c + 1 < width).then(|| i + 1),
+        (r > 0).then(|| i - width),
+        (r + 1 < height).then(|| i + width),
+    ]
+    .into_iter()
+    .flatten()
 }
 
 /// Unit normal (terrain frame, z up) of the full-resolution surface at

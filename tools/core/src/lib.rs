@@ -23,7 +23,9 @@
 //!   quadtree with baked views, atlases, the cut chosen from a camera.
 //! - [`zbuffer`]: the grid as geometry in the seven Z-buffer
 //!   representations the floating horizon is compared with.
-//! - [`bundle`]: the `NAME.relevo/` directory: manifest, artifacts, validation.
+//! - [`bundle`]: the `NAME.relevo/` directory: manifest, artifacts, their checks.
+//! - [`validation`]: a whole bundle checked, clusters included.
+//! - [`memory`]: the memory budget every large allocation is checked against.
 
 pub mod atomic;
 pub mod bundle;
@@ -37,6 +39,7 @@ pub mod memory;
 pub mod objects;
 pub mod raster;
 pub mod scene;
+pub mod validation;
 pub mod veg;
 pub mod zbuffer;
 

@@ -159,6 +159,30 @@ pub fn camera(frame: &TerrainFrame, view: &View) -> Result<Camera> {
     })
 }
 
+/// Refuse a field of view or far plane no renderer can use, in the words
+/// both programs print: the field of view (degrees) lies in (0, 179), the
+/// far plane (grid cells) is finite and at least 2.
+///
+/// ```
+/// use relevo_core::scene::check_view_limits;
+/// assert!(check_view_limits(60.0, 1024.0).is_ok());
+/// assert!(check_view_limits(180.0, 1024.0).unwrap_err().to_string().contains("--fov"));
+/// assert!(check_view_limits(60.0, f64::INFINITY).is_err());
+/// ```
+pub fn check_view_limits(fov_x_deg: f64, far_cells: f64) -> Result<()> {
+    if !(fov_x_deg > 0.0 && fov_x_deg < 179.0) {
+        return Err(Error::Input(format!(
+            "--fov must be between 0 and 179 degrees, got {fov_x_deg}"
+        )));
+    }
+    if !(far_cells.is_finite() && far_cells >= 2.0) {
+        return Err(Error::Input(format!(
+            "--far must be a finite number of at least 2 cells, got {far_cells}"
+        )));
+    }
+    Ok(())
+}
+
 /// Parse an image size `WIDTHxHEIGHT`, each 1 to 16384 pixels.
 pub fn parse_size(text: &str) -> Result<[u32; 2], String> {
     let (w, h) = text

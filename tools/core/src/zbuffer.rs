@@ -7,24 +7,24 @@
 //! (f32 keeps centimetres); colours come from the caller (the drape at the
 //! vertex, or a height ramp). Cells with a masked vertex are left out.
 
-/// One of the thesis's representations [a]–[g].
+/// One of the thesis's representations \[a\]–\[g\].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Representation {
-    /// [a] one point at the centre of each block's top face.
+    /// \[a\] one point at the centre of each block's top face.
     Points,
-    /// [b] the top face of each block.
+    /// \[b\] the top face of each block.
     TopFaces,
-    /// [c] the vertical faces between neighbouring blocks (the ones facing
+    /// \[c\] the vertical faces between neighbouring blocks (the ones facing
     /// the viewer survive back-face culling).
     FrontFaces,
-    /// [d] a vertical segment from the base to each block's top.
+    /// \[d\] a vertical segment from the base to each block's top.
     Segments,
-    /// [e] the blocks themselves, six faces each.
+    /// \[e\] the blocks themselves, six faces each.
     Blocks,
-    /// [f] the tops triangulated by their diagonals, one colour a triangle.
+    /// \[f\] the tops triangulated by their diagonals, one colour a triangle.
     FlatTriangles,
-    /// [g] the same triangles, colours interpolated between vertices.
+    /// \[g\] the same triangles, colours interpolated between vertices.
     SmoothTriangles,
 }
 

@@ -4,8 +4,9 @@
 //! largest frame seen and is reused; nothing else is allocated per frame.
 
 use super::targets::{Targets, COLOUR_FORMAT};
-use super::{eye_relative_view_projection, FrameStats, Settings, SUN};
+use super::{eye_relative_view_projection, FrameStats, SUN};
 use crate::scene::Scene;
+use crate::settings::Settings;
 use bytemuck::{Pod, Zeroable};
 use eframe::egui_wgpu::wgpu;
 use glam::DVec3;

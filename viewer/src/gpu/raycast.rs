@@ -6,8 +6,9 @@
 //! uploads colour alone (Szenberg 1997, table 8.1).
 
 use super::targets::{Targets, COLOUR_FORMAT};
-use super::{FrameStats, Settings};
+use super::FrameStats;
 use crate::scene::Scene;
+use crate::settings::Settings;
 use eframe::egui_wgpu::wgpu;
 use relevo_core::camera::Camera;
 use relevo_core::horizon::TILE_COLUMNS;

@@ -4,9 +4,9 @@
 //! depth-tested against it. The instance buffer is reused across frames.
 
 use super::targets::Targets;
-use super::Settings;
 use super::{eye_relative_view_projection, COLOUR_FORMAT};
 use crate::scene::Vegetation;
+use crate::settings::Settings;
 use bytemuck::{Pod, Zeroable};
 use eframe::egui_wgpu::wgpu;
 use relevo_core::camera::Camera;

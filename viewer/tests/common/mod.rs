@@ -39,9 +39,9 @@ pub fn grenoble_bundle(dir: &Path) -> PathBuf {
 
 /// The Grenoble crop with a drape derived from its heights (tint and
 /// hillshade, one pixel per vertex), for the samples tab.
-#[allow(dead_code)] // only the UI tests mark samples
+#[allow(dead_code)] // used by the UI and window tests, not the flight tests
 pub fn grenoble_bundle_with_drape(dir: &Path) -> PathBuf {
-    use relevo_core::bundle::{names, Bundle, BundleWriter, ColorInfo, Dtype};
+    use relevo_core::bundle::{Bundle, BundleWriter, ColorInfo};
     let path = grenoble_bundle(dir);
     let bundle = Bundle::open(&path).unwrap();
     let side = bundle.manifest.grid.side;
@@ -54,17 +54,14 @@ pub fn grenoble_bundle_with_drape(dir: &Path) -> PathBuf {
         bundle.manifest.grid.cell_size_m,
         bundle.manifest.grid.height_range_m,
     );
-    let (writer, mut manifest) = BundleWriter::rewrite(&bundle, |_| true).unwrap();
-    let color = writer
-        .write_array(names::COLOR.file, Dtype::U8, &[side, side, 4], &rgba)
-        .unwrap();
-    manifest.artifacts.insert(names::COLOR.key.into(), color);
-    manifest.color = Some(ColorInfo {
+    let mut writer = BundleWriter::rewrite(&bundle, |_| true).unwrap();
+    let info = ColorInfo {
         width: side,
         height: side,
         geotransform: bundle.manifest.grid.geotransform,
         bands: [0, 0, 0],
-    });
+    };
+    writer.write_drape(&rgba, info).unwrap();
     drop((heights, mask, bundle));
-    writer.commit(&manifest).unwrap()
+    writer.commit().unwrap()
 }

@@ -28,7 +28,7 @@ pub struct FillArgs {
 }
 
 pub fn run(a: FillArgs) -> Result<()> {
-    output::check(&a.out, a.force)?;
+    output::check(&[&a.out], a.force)?;
     let (mut raster, grid, band_type, nodata) = gdalio::read_single_band(&a.input, a.src_nodata)?;
     let (w, h) = (raster.width, raster.height);
     let report = fill_holes(raster.band_mut(0), w, h, a.max_hole);

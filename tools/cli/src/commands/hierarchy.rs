@@ -28,7 +28,7 @@ pub struct HierarchyArgs {
 }
 
 pub fn run(a: HierarchyArgs) -> Result<()> {
-    output::check(&a.out, a.force)?;
+    output::check(&[&a.out], a.force)?;
     let (raster, grid, _, _) = gdalio::read_single_band(&a.input, None)?;
     let side = raster.width;
     if raster.height != side || side < 3 || !(side - 1).is_power_of_two() {

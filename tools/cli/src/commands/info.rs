@@ -1,6 +1,6 @@
 //! `relevo info`: describe a bundle.
 
-use super::bake::print_report;
+use crate::clusters::print_report;
 use anyhow::Result;
 use clap::Args;
 use relevo_core::bundle::Bundle;

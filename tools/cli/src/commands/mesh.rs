@@ -1,7 +1,7 @@
 //! `relevo mesh`: the mesh at an object-space tolerance as glTF or OBJ.
 
 use crate::output;
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use clap::Args;
 use relevo_core::bundle::Bundle;
 use relevo_core::lp::{export, ErrorMetric};
@@ -73,10 +73,31 @@ pub fn run(a: MeshArgs) -> Result<()> {
         ],
         _ => Vec::new(),
     };
-    for path in std::iter::once(&a.out).chain(&side_files) {
-        output::check(path, a.force)?;
-    }
-    let m = export::build(&bundle, a.max_error, a.keep_padding)?;
+    let outputs: Vec<&Path> = std::iter::once(&a.out)
+        .chain(&side_files)
+        .map(PathBuf::as_path)
+        .collect();
+    output::check(&outputs, a.force)?;
+    let (heights, mask, lp, drape) = (
+        bundle.heights()?,
+        bundle.mask()?,
+        bundle.lp()?,
+        bundle.drape()?,
+    );
+    let surface = export::Surface {
+        frame: bundle.frame(),
+        heights: &heights,
+        mask: &mask,
+        hierarchy: lp.hierarchy(),
+        drape: drape.as_ref().map(|d| export::DrapeImage {
+            rgba: &d.rgba,
+            width: d.info.width,
+            height: d.info.height,
+            geotransform: d.info.geotransform,
+        }),
+    };
+    let m = export::build(&surface, a.max_error, a.keep_padding)
+        .with_context(|| a.bundle.display().to_string())?;
     match format {
         MeshFormat::Glb => {
             output::write_atomic(&a.out, &export::to_glb(&m, &bundle.manifest.crs.wkt)?)?;

@@ -40,8 +40,7 @@ pub fn run(a: PadArgs) -> Result<()> {
             .unwrap_or_default();
         a.out.with_file_name(format!("{stem}_mask.tif"))
     });
-    output::check(&a.out, a.force)?;
-    output::check(&mask_out, a.force)?;
+    output::check(&[&a.out, &mask_out], a.force)?;
     let (raster, grid, _, _) = gdalio::read_single_band(&a.input, a.src_nodata)?;
     if raster.width < 2 || raster.height < 2 {
         bail!(

@@ -110,7 +110,9 @@ pub fn run(a: PrepArgs) -> Result<()> {
             region
         }
     };
-    output::check_folder(&a.out)?;
+    // Only the folder is checked here: the bundle writer decides what an
+    // existing bundle at `--out` needs (`--force`).
+    output::check(&[&a.out], true)?;
     let summary = prep(&region, &a.out, a.force)?;
     if a.json {
         println!("{}", serde_json::to_string(&summary)?);

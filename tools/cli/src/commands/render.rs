@@ -8,7 +8,7 @@ use relevo_core::bundle::Bundle;
 use relevo_core::horizon::{Band, Mode};
 use relevo_core::raster::png::encode_rgba;
 use relevo_core::scene::{self, CameraPose, View};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
 pub struct RenderArgs {
@@ -78,19 +78,12 @@ pub enum RenderMode {
 }
 
 pub fn run(a: RenderArgs) -> Result<()> {
-    output::check(&a.out, a.force)?;
-    if let Some(d) = &a.depth {
-        output::check(d, a.force)?;
-    }
-    if !(a.fov > 0.0 && a.fov < 179.0) {
-        bail!("--fov must be between 0 and 179 degrees, got {}", a.fov);
-    }
-    if !(a.far.is_finite() && a.far >= 2.0) {
-        bail!(
-            "--far must be a finite number of at least 2 cells, got {}",
-            a.far
-        );
-    }
+    let outputs: Vec<&Path> = std::iter::once(&a.out)
+        .chain(&a.depth)
+        .map(PathBuf::as_path)
+        .collect();
+    output::check(&outputs, a.force)?;
+    scene::check_view_limits(a.fov, a.far)?;
     let pose = a.camera;
     if a.hillshade.as_ref().is_some_and(|h| h.len() != 2) {
         bail!("--hillshade takes AZIMUTH,ELEVATION");

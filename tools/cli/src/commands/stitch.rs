@@ -75,7 +75,7 @@ impl From<OverlapArg> for Overlap {
 }
 
 pub fn run(a: StitchArgs) -> Result<()> {
-    output::check(&a.out, a.force)?;
+    output::check(&[&a.out], a.force)?;
     if a.tr.as_ref().is_some_and(|v| v.len() > 2) {
         bail!("--tr takes X or X,Y");
     }

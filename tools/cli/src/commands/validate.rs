@@ -2,7 +2,8 @@
 
 use anyhow::{bail, Result};
 use clap::Args;
-use relevo_core::bundle::{validate, Bundle};
+use relevo_core::bundle::Bundle;
+use relevo_core::validation::validate;
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]

@@ -222,9 +222,7 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
         .chain(a.gpkg.iter())
         .chain(a.labels.iter())
         .chain(a.overlay.iter());
-    for path in outputs {
-        output::check(path, a.force)?;
-    }
+    output::check(&outputs.map(PathBuf::as_path).collect::<Vec<_>>(), a.force)?;
     let image = veg_io::read_image(&a.image, a.bands.as_deref(), a.stretch, a.pixel_size)?;
     let samples = samples::read_file(
         &a.samples,
@@ -403,7 +401,7 @@ fn score(
     json: bool,
 ) -> Result<()> {
     if let Some(path) = matches_out {
-        output::check(path, force)?;
+        output::check(&[path], force)?;
     }
     let read = |p: &Path| {
         std::fs::read_to_string(p).with_context(|| format!("{}: cannot read", p.display()))

@@ -1,12 +1,12 @@
 //! `relevo prep`: the whole chain from raw rasters to a bundle.
 //!
-//! The chain is the list [`STAGES`]; each stage is a function that reads what
-//! earlier stages left in [`Build`] and adds its own results. Adding a stage is
+//! The chain is the list `STAGES`; each stage is a function that reads what
+//! earlier stages left in `Build` and adds its own results. Adding a stage is
 //! writing one such function and listing it.
 
 pub mod region;
 
-use crate::commands::bake::ClustersSummary;
+use crate::clusters::{bake_with_progress, ClustersSummary};
 use crate::ingest::crs;
 use crate::ingest::gdalio::{self, GridSpec};
 use crate::ingest::stitch::{stitch, Mosaic, StitchOptions};
@@ -15,10 +15,9 @@ use anyhow::{bail, Context, Result};
 use gdal::raster::GdalDataType;
 use gdal::spatial_ref::SpatialRef;
 use region::Region;
-use relevo_core::bundle::names::{self, ArtifactName};
+use relevo_core::bundle::names;
 use relevo_core::bundle::{
-    sha256_file, Artifact, BundleWriter, ColorInfo, Crs, Dtype, GridInfo, InputFile, Manifest,
-    StageTiming, FORMAT, FORMAT_VERSION,
+    sha256_file, BundleWriter, ColorInfo, Crs, Description, GridInfo, InputFile, StageTiming,
 };
 use relevo_core::bundle::{MAX_IMAGE_SIDE, MAX_SIDE};
 use relevo_core::cluster::bake::BakeOptions;
@@ -88,10 +87,11 @@ struct Build<'a> {
     /// The drape as RGBA8, as written to `color.rgba8`.
     rgba: Vec<u8>,
     vegetation: Option<(VegImage, Extraction)>,
+    /// The samples the vegetation was detected from, on the drape (the CSV
+    /// the viewer's samples tab reads).
+    samples_csv: Option<String>,
     /// The baked clusters, the objects left off the terrain, the options.
     clusters: Option<(Clusters, usize, BakeOptions)>,
-    artifacts: BTreeMap<String, Artifact>,
-    exports: BTreeMap<String, Artifact>,
 }
 
 /// Run every stage and move the finished bundle to `out`.
@@ -114,9 +114,8 @@ pub fn prep(region: &Region, out: &Path, force: bool) -> Result<Summary> {
         color: None,
         rgba: Vec::new(),
         vegetation: None,
+        samples_csv: None,
         clusters: None,
-        artifacts: BTreeMap::new(),
-        exports: BTreeMap::new(),
     };
     let mut timings = Vec::new();
     let bar = crate::progress::bar(STAGES.len() as u64, "prep");
@@ -387,6 +386,7 @@ fn stage_vegetation(b: &mut Build) -> Result<()> {
     let extraction = pipeline::extract(&image, &samples, &section.options)
         .with_context(|| section.samples.display().to_string())?;
     tracing::info!(objects = extraction.objects.len(), "vegetation");
+    b.samples_csv = Some(samples::to_csv(&samples, grid.width, grid.height));
     b.vegetation = Some((image, extraction));
     Ok(())
 }
@@ -406,8 +406,8 @@ fn stage_clusters(b: &mut Build) -> Result<()> {
     };
     // From the database as stored (millimetres), so that `relevo bake`
     // on the bundle reproduces these clusters byte for byte.
-    let database = db::from_csv(&db::to_csv(&extraction.objects))?;
-    let (clusters, off_terrain) = crate::commands::bake::bake_with_progress(
+    let database = db::as_stored(&extraction.objects);
+    let (clusters, off_terrain) = bake_with_progress(
         &database,
         &frame,
         &grid.heights,
@@ -424,30 +424,10 @@ fn stage_write(b: &mut Build) -> Result<()> {
     let grid = b.grid.as_ref().context("grid stage did not run")?;
     let dem = b.dem.as_ref().context("dem stage did not run")?;
     let side = grid.side;
-    let array = |name: ArtifactName| (name.key.to_string(), name.file);
-    let (key, file) = array(names::HEIGHT);
-    b.artifacts.insert(
-        key,
-        b.writer
-            .write_array(file, Dtype::F32, &[side, side], &grid.heights)?,
-    );
-    let (key, file) = array(names::MASK);
-    b.artifacts.insert(
-        key,
-        b.writer
-            .write_array(file, Dtype::U8, &[side, side], &grid.mask)?,
-    );
+    b.writer.write_grid(grid)?;
     if let Some(h) = &b.hierarchy {
-        let values: &[f32] = bytemuck::cast_slice(&h.error_radius);
-        let (key, file) = array(names::LP);
-        b.artifacts.insert(
-            key,
-            b.writer
-                .write_array(file, Dtype::F32, &[side, side, 2], values)?,
-        );
+        b.writer.write_hierarchy(h)?;
     }
-    std::fs::create_dir_all(b.writer.dir().join(names::EXPORTS_DIR))
-        .context("cannot create exports/")?;
 
     let spec = GridSpec {
         crs_wkt: dem.grid.crs_wkt.clone(),
@@ -464,56 +444,56 @@ fn stage_write(b: &mut Build) -> Result<()> {
     let raster = Raster::from_data(side, side, 1, heights);
     let export = names::HEIGHT_GEOTIFF;
     gdalio::write_geotiff(
-        &b.writer.dir().join(export.file),
+        &b.writer.export_path(export)?,
         &raster,
         &spec,
         GdalDataType::Float32,
         Some(-9999.0),
     )?;
-    b.exports
-        .insert(export.key.into(), b.writer.record_file(export.file)?);
+    b.writer.record_export(export)?;
 
-    if let Some((drape_grid, _)) = &b.color {
+    if let Some((drape_grid, bands)) = &b.color {
         let rgba = &b.rgba;
         let (w, h) = (drape_grid.width, drape_grid.height);
-        let (key, file) = array(names::COLOR);
-        b.artifacts.insert(
-            key,
-            b.writer.write_array(file, Dtype::U8, &[h, w, 4], rgba)?,
-        );
+        let info = ColorInfo {
+            width: w,
+            height: h,
+            geotransform: drape_grid.geotransform,
+            bands: *bands,
+        };
+        b.writer.write_drape(rgba, info)?;
         let bands: Vec<f64> = (0..4)
             .flat_map(|c| rgba.iter().skip(c).step_by(4).map(|&v| v as f64))
             .collect();
         let raster = Raster::from_data(w, h, 4, bands);
         let export = names::COLOR_GEOTIFF;
         gdalio::write_geotiff(
-            &b.writer.dir().join(export.file),
+            &b.writer.export_path(export)?,
             &raster,
             drape_grid,
             GdalDataType::UInt8,
             None,
         )?;
-        b.exports
-            .insert(export.key.into(), b.writer.record_file(export.file)?);
+        b.writer.record_export(export)?;
     }
     if let Some((image, extraction)) = &b.vegetation {
-        let dir = b.writer.dir().to_path_buf();
-        let (key, file) = array(names::VEGETATION);
-        let csv = db::to_csv(&extraction.objects);
-        b.artifacts
-            .insert(key, b.writer.write_file(file, csv.as_bytes())?);
+        b.writer.write_vegetation(&extraction.objects)?;
+        if let Some(csv) = &b.samples_csv {
+            b.writer.write_vegetation_samples(csv)?;
+        }
         let export = names::VEGETATION_GEOPACKAGE;
-        veg_io::write_gpkg(&dir.join(export.file), &extraction.objects, &image.crs_wkt)?;
-        b.exports
-            .insert(export.key.into(), b.writer.record_file(export.file)?);
+        veg_io::write_gpkg(
+            &b.writer.export_path(export)?,
+            &extraction.objects,
+            &image.crs_wkt,
+        )?;
+        b.writer.record_export(export)?;
         let export = names::VEGETATION_LABELS;
-        veg_io::write_labels(&dir.join(export.file), image, extraction)?;
-        b.exports
-            .insert(export.key.into(), b.writer.record_file(export.file)?);
+        veg_io::write_labels(&b.writer.export_path(export)?, image, extraction)?;
+        b.writer.record_export(export)?;
     }
     if let Some((clusters, off_terrain, options)) = &b.clusters {
-        b.artifacts
-            .extend(store::write(&b.writer, clusters, options, *off_terrain)?);
+        store::write(&mut b.writer, clusters, options, *off_terrain)?;
     }
     Ok(())
 }
@@ -550,28 +530,17 @@ fn finish(b: Build, timings: Vec<StageTiming>) -> Result<Summary> {
         wkt: dem.grid.crs_wkt.clone(),
         epsg: dem.srs.as_ref().and_then(crs::epsg),
     };
-    let color = b.color.as_ref().map(|(grid, bands)| ColorInfo {
-        width: grid.width,
-        height: grid.height,
-        geotransform: grid.geotransform,
-        bands: *bands,
-    });
-    let manifest = Manifest {
-        format: FORMAT.into(),
-        format_version: FORMAT_VERSION,
+    let mut writer = b.writer;
+    writer.describe(Description {
         region: b.name.clone(),
-        tool_version: env!("CARGO_PKG_VERSION").into(),
         crs,
         grid: grid_info,
         lp_error_metric: b.region.grid.error_metric,
-        color: color.clone(),
         inputs,
         parameters,
-        artifacts: b.artifacts,
-        exports: b.exports,
         timings: timings.clone(),
-    };
-    let bundle = b.writer.commit(&manifest)?;
+    });
+    let bundle = writer.commit()?;
     Ok(Summary {
         bundle,
         region: b.name,
@@ -580,7 +549,7 @@ fn finish(b: Build, timings: Vec<StageTiming>) -> Result<Summary> {
         valid_vertices: grid.valid_count(),
         height_range_m,
         fill: b.fill,
-        color: color.map(|c| [c.width, c.height]),
+        color: b.color.as_ref().map(|(c, _)| [c.width, c.height]),
         vegetation: b.vegetation.as_ref().map(|(_, e)| e.objects.len()),
         clusters: b.clusters.as_ref().map(|(c, _, _)| ClustersSummary::of(c)),
         timings,

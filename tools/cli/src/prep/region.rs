@@ -5,7 +5,7 @@
 
 use crate::ingest::gdalio::Resampling;
 use anyhow::{anyhow, bail, Context, Result};
-use relevo_core::cluster::model::TreeKind;
+use relevo_core::cluster::model::ModelSource;
 use relevo_core::grid::Squaring;
 use relevo_core::raster::encoding::Encoding;
 use relevo_core::raster::mosaic::Overlap;
@@ -50,7 +50,7 @@ pub struct ClustersSection {
     /// Class name → built-in model (`broadleaf`, `conifer`, `dead`,
     /// `stand`) or OBJ file.
     #[serde(default)]
-    pub models: std::collections::BTreeMap<String, String>,
+    pub models: std::collections::BTreeMap<String, ModelSource>,
     #[serde(default)]
     pub options: relevo_core::cluster::bake::BakeOptions,
 }
@@ -189,8 +189,10 @@ impl Region {
         }
         if let Some(clusters) = &mut region.clusters {
             for model in clusters.models.values_mut() {
-                if TreeKind::from_name(model).is_none() && Path::new(model).is_relative() {
-                    *model = base.join(&*model).display().to_string();
+                if let ModelSource::Obj(path) = model {
+                    if path.is_relative() {
+                        *path = base.join(&*path);
+                    }
                 }
             }
         }

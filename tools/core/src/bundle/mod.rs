@@ -19,8 +19,8 @@ pub use manifest::{
     FORMAT_VERSION,
 };
 pub use reader::{Array, Bundle, Drape, LpArray, MAX_IMAGE_SIDE, MAX_SIDE};
-pub use validate::validate;
-pub use writer::{write_terrain_bundle, BundleWriter};
+pub use validate::validate_artifacts;
+pub use writer::{write_terrain_bundle, BundleWriter, Description};
 
 /// File name of the manifest inside a bundle.
 pub const MANIFEST_FILE: &str = "manifest.json";

@@ -36,8 +36,9 @@ pub const VEGETATION: ArtifactName = ArtifactName {
     file: "vegetation.csv",
 };
 
-/// The samples the vegetation was detected from, when marked in the
-/// viewer (`class;xmin;ymin;xmax;ymax`, pixels of the drape).
+/// The samples the vegetation was detected from, written by `prep` from
+/// the region's samples and by the viewer's accept
+/// (`class;xmin;ymin;xmax;ymax`, pixels of the drape).
 pub const VEGETATION_SAMPLES: ArtifactName = ArtifactName {
     key: "vegetation_samples",
     file: "vegetation_samples.csv",

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 
 /// An opened bundle: its directory and parsed manifest. Arrays are mapped
 /// on request through the typed accessors ([`Bundle::heights`],
-/// [`Bundle::hierarchy`], …), each checking its shape against the grid.
+/// [`Bundle::lp`], …), each checking its shape against the grid.
 #[derive(Debug, Clone)]
 pub struct Bundle {
     pub dir: PathBuf,
@@ -179,13 +179,13 @@ fn check_files_stay_inside(dir: &Path, m: &Manifest) -> Result<()> {
 impl Bundle {
     /// Read `DIR/manifest.json`, check the format and version, and check
     /// that the manifest is consistent and names only files inside the
-    /// bundle ([`check_manifest`]).
+    /// bundle (`check_manifest`).
     pub fn open(dir: &Path) -> Result<Bundle> {
         let path = dir.join(MANIFEST_FILE);
         let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
         let manifest: Manifest = serde_json::from_str(&text).map_err(|e| Error::Manifest {
             path: path.clone(),
-            source: e,
+            json: e,
         })?;
         if manifest.format != FORMAT {
             return Err(Error::invalid(
@@ -357,7 +357,7 @@ impl Bundle {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bundle::{validate, write_terrain_bundle, Crs, GridInfo};
+    use crate::bundle::{validate_artifacts, write_terrain_bundle, Crs, GridInfo};
     use crate::geo::GeoTransform;
     use crate::grid::HeightGrid;
     use crate::lp::ErrorMetric;
@@ -410,7 +410,7 @@ mod tests {
         assert!(bundle.drape().unwrap().is_none());
         assert!(bundle.vegetation().unwrap().is_none());
         assert_eq!(bundle.frame().world_origin(), (15.0, 15.0));
-        assert_eq!(validate(&bundle), Vec::<String>::new());
+        assert_eq!(validate_artifacts(&bundle), Vec::<String>::new());
 
         // A manifest whose side disagrees with the arrays is refused by name.
         let mut wrong = bundle.clone();

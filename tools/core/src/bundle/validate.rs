@@ -4,9 +4,11 @@ use crate::grid::pow2_plus_1_at_least;
 /// Check a bundle against its manifest: every file present with the recorded
 /// size and SHA-256, array shapes consistent with their byte length, and the
 /// grid invariants (side 2^n+1, mask of 0/1 agreeing with the manifest,
-/// finite heights within the recorded range, nested LP errors and radii). Returns one line per problem;
-/// empty means valid.
-pub fn validate(bundle: &Bundle) -> Vec<String> {
+/// finite heights within the recorded range, nested LP errors and radii),
+/// and the vegetation database. Returns one line per problem; empty means
+/// valid. The clusters are checked by `cluster::store`; `validation`
+/// runs both.
+pub fn validate_artifacts(bundle: &Bundle) -> Vec<String> {
     let mut problems = Vec::new();
     let m = &bundle.manifest;
     for (name, a) in m.artifacts.iter().chain(&m.exports) {
@@ -132,7 +134,6 @@ pub fn validate(bundle: &Bundle) -> Vec<String> {
     if m.artifacts.contains_key(names::VEGETATION.key) {
         problems.extend(vegetation_problems(bundle));
     }
-    problems.extend(crate::cluster::store::validate(bundle));
     problems
 }
 

@@ -1,25 +1,94 @@
 use super::Bundle;
 use super::{
-    names, sha256_bytes, sha256_file, Artifact, Crs, Dtype, GridInfo, Manifest, FORMAT,
-    FORMAT_VERSION, MANIFEST_FILE,
+    names, sha256_bytes, sha256_file, Artifact, ColorInfo, Crs, Dtype, GridInfo, InputFile,
+    Manifest, StageTiming, FORMAT, FORMAT_VERSION, MANIFEST_FILE,
 };
 use crate::grid::HeightGrid;
 use crate::lp::{ErrorMetric, Hierarchy};
+use crate::veg::db::{self, VegObject};
 use crate::{Error, Result};
+use names::ArtifactName;
 use std::collections::BTreeMap;
 use std::fs;
 use std::path::{Path, PathBuf};
 
+/// What a manifest says about a bundle besides its files: set once by the
+/// writer of a new bundle, kept (and amendable) when one is rewritten.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Description {
+    /// Region name, from REGION.toml or the output file name.
+    pub region: String,
+    pub crs: Crs,
+    pub grid: GridInfo,
+    pub lp_error_metric: ErrorMetric,
+    pub inputs: Vec<InputFile>,
+    /// Every parameter the stages used, by stage then name.
+    pub parameters: BTreeMap<String, serde_json::Value>,
+    pub timings: Vec<StageTiming>,
+}
+
 /// Builds a bundle in `TARGET.tmp/` and moves it to `TARGET` on [`commit`].
-/// Dropped without committing, it removes the staging directory; a process
-/// killed mid-way leaves only the staging directory, which the next writer
-/// for the same target clears.
+/// Every artifact goes through one typed call — [`write_grid`],
+/// [`write_hierarchy`], [`write_drape`], [`write_vegetation`],
+/// [`write_vegetation_samples`], the exports ([`export_path`] then
+/// [`record_export`]) and the clusters (`cluster::store::write`) — which
+/// writes the file `names` gives it and records it in the manifest; nothing
+/// else adds to a manifest. Dropped without committing, it removes the
+/// staging directory; a process killed mid-way leaves only the staging
+/// directory, which the next writer for the same target clears.
+///
+/// ```
+/// use relevo_core::bundle::{Bundle, BundleWriter, Crs, Description, GridInfo};
+/// use relevo_core::geo::GeoTransform;
+/// use relevo_core::grid::HeightGrid;
+/// use relevo_core::lp::{ErrorMetric, Hierarchy};
+///
+/// let side = 9;
+/// let grid = HeightGrid {
+///     side,
+///     heights: (0..side * side).map(|i| (i % side) as f32).collect(),
+///     mask: vec![1; side * side],
+///     geotransform: GeoTransform::north_up(0.0, 80.0, 10.0, 10.0),
+/// };
+/// let dir = std::env::temp_dir().join(format!("relevo-doc-{}", std::process::id()));
+/// let mut writer = BundleWriter::create(&dir.join("ramp.relevo"), true).unwrap();
+/// writer.write_grid(&grid).unwrap();
+/// writer
+///     .write_hierarchy(&Hierarchy::compute(&grid.heights, side, 10.0, ErrorMetric::Bound))
+///     .unwrap();
+/// writer.describe(Description {
+///     region: "ramp".into(),
+///     crs: Crs { wkt: String::new(), epsg: None },
+///     grid: GridInfo::of(&grid, 10.0, 1.0).unwrap(),
+///     lp_error_metric: ErrorMetric::Bound,
+///     inputs: Vec::new(),
+///     parameters: Default::default(),
+///     timings: Vec::new(),
+/// });
+/// let bundle = Bundle::open(&writer.commit().unwrap()).unwrap();
+/// assert_eq!(bundle.heights().unwrap()[..], grid.heights[..]);
+/// # std::fs::remove_dir_all(&dir).unwrap();
+/// ```
 ///
 /// [`commit`]: BundleWriter::commit
+/// [`write_grid`]: BundleWriter::write_grid
+/// [`write_hierarchy`]: BundleWriter::write_hierarchy
+/// [`write_drape`]: BundleWriter::write_drape
+/// [`write_vegetation`]: BundleWriter::write_vegetation
+/// [`write_vegetation_samples`]: BundleWriter::write_vegetation_samples
+/// [`export_path`]: BundleWriter::export_path
+/// [`record_export`]: BundleWriter::record_export
 pub struct BundleWriter {
     target: PathBuf,
     staging: PathBuf,
     committed: bool,
+    /// `relevo` version the manifest names: this build's for a new bundle,
+    /// the original's for a rewrite.
+    tool_version: String,
+    description: Option<Description>,
+    color: Option<ColorInfo>,
+    artifacts: BTreeMap<String, Artifact>,
+    exports: BTreeMap<String, Artifact>,
 }
 
 impl BundleWriter {
@@ -51,20 +120,40 @@ impl BundleWriter {
             target: target.to_path_buf(),
             staging,
             committed: false,
+            tool_version: env!("CARGO_PKG_VERSION").into(),
+            description: None,
+            color: None,
+            artifacts: BTreeMap::new(),
+            exports: BTreeMap::new(),
         })
     }
 
     /// Start rewriting `bundle` in place: the staging directory receives
     /// every artifact and export whose key passes `keep` (hard-linked where
-    /// the file system allows, copied otherwise), and the returned manifest
-    /// lists only those. Until [`commit`](BundleWriter::commit) the bundle
-    /// is untouched.
-    pub fn rewrite(bundle: &Bundle, keep: impl Fn(&str) -> bool) -> Result<(Self, Manifest)> {
-        let writer = BundleWriter::create(&bundle.dir, true)?;
-        let mut manifest = bundle.manifest.clone();
-        manifest.artifacts.retain(|key, _| keep(key));
-        manifest.exports.retain(|key, _| keep(key));
-        for a in manifest.artifacts.values().chain(manifest.exports.values()) {
+    /// the file system allows, copied otherwise), and the manifest keeps
+    /// its description and lists only those. Until
+    /// [`commit`](BundleWriter::commit) the bundle is untouched.
+    pub fn rewrite(bundle: &Bundle, keep: impl Fn(&str) -> bool) -> Result<Self> {
+        let mut writer = BundleWriter::create(&bundle.dir, true)?;
+        let m = &bundle.manifest;
+        writer.tool_version.clone_from(&m.tool_version);
+        writer.describe(Description {
+            region: m.region.clone(),
+            crs: m.crs.clone(),
+            grid: m.grid.clone(),
+            lp_error_metric: m.lp_error_metric,
+            inputs: m.inputs.clone(),
+            parameters: m.parameters.clone(),
+            timings: m.timings.clone(),
+        });
+        writer.artifacts = m.artifacts.clone();
+        writer.exports = m.exports.clone();
+        writer.artifacts.retain(|key, _| keep(key));
+        writer.exports.retain(|key, _| keep(key));
+        if writer.artifacts.contains_key(names::COLOR.key) {
+            writer.color.clone_from(&m.color);
+        }
+        for a in writer.artifacts.values().chain(writer.exports.values()) {
             let (from, to) = (bundle.dir.join(&a.file), writer.staging.join(&a.file));
             if let Some(parent) = to.parent() {
                 fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
@@ -73,71 +162,99 @@ impl BundleWriter {
                 fs::copy(&from, &to).map_err(|e| Error::io(&from, e))?;
             }
         }
-        Ok((writer, manifest))
+        Ok(writer)
     }
 
-    /// The staging directory, for writers that produce files themselves.
-    pub fn dir(&self) -> &Path {
-        &self.staging
+    /// Set what the manifest says besides the files (required once before
+    /// [`commit`](BundleWriter::commit) of a new bundle; a rewrite starts
+    /// with the bundle's own).
+    pub fn describe(&mut self, description: Description) {
+        self.description = Some(description);
     }
 
-    /// Write a little-endian array and describe it.
-    pub fn write_array<T: bytemuck::Pod>(
-        &self,
-        file: &str,
-        dtype: Dtype,
-        shape: &[usize],
-        data: &[T],
-    ) -> Result<Artifact> {
-        let elements: usize = shape.iter().product();
-        assert_eq!(elements, data.len(), "{file}: shape does not match data");
-        assert_eq!(dtype.size(), Some(size_of::<T>()), "{file}: dtype");
-        // Every target Relevo builds for is little-endian; refuse others.
-        const { assert!(cfg!(target_endian = "little")) };
-        let bytes: &[u8] = bytemuck::cast_slice(data);
-        let path = self.staging.join(file);
+    /// The description set so far, to amend (a rewrite's parameters).
+    pub fn description_mut(&mut self) -> Option<&mut Description> {
+        self.description.as_mut()
+    }
+
+    /// The height grid: `height.f32` and `mask.u8`, `side`².
+    pub fn write_grid(&mut self, grid: &HeightGrid) -> Result<()> {
+        let square = [grid.side, grid.side];
+        self.put_array(names::HEIGHT, Dtype::F32, &square, &grid.heights)?;
+        self.put_array(names::MASK, Dtype::U8, &square, &grid.mask)
+    }
+
+    /// The LP errors and radii: `lp.f32x2`, `side`² pairs.
+    pub fn write_hierarchy(&mut self, hierarchy: &Hierarchy) -> Result<()> {
+        let side = hierarchy.side;
+        let pairs: &[f32] = bytemuck::cast_slice(&hierarchy.error_radius);
+        self.put_array(names::LP, Dtype::F32, &[side, side, 2], pairs)
+    }
+
+    /// The drape: RGBA8 texels of the image `info` describes.
+    pub fn write_drape(&mut self, rgba: &[u8], info: ColorInfo) -> Result<()> {
+        self.put_array(names::COLOR, Dtype::U8, &[info.height, info.width, 4], rgba)?;
+        self.color = Some(info);
+        Ok(())
+    }
+
+    /// The vegetation database (`vegetation.csv`).
+    pub fn write_vegetation(&mut self, objects: &[VegObject]) -> Result<()> {
+        self.put_file(names::VEGETATION, db::to_csv(objects).as_bytes())
+    }
+
+    /// The samples the vegetation came from, as `veg::samples::to_csv` writes
+    /// them (drape pixels).
+    pub fn write_vegetation_samples(&mut self, csv: &str) -> Result<()> {
+        self.put_file(names::VEGETATION_SAMPLES, csv.as_bytes())
+    }
+
+    /// Where an export (a GeoTIFF, a GeoPackage, written by another
+    /// program) goes in the staging directory; its folder exists. Record it
+    /// with [`record_export`](BundleWriter::record_export) once written.
+    pub fn export_path(&self, name: ArtifactName) -> Result<PathBuf> {
+        let path = self.staging.join(name.file);
         if let Some(parent) = path.parent() {
             fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
         }
-        fs::write(&path, bytes).map_err(|e| Error::io(&path, e))?;
-        Ok(Artifact {
-            file: file.to_string(),
-            dtype,
-            shape: shape.to_vec(),
-            bytes: bytes.len() as u64,
-            sha256: sha256_bytes(bytes),
-        })
+        Ok(path)
     }
 
-    /// Write a non-array file (CSV, PNG, …) and describe it.
-    pub fn write_file(&self, file: &str, bytes: &[u8]) -> Result<Artifact> {
-        let path = self.staging.join(file);
-        if let Some(parent) = path.parent() {
-            fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
-        }
-        fs::write(&path, bytes).map_err(|e| Error::io(&path, e))?;
-        self.record_file(file)
+    /// Record the export written at [`export_path`](BundleWriter::export_path).
+    pub fn record_export(&mut self, name: ArtifactName) -> Result<()> {
+        let artifact = self.record(name.file)?;
+        self.exports.insert(name.key.into(), artifact);
+        Ok(())
     }
 
-    /// Describe a file already written inside the staging directory.
-    pub fn record_file(&self, file: &str) -> Result<Artifact> {
-        let (bytes, sha256) = sha256_file(&self.staging.join(file))?;
-        Ok(Artifact {
-            file: file.to_string(),
-            dtype: Dtype::File,
-            shape: Vec::new(),
-            bytes,
-            sha256,
-        })
-    }
-
-    /// Write the manifest and move the bundle into place, replacing an older
-    /// one only after the new one is complete.
-    pub fn commit(mut self, manifest: &Manifest) -> Result<PathBuf> {
+    /// Write the manifest and move the bundle into place, replacing the
+    /// previous one if any. Returns the bundle's path.
+    pub fn commit(mut self) -> Result<PathBuf> {
         let path = self.staging.join(MANIFEST_FILE);
-        let mut json = serde_json::to_string_pretty(manifest).map_err(|e| Error::Manifest {
+        let Some(d) = self.description.take() else {
+            return Err(Error::invalid(
+                &self.target,
+                "the bundle was never described (region, CRS, grid)",
+            ));
+        };
+        let manifest = Manifest {
+            format: FORMAT.into(),
+            format_version: FORMAT_VERSION,
+            region: d.region,
+            tool_version: std::mem::take(&mut self.tool_version),
+            crs: d.crs,
+            grid: d.grid,
+            lp_error_metric: d.lp_error_metric,
+            color: self.color.take(),
+            inputs: d.inputs,
+            parameters: d.parameters,
+            artifacts: std::mem::take(&mut self.artifacts),
+            exports: std::mem::take(&mut self.exports),
+            timings: d.timings,
+        };
+        let mut json = serde_json::to_string_pretty(&manifest).map_err(|e| Error::Manifest {
             path: path.clone(),
-            source: e,
+            json: e,
         })?;
         json.push('\n');
         fs::write(&path, json).map_err(|e| Error::io(&path, e))?;
@@ -151,6 +268,76 @@ impl BundleWriter {
         }
         self.committed = true;
         Ok(self.target.clone())
+    }
+
+    /// Write an array artifact under `name` (little-endian, row-major).
+    pub(crate) fn put_array<T: bytemuck::Pod>(
+        &mut self,
+        name: ArtifactName,
+        dtype: Dtype,
+        shape: &[usize],
+        data: &[T],
+    ) -> Result<()> {
+        let elements: usize = shape.iter().product();
+        if elements != data.len() || dtype.size() != Some(size_of::<T>()) {
+            return Err(Error::invalid(
+                self.staging.join(name.file),
+                format!(
+                    "{} values of {} bytes do not make a {dtype:?} array of shape {shape:?}",
+                    data.len(),
+                    size_of::<T>()
+                ),
+            ));
+        }
+        // Every target Relevo builds for is little-endian; refuse others.
+        const { assert!(cfg!(target_endian = "little")) };
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        self.write_bytes(name.file, bytes)?;
+        self.artifacts.insert(
+            name.key.into(),
+            Artifact {
+                file: name.file.to_string(),
+                dtype,
+                shape: shape.to_vec(),
+                bytes: bytes.len() as u64,
+                sha256: sha256_bytes(bytes),
+            },
+        );
+        Ok(())
+    }
+
+    /// Write a whole-file artifact under `key` (the clusters' pages have
+    /// keys made at run time, so this takes the key and file apart).
+    pub(crate) fn put_keyed_file(&mut self, key: &str, file: &str, bytes: &[u8]) -> Result<()> {
+        self.write_bytes(file, bytes)?;
+        let artifact = self.record(file)?;
+        self.artifacts.insert(key.into(), artifact);
+        Ok(())
+    }
+
+    /// Write a whole-file artifact under `name`.
+    pub(crate) fn put_file(&mut self, name: ArtifactName, bytes: &[u8]) -> Result<()> {
+        self.put_keyed_file(name.key, name.file, bytes)
+    }
+
+    fn write_bytes(&self, file: &str, bytes: &[u8]) -> Result<()> {
+        let path = self.staging.join(file);
+        if let Some(parent) = path.parent() {
+            fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+        }
+        fs::write(&path, bytes).map_err(|e| Error::io(&path, e))
+    }
+
+    /// The artifact record (size, SHA-256) of a file in the staging directory.
+    fn record(&self, file: &str) -> Result<Artifact> {
+        let (bytes, sha256) = sha256_file(&self.staging.join(file))?;
+        Ok(Artifact {
+            file: file.to_string(),
+            dtype: Dtype::File,
+            shape: Vec::new(),
+            bytes,
+            sha256,
+        })
     }
 }
 
@@ -173,42 +360,27 @@ pub fn write_terrain_bundle(
     crs: Crs,
     force: bool,
 ) -> Result<PathBuf> {
-    let side = grid.side;
     let info = GridInfo::of(grid, cell_size_m, 1.0)
         .ok_or_else(|| Error::invalid(target, "the grid holds no data"))?;
-    let writer = BundleWriter::create(target, force)?;
-    let hierarchy = Hierarchy::compute(&grid.heights, side, cell_size_m, ErrorMetric::default());
-    let square = [side, side];
-    let mut artifacts = BTreeMap::new();
-    artifacts.insert(
-        names::HEIGHT.key.to_string(),
-        writer.write_array(names::HEIGHT.file, Dtype::F32, &square, &grid.heights)?,
-    );
-    artifacts.insert(
-        names::MASK.key.to_string(),
-        writer.write_array(names::MASK.file, Dtype::U8, &square, &grid.mask)?,
-    );
-    let pairs: &[f32] = bytemuck::cast_slice(&hierarchy.error_radius);
-    artifacts.insert(
-        names::LP.key.to_string(),
-        writer.write_array(names::LP.file, Dtype::F32, &[side, side, 2], pairs)?,
-    );
-    let manifest = Manifest {
-        format: FORMAT.into(),
-        format_version: FORMAT_VERSION,
+    let mut writer = BundleWriter::create(target, force)?;
+    let metric = ErrorMetric::default();
+    writer.write_grid(grid)?;
+    writer.write_hierarchy(&Hierarchy::compute(
+        &grid.heights,
+        grid.side,
+        cell_size_m,
+        metric,
+    ))?;
+    writer.describe(Description {
         region: region.into(),
-        tool_version: env!("CARGO_PKG_VERSION").into(),
         crs,
         grid: info,
-        lp_error_metric: ErrorMetric::default(),
-        color: None,
+        lp_error_metric: metric,
         inputs: Vec::new(),
         parameters: BTreeMap::new(),
-        artifacts,
-        exports: BTreeMap::new(),
         timings: Vec::new(),
-    };
-    writer.commit(&manifest)
+    });
+    writer.commit()
 }
 
 /// `TARGET.tmp` beside the target.

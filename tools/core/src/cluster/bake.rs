@@ -16,7 +16,7 @@
 
 use super::cut::{CutOptions, Frame};
 use super::image::PremulImage;
-use super::model::Model;
+use super::model::{Model, ModelSource};
 use super::quadtree::{ClusterObject, Node, Quadtree, NONE};
 use super::views::{render_view, ImpostorView, Placed};
 use super::{ClassImpostor, Clusters};
@@ -77,11 +77,11 @@ impl Default for BakeOptions {
 }
 
 /// A vegetation class to bake: its name, model and where the model came
-/// from (a file, or `procedural:KIND`).
+/// from.
 #[derive(Debug, Clone)]
 pub struct ClassSource {
     pub name: String,
-    pub source: String,
+    pub source: ModelSource,
     pub model: Model,
 }
 
@@ -646,7 +646,7 @@ pub(crate) mod tests {
             .iter()
             .map(|k| ClassSource {
                 name: k.name().into(),
-                source: format!("procedural:{}", k.name()),
+                source: ModelSource::Procedural(*k),
                 model: k.model(1),
             })
             .collect()

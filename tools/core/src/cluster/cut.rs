@@ -883,7 +883,7 @@ impl Selection for QuadtreeCut<'_> {
         "quadtree"
     }
 
-    /// The walk down to [`SPLIT_DEPTH`] runs here; the subtrees below it
+    /// The walk down to `SPLIT_DEPTH` runs here; the subtrees below it
     /// run in parallel, each into its own part of the list, and the parts
     /// are appended in tree order — the result does not depend on the
     /// thread count.

@@ -29,17 +29,16 @@ use crate::{Error, Result};
 use bake::{BakeOptions, ClassSource};
 use cut::Frame;
 use image::PremulImage;
-use model::{Model, TreeKind};
+use model::{ModelSource, TreeKind};
 use quadtree::{ClusterObject, Quadtree};
 use std::collections::BTreeMap;
-use std::path::Path;
 
 /// The impostor of one vegetation class.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ClassImpostor {
     pub name: String,
-    /// Where the model came from: a file, or `procedural:KIND`.
-    pub model: String,
+    /// Where the model came from.
+    pub model: ModelSource,
     /// Height over crown diameter: an object of this class with diameter d
     /// stands d × aspect tall.
     pub aspect: f32,
@@ -103,28 +102,23 @@ pub fn objects_on_terrain(
 }
 
 /// The model of each class: `models` maps a class name to a built-in kind
-/// (`broadleaf`, `conifer`, `dead`, `stand`) or to an OBJ file; a class not
-/// named gets the kind its name suggests ([`TreeKind::for_class`]).
+/// or an OBJ file; a class not named gets the kind its name suggests
+/// ([`TreeKind::for_class`]).
 pub fn class_sources(
     classes: &[String],
-    models: &BTreeMap<String, String>,
+    models: &BTreeMap<String, ModelSource>,
 ) -> Result<Vec<ClassSource>> {
     classes
         .iter()
         .map(|name| {
-            let procedural =
-                |kind: TreeKind| (format!("procedural:{}", kind.name()), kind.model(1));
-            let (source, model) = match models.get(name) {
-                None => procedural(TreeKind::for_class(name)),
-                Some(choice) => match TreeKind::from_name(choice) {
-                    Some(kind) => procedural(kind),
-                    None => (choice.clone(), Model::load_obj(Path::new(choice))?),
-                },
-            };
+            let source = models
+                .get(name)
+                .cloned()
+                .unwrap_or_else(|| ModelSource::Procedural(TreeKind::for_class(name)));
             Ok(ClassSource {
                 name: name.clone(),
+                model: source.load()?,
                 source,
-                model,
             })
         })
         .collect()
@@ -139,7 +133,7 @@ pub fn bake_database(
     frame: &TerrainFrame,
     heights: &[f32],
     mask: &[u8],
-    models: &BTreeMap<String, String>,
+    models: &BTreeMap<String, ModelSource>,
     options: &BakeOptions,
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Result<(Clusters, usize)> {

@@ -177,6 +177,64 @@ impl Model {
     }
 }
 
+/// Where the model of a vegetation class comes from: a built-in kind, or an
+/// OBJ file. Stored (in the cluster index, the manifest's parameters) as
+/// `procedural:KIND` or the file's path.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(from = "String", into = "String")]
+pub enum ModelSource {
+    Procedural(TreeKind),
+    Obj(std::path::PathBuf),
+}
+
+impl ModelSource {
+    /// A person's or a file's choice: a kind's name (`conifer`, or as
+    /// stored, `procedural:conifer`), anything else an OBJ file.
+    ///
+    /// ```
+    /// use relevo_core::cluster::model::{ModelSource, TreeKind};
+    /// assert_eq!(ModelSource::parse("conifer"), ModelSource::Procedural(TreeKind::Conifer));
+    /// assert_eq!(ModelSource::parse("procedural:stand").to_string(), "procedural:stand");
+    /// assert_eq!(ModelSource::parse("oak.obj"), ModelSource::Obj("oak.obj".into()));
+    /// ```
+    pub fn parse(text: &str) -> ModelSource {
+        let kind = TreeKind::from_name(text.strip_prefix("procedural:").unwrap_or(text));
+        match kind {
+            Some(kind) => ModelSource::Procedural(kind),
+            None => ModelSource::Obj(text.into()),
+        }
+    }
+
+    /// The model itself: built, or read from its file.
+    pub fn load(&self) -> Result<Model> {
+        match self {
+            ModelSource::Procedural(kind) => Ok(kind.model(1)),
+            ModelSource::Obj(path) => Model::load_obj(path),
+        }
+    }
+}
+
+impl std::fmt::Display for ModelSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ModelSource::Procedural(kind) => write!(f, "procedural:{}", kind.name()),
+            ModelSource::Obj(path) => write!(f, "{}", path.display()),
+        }
+    }
+}
+
+impl From<String> for ModelSource {
+    fn from(text: String) -> Self {
+        ModelSource::parse(&text)
+    }
+}
+
+impl From<ModelSource> for String {
+    fn from(source: ModelSource) -> Self {
+        source.to_string()
+    }
+}
+
 /// The procedural models, one per kind of vegetation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]

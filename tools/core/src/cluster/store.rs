@@ -11,10 +11,11 @@
 use super::bake::{BakeOptions, BakeReport, ALIGN, MIP_LEVELS};
 use super::cut::Frame;
 use super::image::PremulImage;
+use super::model::ModelSource;
 use super::quadtree::{ClusterObject, Node, Quadtree, NONE};
 use super::{ClassImpostor, Clusters};
 use crate::bundle::names;
-use crate::bundle::{Artifact, Bundle, BundleWriter};
+use crate::bundle::{Bundle, BundleWriter};
 use crate::raster::png;
 use crate::{Error, Result};
 use std::collections::BTreeMap;
@@ -57,20 +58,19 @@ fn page_name(i: usize) -> (String, String) {
     )
 }
 
-/// Write `clusters` into the bundle being built; returns the artifacts to
-/// list in the manifest.
+/// Write `clusters` into the bundle being built (the index, the quadtree's
+/// records and the atlas pages), each recorded in its manifest.
 pub fn write(
-    writer: &BundleWriter,
+    writer: &mut BundleWriter,
     clusters: &Clusters,
     options: &BakeOptions,
     off_terrain: usize,
-) -> Result<BTreeMap<String, Artifact>> {
-    let mut artifacts = BTreeMap::new();
+) -> Result<()> {
     let mut pages = Vec::new();
     for (i, page) in clusters.pages.iter().enumerate() {
         let (key, file) = page_name(i);
         let bytes = png::encode_rgba(page.bytes(), page.width, page.height)?;
-        artifacts.insert(key, writer.write_file(&file, &bytes)?);
+        writer.put_keyed_file(&key, &file, &bytes)?;
         pages.push(Page {
             file,
             width: page.width,
@@ -91,7 +91,7 @@ pub fn write(
             bytemuck::cast_slice::<Frame, u8>(&clusters.frames),
         ),
     ] {
-        artifacts.insert(name.key.into(), writer.write_file(name.file, bytes)?);
+        writer.put_file(name, bytes)?;
     }
     let index = ClusterIndex {
         version: VERSION,
@@ -109,12 +109,7 @@ pub fn write(
     let mut json = serde_json::to_string_pretty(&index)
         .map_err(|e| Error::Input(format!("cluster index: {e}")))?;
     json.push('\n');
-    let name = names::CLUSTER_INDEX;
-    artifacts.insert(
-        name.key.into(),
-        writer.write_file(name.file, json.as_bytes())?,
-    );
-    Ok(artifacts)
+    writer.put_file(names::CLUSTER_INDEX, json.as_bytes())
 }
 
 /// What [`rewrite_bundle`] replaces besides the clusters.
@@ -135,7 +130,7 @@ pub struct NewVegetation<'a> {
 pub fn rewrite_bundle(
     bundle: &Bundle,
     new: &NewVegetation,
-    models: &BTreeMap<String, String>,
+    models: &BTreeMap<String, ModelSource>,
     options: &BakeOptions,
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Result<(std::path::PathBuf, Clusters, usize)> {
@@ -173,27 +168,16 @@ pub fn rewrite_bundle(
                 .contains(&key))
             || (new.samples_csv.is_some() && key == names::VEGETATION_SAMPLES.key)
     };
-    let (writer, mut manifest) = BundleWriter::rewrite(bundle, |key| !replaced(key))?;
+    let mut writer = BundleWriter::rewrite(bundle, |key| !replaced(key))?;
     if let Some(database) = new.database {
-        let csv = crate::veg::db::to_csv(database);
-        let name = names::VEGETATION;
-        manifest.artifacts.insert(
-            name.key.into(),
-            writer.write_file(name.file, csv.as_bytes())?,
-        );
+        writer.write_vegetation(database)?;
     }
     if let Some(samples) = new.samples_csv {
-        let name = names::VEGETATION_SAMPLES;
-        manifest.artifacts.insert(
-            name.key.into(),
-            writer.write_file(name.file, samples.as_bytes())?,
-        );
+        writer.write_vegetation_samples(samples)?;
     }
-    manifest
-        .artifacts
-        .extend(write(&writer, &clusters, options, off_terrain)?);
+    write(&mut writer, &clusters, options, off_terrain)?;
     drop((heights, mask));
-    let path = writer.commit(&manifest)?;
+    let path = writer.commit()?;
     Ok((path, clusters, off_terrain))
 }
 

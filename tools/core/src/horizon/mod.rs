@@ -75,7 +75,7 @@ pub struct RenderOptions {
     /// Sample prefiltered colour levels chosen by each slice's footprint.
     pub prefilter: bool,
     /// Let the slice spacing grow with distance while one step moves any
-    /// terrain point by at most a pixel on screen (see [`fill_slices`]):
+    /// terrain point by at most a pixel on screen (see `fill_slices`):
     /// fewer slices far away, at a measured cost in image detail.
     pub grow_steps: bool,
     /// Colour of pixels no terrain covers.

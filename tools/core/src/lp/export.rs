@@ -8,8 +8,9 @@
 //! the glTF node's translation and in an OBJ comment.
 
 use super::extract::extract;
+use super::hierarchy::Hierarchy;
 use super::terrain_position;
-use crate::bundle::Bundle;
+use crate::geo::{GeoTransform, TerrainFrame};
 use crate::grid::vertex_normal;
 use crate::raster::png::encode_rgba;
 use crate::{Error, Result};
@@ -34,23 +35,38 @@ pub struct ExportMesh {
     pub largest_deviation_m: f64,
 }
 
-/// Build the mesh of `bundle` at `max_error` metres.
-pub fn build(bundle: &Bundle, max_error: f32, keep_padding: bool) -> Result<ExportMesh> {
-    let frame = bundle.frame();
+/// The terrain a mesh is exported from: the grid's frame, heights (metres),
+/// data mask, LP hierarchy and, when there is one, the drape.
+pub struct Surface<'a> {
+    pub frame: TerrainFrame,
+    pub heights: &'a [f32],
+    pub mask: &'a [u8],
+    pub hierarchy: Hierarchy<'a>,
+    pub drape: Option<DrapeImage<'a>>,
+}
+
+/// The image an exported mesh is textured with: RGBA8 texels,
+/// `width`×`height`, placed in the world by `geotransform`.
+pub struct DrapeImage<'a> {
+    pub rgba: &'a [u8],
+    pub width: usize,
+    pub height: usize,
+    pub geotransform: GeoTransform,
+}
+
+/// Build the mesh of `surface` at `max_error` metres.
+pub fn build(surface: &Surface, max_error: f32, keep_padding: bool) -> Result<ExportMesh> {
+    let Surface {
+        frame,
+        heights,
+        mask,
+        hierarchy,
+        drape,
+    } = surface;
     let side = frame.side;
-    let heights = bundle.heights()?;
-    let mask = bundle.mask()?;
-    let lp = bundle.lp()?;
-    let grid = extract(
-        &lp.hierarchy(),
-        max_error,
-        (!keep_padding).then_some(&mask[..]),
-    );
+    let grid = extract(hierarchy, max_error, (!keep_padding).then_some(mask));
     if grid.triangles.is_empty() {
-        return Err(Error::invalid(
-            &bundle.dir,
-            "no triangles: the mask covers no data",
-        ));
+        return Err(Error::Input("no triangles: the mask covers no data".into()));
     }
     let cell = frame.cell_size_m;
     let position = |c: usize, r: usize| {
@@ -68,7 +84,7 @@ pub fn build(bundle: &Bundle, max_error: f32, keep_padding: bool) -> Result<Expo
         .vertices
         .iter()
         .map(|v| {
-            let n = vertex_normal(&heights, side, cell, v[0] as usize, v[1] as usize);
+            let n = vertex_normal(heights, side, cell, v[0] as usize, v[1] as usize);
             // z up → y up (x east, y up, z south).
             [n[0] as f32, n[2] as f32, -n[1] as f32]
         })
@@ -90,10 +106,9 @@ pub fn build(bundle: &Bundle, max_error: f32, keep_padding: bool) -> Result<Expo
         })
         .collect();
     let (origin_x, origin_y) = frame.world_origin();
-    let (uvs, texture_png) = match bundle.drape()? {
+    let (uvs, texture_png) = match drape {
         None => (None, None),
-        Some(drape) => {
-            let color = &drape.info;
+        Some(color) => {
             let uvs = grid
                 .vertices
                 .iter()
@@ -108,7 +123,7 @@ pub fn build(bundle: &Bundle, max_error: f32, keep_padding: bool) -> Result<Expo
                 .collect();
             (
                 Some(uvs),
-                Some(encode_rgba(&drape.rgba, color.width, color.height)?),
+                Some(encode_rgba(color.rgba, color.width, color.height)?),
             )
         }
     };
@@ -119,7 +134,7 @@ pub fn build(bundle: &Bundle, max_error: f32, keep_padding: bool) -> Result<Expo
         triangles,
         origin: [origin_x, origin_y],
         texture_png,
-        largest_deviation_m: grid.largest_deviation(&heights, side),
+        largest_deviation_m: grid.largest_deviation(heights, side),
     })
 }
 

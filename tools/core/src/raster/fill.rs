@@ -92,7 +92,7 @@ fn find_holes(values: &[f64], width: usize, height: usize) -> Vec<Hole> {
             if c == 0 || r == 0 || c + 1 == width || r + 1 == height {
                 hole.touches_edge = true;
             }
-            for n in super::neighbours4(i, width, height) {
+            for n in crate::grid::neighbours4(i, width, height) {
                 if !seen[n] && values[n].is_nan() {
                     seen[n] = true;
                     stack.push(n);

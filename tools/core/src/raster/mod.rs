@@ -1,29 +1,17 @@
 //! In-memory multiband rasters and the algorithms that turn tiles into one
 //! clean grid: mosaicking with feathered overlaps, no-data filling, and the
-//! decoding of RGB-encoded elevation tiles; 8-bit stretching and PNG
-//! encoding for what people look at; a drape derived from the terrain.
+//! decoding of RGB-encoded elevation tiles; 8-bit stretching, PNG encoding
+//! and fitting into a frame for what people look at; a drape derived from
+//! the terrain.
 
 pub mod distance;
 pub mod encoding;
 pub mod fill;
+pub mod fit;
 pub mod mosaic;
 pub mod png;
 pub mod stretch;
 pub mod tint;
-
-/// The up-to-four edge neighbours of cell `i` (row-major) of a
-/// `width`×`height` grid.
-pub fn neighbours4(i: usize, width: usize, height: usize) -> impl Iterator<Item = usize> {
-    let (c, r) = (i % width, i / width);
-    [
-        (c > 0).then(|| i - 1),
-        (c + 1 < width).then(|| i + 1),
-        (r > 0).then(|| i - width),
-        (r + 1 < height).then(|| i + width),
-    ]
-    .into_iter()
-    .flatten()
-}
 
 /// A multiband raster held as `f64`, band-major (all of band 0, then band 1…),
 /// rows top to bottom. `NaN` marks no-data: a cell is valid when every band

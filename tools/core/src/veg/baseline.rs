@@ -24,7 +24,7 @@ pub fn excess_green(image: &Image, min_area: usize) -> Vec<(f64, f64, f32)> {
             n += 1;
             sx += (i % w) as f64 + 0.5;
             sy += (i / w) as f64 + 0.5;
-            for j in crate::raster::neighbours4(i, w, h) {
+            for j in crate::grid::neighbours4(i, w, h) {
                 if !seen[j] {
                     seen[j] = true;
                     stack.push(j);

@@ -18,6 +18,11 @@ pub struct VegObject {
     pub score: f32,
 }
 
+/// Decimals the database keeps of positions and sizes (millimetres in a
+/// metric CRS) and of scores.
+const LENGTH_DECIMALS: usize = 3;
+const SCORE_DECIMALS: usize = 4;
+
 /// The database text, header first.
 pub fn to_csv(objects: &[VegObject]) -> String {
     let mut out = String::with_capacity(40 * (objects.len() + 1));
@@ -25,13 +30,35 @@ pub fn to_csv(objects: &[VegObject]) -> String {
     out.push('\n');
     for o in objects {
         use std::fmt::Write;
+        let (l, s) = (LENGTH_DECIMALS, SCORE_DECIMALS);
         let _ = writeln!(
             out,
-            "{};{:.3};{:.3};{};{:.3};{:.4}",
+            "{};{:.l$};{:.l$};{};{:.l$};{:.s$}",
             o.id, o.x, o.y, o.class, o.size, o.score
         );
     }
     out
+}
+
+/// The objects exactly as [`from_csv`] reads them back from [`to_csv`]:
+/// positions and sizes rounded to the millimetre, scores to 10⁻⁴. What is
+/// baked from a database in memory then matches what is baked from the
+/// bundle's file.
+pub fn as_stored(objects: &[VegObject]) -> Vec<VegObject> {
+    // Written and parsed back, so the value is the stored one bit for bit.
+    let stored = |v: f64, decimals: usize| format!("{v:.decimals$}").parse().unwrap_or(v);
+    objects
+        .iter()
+        .map(|o| VegObject {
+            x: stored(o.x, LENGTH_DECIMALS),
+            y: stored(o.y, LENGTH_DECIMALS),
+            size: stored(o.size, LENGTH_DECIMALS),
+            score: format!("{:.SCORE_DECIMALS$}", o.score)
+                .parse()
+                .unwrap_or(o.score),
+            ..o.clone()
+        })
+        .collect()
 }
 
 /// Read a database; errors name the line.
@@ -92,6 +119,14 @@ mod tests {
             score: 0.75,
         }];
         assert_eq!(from_csv(&to_csv(&objects)).unwrap(), objects);
+        let fine = vec![VegObject {
+            x: 291_000.123_456_7,
+            y: -0.000_6,
+            size: 2.345_678_9,
+            score: 0.912_345_6,
+            ..objects[0].clone()
+        }];
+        assert_eq!(as_stored(&fine), from_csv(&to_csv(&fine)).unwrap());
         assert!(from_csv("x;y\n")
             .unwrap_err()
             .to_string()

@@ -38,7 +38,7 @@ pub struct Evaluation {
 }
 
 /// Match `(x, y, score)` detections to `[xmin, ymin, xmax, ymax]` boxes
-/// and score the result ([`matches`], [`Evaluation::of`]).
+/// and score the result (`matches`, [`Evaluation::of`]).
 pub fn evaluate(detections: &[(f64, f64, f32)], truth: &[[f64; 4]]) -> Evaluation {
     Evaluation::of(&matches(detections, truth), truth.len())
 }

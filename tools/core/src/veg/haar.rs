@@ -153,7 +153,7 @@ fn channel_signatures(coefficients: &[Vec4], bands: usize, out: &mut Vec<f32>) {
 
 /// Signature of region `index` of a segmentation: over its own pixels when
 /// its bounding box spans `window_px` both ways, else over the window of
-/// [`window`] around it, neighbours included (a small region is a fragment of
+/// `window` around it, neighbours included (a small region is a fragment of
 /// a texture that only shows at the window's scale).
 pub fn region_signature(
     image: &Image,

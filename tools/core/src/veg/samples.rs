@@ -16,6 +16,14 @@ pub struct Sample {
 }
 
 impl Sample {
+    /// The rectangle `[x0, y0, x1, y1]` (pixels) as a sample of `class`.
+    pub fn rectangle(class: &str, [x0, y0, x1, y1]: [f64; 4]) -> Sample {
+        Sample {
+            class: class.to_string(),
+            polygon: vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]],
+        }
+    }
+
     /// The same sample moved by `(dx, dy)` pixels.
     pub fn translated(&self, dx: f64, dy: f64) -> Sample {
         Sample {
@@ -160,15 +168,29 @@ pub fn parse_csv(text: &str, width: usize, height: usize) -> Result<Vec<Sample>>
                 "box ({x0}, {y0}, {x1}, {y1}) lies outside the {width}×{height} image"
             )));
         }
-        samples.push(Sample {
-            class: fields[0].to_string(),
-            polygon: vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]],
-        });
+        samples.push(Sample::rectangle(fields[0], [x0, y0, x1, y1]));
     }
     if samples.is_empty() {
         return Err(Error::Input("no samples".into()));
     }
     Ok(samples)
+}
+
+/// The CSV form [`parse_csv`] reads: each sample's bounding box clipped to
+/// the `width`×`height` image, in pixels written exactly (the shortest
+/// decimal that reads back to the same value). A sample with nothing left
+/// inside the image is left out.
+pub fn to_csv(samples: &[Sample], width: usize, height: usize) -> String {
+    let mut csv = CSV_COLUMNS.join(";") + "\n";
+    for sample in samples {
+        let [x0, y0, x1, y1] = sample.bounds();
+        let (x0, x1) = (x0.clamp(0.0, width as f64), x1.clamp(0.0, width as f64));
+        let (y0, y1) = (y0.clamp(0.0, height as f64), y1.clamp(0.0, height as f64));
+        if x0 < x1 && y0 < y1 {
+            csv.push_str(&format!("{};{x0};{y0};{x1};{y1}\n", sample.class));
+        }
+    }
+    csv
 }
 
 /// Parse the GeoJSON form: a FeatureCollection of Polygon or MultiPolygon
@@ -286,6 +308,24 @@ mod tests {
         assert_eq!(s.len(), 2);
         assert!(s[0].contains(5.0, 5.0) && !s[0].contains(0.5, 5.0));
         assert_eq!(parse_csv("tree;1;2;10;12", 20, 20).unwrap().len(), 1);
+    }
+
+    #[test]
+    fn csv_written_reads_back_clipped_to_the_image() {
+        let samples = [
+            Sample::rectangle("tree", [1.25, 2.0, 10.0, 12.5]),
+            Sample::rectangle("other", [-3.0, 15.0, 4.0, 30.0]),
+            Sample::rectangle("gone", [25.0, 1.0, 30.0, 5.0]),
+        ];
+        let csv = to_csv(&samples, 20, 20);
+        assert_eq!(
+            csv,
+            "class;xmin;ymin;xmax;ymax\ntree;1.25;2;10;12.5\nother;0;15;4;20\n"
+        );
+        let back = parse_csv(&csv, 20, 20).unwrap();
+        assert_eq!(back[0], samples[0]);
+        assert_eq!(back[1].bounds(), [0.0, 15.0, 4.0, 20.0]);
+        assert_eq!(back.len(), 2);
     }
 
     #[test]

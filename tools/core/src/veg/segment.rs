@@ -993,7 +993,7 @@ mod tests {
             let mut reached = 0;
             while let Some(i) = stack.pop() {
                 reached += 1;
-                for j in crate::raster::neighbours4(i, w, h) {
+                for j in crate::grid::neighbours4(i, w, h) {
                     if !seen[j] && s.labels[j] == k as u32 {
                         seen[j] = true;
                         stack.push(j);
