@@ -2,12 +2,12 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use relevo::prep::region::Region;
+use relevo::prep::region::RegionSpec;
 use std::path::Path;
 
 fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else {
         return;
     };
-    let _ = Region::parse(text, Path::new("/nonexistent/region"));
+    let _ = RegionSpec::parse(text, Path::new("/nonexistent/region"));
 });

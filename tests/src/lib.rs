@@ -8,7 +8,7 @@
 mod paths;
 
 pub use paths::{repo, repo_root, shared};
-use relevo::prep::region::Region;
+use relevo::prep::region::RegionSpec;
 use std::path::{Path, PathBuf};
 
 /// Whether the run asked to rewrite golden outputs (`RELEVO_BLESS=1`).
@@ -19,7 +19,7 @@ pub fn blessing() -> bool {
 /// `relevo prep` in process: the region file at `region` into `out`.
 pub fn prep_region(region: &Path, out: &Path) -> PathBuf {
     relevo::ingest::gdalio::init();
-    let region = Region::load(region).unwrap();
+    let region = RegionSpec::load(region).unwrap();
     relevo::prep::prep(&region, out, true).unwrap().bundle
 }
 

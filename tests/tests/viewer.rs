@@ -3,12 +3,12 @@
 //! seed's central claim — the raycast's depth is the GPU mesh's depth.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use relevo_core::horizon::{distance_of_depth, Band};
+use relevo_core::horizon::{distance_of_depth, DistanceBand};
 use relevo_tests::{compare_with_reference, prep_region, repo};
 use relevo_view::flight::Flight;
 use relevo_view::headless::{device, render_once};
 use relevo_view::scene::Scene;
-use relevo_view::settings::{Mode, Settings};
+use relevo_view::settings::{Settings, TerrainMode};
 use std::path::Path;
 
 const SIZE: [u32; 2] = [480, 270];
@@ -33,8 +33,8 @@ fn lavapipe() -> (relevo_view::gpu::Device, relevo_view::gpu::Queue) {
 }
 
 /// Eight slices per cell with sub-voxels: the raycast at its finest.
-fn fine_bands() -> Vec<Band> {
-    vec![Band {
+fn fine_bands() -> Vec<DistanceBand> {
+    vec![DistanceBand {
         until_m: f64::INFINITY,
         slices_per_cell: 8.0,
         subvoxel: true,
@@ -60,7 +60,7 @@ fn headless_frames_of_each_mode_match_their_references() {
         (
             "mesh",
             Settings {
-                mode: Mode::Mesh,
+                mode: TerrainMode::Mesh,
                 tau_px: 1.0,
                 ..Default::default()
             },
@@ -68,7 +68,7 @@ fn headless_frames_of_each_mode_match_their_references() {
         (
             "mesh_wireframe",
             Settings {
-                mode: Mode::Mesh,
+                mode: TerrainMode::Mesh,
                 tau_px: 4.0,
                 wireframe: true,
                 texture: false,
@@ -78,13 +78,13 @@ fn headless_frames_of_each_mode_match_their_references() {
         (
             "raycast",
             Settings {
-                mode: Mode::Raycast,
+                mode: TerrainMode::Raycast,
                 ..Default::default()
             },
         ),
         ("raycast_bands", {
             let mut s = Settings {
-                mode: Mode::Raycast,
+                mode: TerrainMode::Raycast,
                 ..Default::default()
             };
             s.raycast.bands = relevo_view::settings::detailed_bands();
@@ -92,7 +92,7 @@ fn headless_frames_of_each_mode_match_their_references() {
         }),
     ];
     let zbuffer = |letter| Settings {
-        mode: Mode::parse(&format!("zbuffer:{letter}")).unwrap(),
+        mode: TerrainMode::parse(&format!("zbuffer:{letter}")).unwrap(),
         ..Default::default()
     };
     let terrain_only = cases
@@ -122,7 +122,7 @@ fn headless_frames_of_each_mode_match_their_references() {
         (
             "mesh_objects",
             Settings {
-                mode: Mode::Mesh,
+                mode: TerrainMode::Mesh,
                 tau_px: 1.0,
                 ..Default::default()
             },
@@ -131,7 +131,7 @@ fn headless_frames_of_each_mode_match_their_references() {
         (
             "raycast_objects",
             Settings {
-                mode: Mode::Raycast,
+                mode: TerrainMode::Raycast,
                 ..Default::default()
             },
             near,
@@ -159,28 +159,32 @@ fn headless_frames_of_each_mode_match_their_references() {
     down.pitch_deg = -20.0;
     down.horizon_frac = 0.5;
     let with_vegetation = [
-        ("mesh_vegetation", vegetation(Mode::Mesh, false), forest),
+        (
+            "mesh_vegetation",
+            vegetation(TerrainMode::Mesh, false),
+            forest,
+        ),
         (
             "mesh_vegetation_pitched",
-            vegetation(Mode::Mesh, false),
+            vegetation(TerrainMode::Mesh, false),
             down,
         ),
         (
             "raycast_vegetation_pitched",
-            vegetation(Mode::Raycast, false),
+            vegetation(TerrainMode::Raycast, false),
             down,
         ),
         (
             "raycast_vegetation",
-            vegetation(Mode::Raycast, false),
+            vegetation(TerrainMode::Raycast, false),
             forest,
         ),
-        ("mesh_sprites", vegetation(Mode::Mesh, true), forest),
+        ("mesh_sprites", vegetation(TerrainMode::Mesh, true), forest),
         (
             "mesh_vegetation_list",
             Settings {
                 vegetation: relevo_view::settings::VegetationSelection::List,
-                ..vegetation(Mode::Mesh, false)
+                ..vegetation(TerrainMode::Mesh, false)
             },
             forest,
         ),
@@ -188,7 +192,7 @@ fn headless_frames_of_each_mode_match_their_references() {
             "mesh_vegetation_blobs",
             Settings {
                 vegetation: relevo_view::settings::VegetationSelection::Blobs { side_m: 1000.0 },
-                ..vegetation(Mode::Mesh, false)
+                ..vegetation(TerrainMode::Mesh, false)
             },
             forest,
         ),
@@ -204,7 +208,7 @@ fn headless_frames_of_each_mode_match_their_references() {
             "{name}: {} pixels off, mean {:.3} levels; {} terrain, {} object triangles",
             d.pixels_off, d.mean, stats.triangles, stats.object_triangles
         );
-        if settings.mode == Mode::Mesh {
+        if settings.mode == TerrainMode::Mesh {
             assert!(
                 stats.triangles > 100,
                 "{name}: {} triangles",
@@ -231,14 +235,14 @@ fn raycast_depth_agrees_with_the_full_resolution_mesh() {
     let mut scene = olinda(d.path());
     let (device, queue) = lavapipe();
     let mesh = Settings {
-        mode: Mode::Mesh,
+        mode: TerrainMode::Mesh,
         tau_px: 0.0,
         morph: false,
         cull: false,
         ..Default::default()
     };
     let mut raycast = Settings {
-        mode: Mode::Raycast,
+        mode: TerrainMode::Raycast,
         ..Default::default()
     };
     raycast.raycast.bands = fine_bands();
@@ -313,7 +317,7 @@ fn vegetation_is_drawn_from_the_cut_and_composited_through_the_depth() {
         .ground_height(flight.position.x, flight.position.y)
         .unwrap()
         + 120.0;
-    for mode in [Mode::Mesh, Mode::Raycast] {
+    for mode in [TerrainMode::Mesh, TerrainMode::Raycast] {
         let settings = Settings {
             mode,
             tau_px: 1.0,
@@ -415,7 +419,7 @@ fn the_hud_counts_the_objects_in_view_and_impostors_stand_on_the_mesh_drawn() {
             VegetationSelection::List,
             VegetationSelection::Blobs { side_m: 1000.0 },
         ] {
-            for mode in [Mode::Mesh, Mode::Raycast] {
+            for mode in [TerrainMode::Mesh, TerrainMode::Raycast] {
                 let settings = Settings {
                     mode,
                     vegetation: selection,
@@ -456,7 +460,7 @@ fn the_hud_counts_the_objects_in_view_and_impostors_stand_on_the_mesh_drawn() {
                     hud.contains(&format!("{in_view} objects represented")),
                     "{what}: {hud}"
                 );
-                if mode == Mode::Mesh {
+                if mode == TerrainMode::Mesh {
                     let hierarchy = scene.lp.hierarchy();
                     let params = settings.refine_params(&camera);
                     for instance in scene.vegetation.as_ref().unwrap().list.instances() {
@@ -551,7 +555,10 @@ fn composited_objects_are_hidden_exactly_where_the_terrain_covers_them() {
     )
     .unwrap();
     scene.load_objects(&placement).unwrap();
-    for (name, mode) in [("mesh", Mode::Mesh), ("raycast", Mode::Raycast)] {
+    for (name, mode) in [
+        ("mesh", TerrainMode::Mesh),
+        ("raycast", TerrainMode::Raycast),
+    ] {
         let mut settings = Settings {
             mode,
             tau_px: 1.0,

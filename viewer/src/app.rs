@@ -9,7 +9,7 @@ use crate::hud;
 use crate::keys::{self, Action, Axis, Input};
 use crate::samples::SamplesTab;
 use crate::scene::Scene;
-use crate::settings::{self, Mode, Settings};
+use crate::settings::{self, Settings, TerrainMode};
 use eframe::egui;
 use eframe::egui_wgpu::{self, wgpu};
 use relevo_core::horizon;
@@ -274,8 +274,8 @@ impl ViewerApp {
         match action {
             Action::MeshOrRaycast => {
                 s.mode = match s.mode {
-                    Mode::Mesh => Mode::Raycast,
-                    Mode::Raycast | Mode::ZBuffer(_) => Mode::Mesh,
+                    TerrainMode::Mesh => TerrainMode::Raycast,
+                    TerrainMode::Raycast | TerrainMode::ZBuffer(_) => TerrainMode::Mesh,
                 };
             }
             Action::Wireframe => s.wireframe = !s.wireframe,
@@ -322,13 +322,13 @@ impl ViewerApp {
         ui.separator();
         let s = &mut self.settings;
         ui.horizontal(|ui| {
-            ui.selectable_value(&mut s.mode, Mode::Mesh, "mesh");
-            ui.selectable_value(&mut s.mode, Mode::Raycast, "raycast");
+            ui.selectable_value(&mut s.mode, TerrainMode::Mesh, "mesh");
+            ui.selectable_value(&mut s.mode, TerrainMode::Raycast, "raycast");
         });
         ui.horizontal_wrapped(|ui| {
             ui.label("z-buffer");
             for r in Representation::ALL {
-                ui.selectable_value(&mut s.mode, Mode::ZBuffer(r), r.letter().to_string())
+                ui.selectable_value(&mut s.mode, TerrainMode::ZBuffer(r), r.letter().to_string())
                     .on_hover_text(format!("{r:?}"));
             }
         });
@@ -534,7 +534,7 @@ impl ViewerApp {
             Ok(stats) => self.stats = stats,
             Err(e) => {
                 self.error = Some(format!("{e:#}"));
-                self.settings.mode = Mode::Mesh;
+                self.settings.mode = TerrainMode::Mesh;
             }
         }
         let view = &renderer.targets.colour_view;

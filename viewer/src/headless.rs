@@ -6,11 +6,11 @@ use crate::flight::Flight;
 use crate::gpu::{FrameStats, Readback, Renderer, Targets, COLOUR_FORMAT, DEPTH_FORMAT};
 use crate::hud;
 use crate::scene::Scene;
-use crate::settings::{Mode, Settings, VegetationSelection};
+use crate::settings::{Settings, TerrainMode, VegetationSelection};
 use anyhow::{bail, Context, Result};
 use eframe::egui;
 use eframe::egui_wgpu::{self, wgpu};
-use relevo_core::horizon::{Arithmetic, Band};
+use relevo_core::horizon::{Arithmetic, DistanceBand};
 use relevo_core::raster::png::encode_rgba;
 use relevo_core::scene::{self, CameraPose};
 use serde::Serialize;
@@ -24,8 +24,8 @@ pub struct RenderArgs {
     /// How the terrain is drawn: mesh, raycast, or a Z-buffer baseline
     /// zbuffer:a … zbuffer:g (points, top faces, front faces, segments,
     /// blocks, flat triangles, smooth triangles).
-    #[arg(long, default_value = "mesh", value_parser = Mode::parse)]
-    pub mode: Mode,
+    #[arg(long, default_value = "mesh", value_parser = TerrainMode::parse)]
+    pub mode: TerrainMode,
     /// Eye easting, northing (bundle CRS), height (m), heading (° clockwise
     /// from north), optionally the pitch with its unit (`-20deg` looks down)
     /// and incl (the view axis's screen row in pixels from the bottom;
@@ -129,13 +129,13 @@ pub struct RenderArgs {
 }
 
 /// One `--bands` value: the whole list.
-type Bands = Vec<Band>;
+type Bands = Vec<DistanceBand>;
 
 /// What `--stats` writes.
 #[derive(Debug, Serialize)]
 struct Report<'a> {
     adapter: &'a str,
-    mode: Mode,
+    mode: TerrainMode,
     camera: String,
     frame: FrameStats,
 }

@@ -6,7 +6,7 @@
 use crate::flight::Flight;
 use crate::gpu::FrameStats;
 use crate::scene::Scene;
-use crate::settings::{Mode, Settings};
+use crate::settings::{Settings, TerrainMode};
 use eframe::egui;
 
 /// What the HUD reports.
@@ -26,13 +26,13 @@ pub fn lines(r: &Readings) -> Vec<String> {
     let mut lines = vec![format!("{:.0} fps   {:.1} ms", r.fps, r.frame_ms)];
     let s = r.settings;
     let mode = match s.mode {
-        Mode::Mesh => format!(
+        TerrainMode::Mesh => format!(
             "mesh τ {:.1} px{}",
             s.tau_px,
             if s.morph { ", geomorphing" } else { "" }
         ),
-        Mode::Raycast => "raycast (floating horizon)".to_string(),
-        Mode::ZBuffer(rep) => format!("z-buffer baseline [{}] {rep:?}", rep.letter()),
+        TerrainMode::Raycast => "raycast (floating horizon)".to_string(),
+        TerrainMode::ZBuffer(rep) => format!("z-buffer baseline [{}] {rep:?}", rep.letter()),
     };
     lines.push(format!("{mode}   {} triangles", r.stats.triangles));
     if let (Some(scene), Some(flight)) = (r.scene, r.flight) {

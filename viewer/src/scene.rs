@@ -41,7 +41,7 @@ pub struct Scene {
     /// Reusable refinement and raycast buffers: nothing allocated per frame
     /// once warm.
     pub refiner: Refiner,
-    pub raycaster: horizon::Renderer,
+    pub raycaster: horizon::Raycaster,
     /// Objects placed on the terrain, when a placement file was loaded.
     pub objects: Option<ObjectMesh>,
     /// The bundle's vegetation clusters with the cut they were baked for,
@@ -161,7 +161,7 @@ impl Scene {
             drape,
             terrain,
             refiner: Refiner::new(),
-            raycaster: horizon::Renderer::default(),
+            raycaster: horizon::Raycaster::default(),
             objects: None,
             vegetation,
         })

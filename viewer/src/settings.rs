@@ -4,14 +4,14 @@
 //! reads it from flags, and the GPU passes draw by it.
 
 use relevo_core::camera::Camera;
-use relevo_core::horizon::{Band, RenderOptions};
+use relevo_core::horizon::{DistanceBand, RenderOptions};
 use relevo_core::lp::refine::RefineParams;
 use relevo_core::zbuffer::Representation;
 use serde::Serialize;
 
 /// How the terrain is drawn.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Mode {
+pub enum TerrainMode {
     /// relevo-core's view-dependent refinement, drawn as triangles.
     Mesh,
     /// relevo-core's floating-horizon raycast, composited with its depth.
@@ -20,17 +20,17 @@ pub enum Mode {
     ZBuffer(Representation),
 }
 
-impl Mode {
+impl TerrainMode {
     /// Parse `mesh`, `raycast` or `zbuffer:a` … `zbuffer:g`.
-    pub fn parse(text: &str) -> Result<Mode, String> {
+    pub fn parse(text: &str) -> Result<TerrainMode, String> {
         match text {
-            "mesh" => Ok(Mode::Mesh),
-            "raycast" => Ok(Mode::Raycast),
+            "mesh" => Ok(TerrainMode::Mesh),
+            "raycast" => Ok(TerrainMode::Raycast),
             _ => text
                 .strip_prefix("zbuffer:")
                 .and_then(|l| l.chars().next().filter(|_| l.len() == 1))
                 .and_then(Representation::from_letter)
-                .map(Mode::ZBuffer)
+                .map(TerrainMode::ZBuffer)
                 .ok_or_else(|| {
                     format!("{text:?}: expected mesh, raycast or zbuffer:a … zbuffer:g")
                 }),
@@ -38,17 +38,17 @@ impl Mode {
     }
 }
 
-impl std::fmt::Display for Mode {
+impl std::fmt::Display for TerrainMode {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Mode::Mesh => write!(f, "mesh"),
-            Mode::Raycast => write!(f, "raycast"),
-            Mode::ZBuffer(r) => write!(f, "zbuffer:{}", r.letter()),
+            TerrainMode::Mesh => write!(f, "mesh"),
+            TerrainMode::Raycast => write!(f, "raycast"),
+            TerrainMode::ZBuffer(r) => write!(f, "zbuffer:{}", r.letter()),
         }
     }
 }
 
-impl Serialize for Mode {
+impl Serialize for TerrainMode {
     fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
         serializer.collect_str(self)
     }
@@ -56,14 +56,14 @@ impl Serialize for Mode {
 
 /// The raycast's detailed bands (the side panel's and the benchmarks'):
 /// four slices per cell with sub-voxels to 3 km, one slice per cell beyond.
-pub fn detailed_bands() -> Vec<Band> {
+pub fn detailed_bands() -> Vec<DistanceBand> {
     vec![
-        Band {
+        DistanceBand {
             until_m: 3000.0,
             slices_per_cell: 4.0,
             subvoxel: true,
         },
-        Band {
+        DistanceBand {
             until_m: f64::INFINITY,
             slices_per_cell: 1.0,
             subvoxel: false,
@@ -74,7 +74,7 @@ pub fn detailed_bands() -> Vec<Band> {
 /// Everything a frame is drawn with besides the camera.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Settings {
-    pub mode: Mode,
+    pub mode: TerrainMode,
     /// Screen-space tolerance τ of the refinement, pixels.
     pub tau_px: f64,
     /// Geomorphing band: vertices blend in between τ and this many pixels.
@@ -173,7 +173,7 @@ impl Settings {
 impl Default for Settings {
     fn default() -> Self {
         Settings {
-            mode: Mode::Mesh,
+            mode: TerrainMode::Mesh,
             tau_px: 2.0,
             morph: true,
             cull: true,

@@ -10,7 +10,7 @@ use eframe::egui::Key;
 use egui_kittest::kittest::Queryable;
 use egui_kittest::Harness;
 use relevo_view::app::ViewerApp;
-use relevo_view::settings::Mode;
+use relevo_view::settings::TerrainMode;
 
 /// The viewer's window on `bundle`, 1000×640, drawn by the wgpu renderer
 /// on lavapipe unless a driver is pinned.
@@ -33,7 +33,7 @@ fn keys_switch_modes_and_the_hud_shows_the_numbers() {
     harness.run_steps(3);
     let app = harness.state();
     assert_eq!(app.error(), None);
-    assert_eq!(app.settings.mode, Mode::Mesh);
+    assert_eq!(app.settings.mode, TerrainMode::Mesh);
     assert!(
         app.stats.triangles > 100,
         "{} triangles",
@@ -53,7 +53,8 @@ fn keys_switch_modes_and_the_hud_shows_the_numbers() {
     for (key, check) in [
         (
             Key::M,
-            &(|a: &ViewerApp| a.settings.mode == Mode::Raycast) as &dyn Fn(&ViewerApp) -> bool,
+            &(|a: &ViewerApp| a.settings.mode == TerrainMode::Raycast)
+                as &dyn Fn(&ViewerApp) -> bool,
         ),
         (Key::W, &|a: &ViewerApp| a.settings.wireframe),
         (Key::T, &|a: &ViewerApp| !a.settings.texture),

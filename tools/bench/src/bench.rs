@@ -7,7 +7,7 @@ use anyhow::{bail, Context, Result};
 use relevo::ingest::gdalio;
 use relevo::ingest::stitch::{stitch, StitchOptions};
 use relevo::prep::prep;
-use relevo::prep::region::Region;
+use relevo::prep::region::RegionSpec;
 use relevo_core::grid::fractal_heights;
 use relevo_core::raster::mosaic::Overlap;
 use serde_json::json;
@@ -21,7 +21,7 @@ pub fn ingest(repo: &Path, data: &Path, runs: usize, json_lines: bool) -> Result
     let scratch = tempfile_dir()?;
 
     // prep on the sample region: first run in this process, then the median.
-    let region = Region::load(&repo.join("data/olinda/REGION.toml"))?;
+    let region = RegionSpec::load(&repo.join("data/olinda/REGION.toml"))?;
     let out = scratch.join("olinda.relevo");
     let first = median_ms(1, || prep(&region, &out, true).map(|_| ()))?;
     let median = median_ms(runs, || prep(&region, &out, true).map(|_| ()))?;
@@ -256,7 +256,7 @@ pub fn hierarchy(
                 gdal::raster::GdalDataType::Float32,
                 None,
             )?;
-            let region: Region = toml::from_str(&format!(
+            let region: RegionSpec = toml::from_str(&format!(
                 "[dem]\nfiles = [{:?}]\n",
                 tif.display().to_string()
             ))?;

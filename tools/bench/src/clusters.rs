@@ -6,7 +6,7 @@
 use crate::measure::{emit, median, tempfile_dir};
 use anyhow::{Context, Result};
 use glam::DVec3;
-use relevo::prep::region::Region;
+use relevo::prep::region::RegionSpec;
 use relevo_core::bundle::Bundle;
 use relevo_core::camera::Camera;
 use relevo_core::cluster::bake::BakeOptions;
@@ -44,7 +44,7 @@ pub fn clusters(
 ) -> Result<()> {
     relevo::ingest::gdalio::init();
     let dir = tempfile_dir()?;
-    let region = Region::load(&repo.join("data/olinda/REGION.toml"))?;
+    let region = RegionSpec::load(&repo.join("data/olinda/REGION.toml"))?;
     let bundle = relevo::prep::prep(&region, &dir.join("olinda.relevo"), true)?.bundle;
     let bundle = Bundle::open(&bundle)?;
     let database = bundle
@@ -383,7 +383,7 @@ pub fn pictures(repo: &Path, out: &Path) -> Result<()> {
     // of growing size.
     relevo::ingest::gdalio::init();
     let dir = tempfile_dir()?;
-    let region = Region::load(&repo.join("data/olinda/REGION.toml"))?;
+    let region = RegionSpec::load(&repo.join("data/olinda/REGION.toml"))?;
     let bundle = relevo::prep::prep(&region, &dir.join("olinda.relevo"), true)?.bundle;
     let (_, clusters) =
         relevo_core::cluster::store::read(&Bundle::open(&bundle)?)?.context("no clusters")?;

@@ -11,7 +11,7 @@ use relevo_core::bundle::Bundle;
 use relevo_core::camera::Camera;
 use relevo_core::grid::fractal_heights;
 use relevo_core::horizon::{
-    self, Arithmetic, Band, ColorSource, Frame, Mode, RenderOptions, Terrain,
+    self, Arithmetic, ColorSource, DistanceBand, RaycastFrame, RaycastMode, RenderOptions, Terrain,
 };
 use serde_json::json;
 use std::path::Path;
@@ -225,7 +225,7 @@ pub fn render(
         );
     }
     let band = |spc: f64, subvoxel: bool| {
-        vec![Band {
+        vec![DistanceBand {
             until_m: f64::INFINITY,
             slices_per_cell: spc,
             subvoxel,
@@ -261,7 +261,7 @@ pub fn render(
         (
             "distorted (voxel-space shortcuts)",
             RenderOptions {
-                mode: Mode::Distorted,
+                mode: RaycastMode::Distorted,
                 ..Default::default()
             },
             0.0,
@@ -287,9 +287,9 @@ pub fn render(
         let grid = &*grid;
         let shade = terrain_colours(&terrain, grid);
         for &size in &sizes {
-            let mut renderer = horizon::Renderer::default();
+            let mut renderer = horizon::Raycaster::default();
             // The reference frames of each heading and pitch.
-            let mut references: Vec<(f64, Vec<Frame>)> = Vec::new();
+            let mut references: Vec<(f64, Vec<RaycastFrame>)> = Vec::new();
             for (name, options, pitch) in &configs {
                 let mut timing = Timing::default();
                 let mut quality = Vec::new();
@@ -417,7 +417,7 @@ pub fn render(
     Ok(())
 }
 
-/// Frame times of one configuration over the headings' flights.
+/// RaycastFrame times of one configuration over the headings' flights.
 #[derive(Default)]
 struct Timing {
     /// Every flight frame after the first, milliseconds.
@@ -464,7 +464,7 @@ const FRAME_WRITE: &str = "frame write floor";
 /// `frame`'s colour and depth once (4 + 4 bytes a pixel, in its column
 /// tiles, tiles in parallel on the renderer's threads), nothing computed —
 /// the median over `runs` × [`HEADINGS`] writes.
-fn frame_write_ms(mut frame: Frame, runs: usize) -> f64 {
+fn frame_write_ms(mut frame: RaycastFrame, runs: usize) -> f64 {
     let tile = horizon::TILE_COLUMNS * frame.height;
     let mut times = Vec::new();
     for run in 0..runs * HEADINGS {

@@ -8,7 +8,7 @@
 use crate::measure::{emit, median};
 use anyhow::{Context, Result};
 use relevo::prep::prep;
-use relevo::prep::region::Region;
+use relevo::prep::region::RegionSpec;
 use relevo_core::bundle::{write_terrain_bundle, Crs};
 use relevo_core::geo::GeoTransform;
 use relevo_core::grid::{fractal_heights, HeightGrid};
@@ -18,7 +18,7 @@ use relevo_view::flight::Flight;
 use relevo_view::gpu::{FrameStats, Renderer};
 use relevo_view::headless::{device, wait_for_gpu};
 use relevo_view::scene::Scene;
-use relevo_view::settings::{Mode, Settings, VegetationSelection};
+use relevo_view::settings::{Settings, TerrainMode, VegetationSelection};
 use serde_json::json;
 use std::path::Path;
 use std::time::Instant;
@@ -45,7 +45,7 @@ pub fn view(
     let mut bundles = Vec::new();
     let olinda = scratch.join("olinda.relevo");
     prep(
-        &Region::load(&repo.join("data/olinda/REGION.toml"))?,
+        &RegionSpec::load(&repo.join("data/olinda/REGION.toml"))?,
         &olinda,
         true,
     )?;
@@ -61,7 +61,7 @@ pub fn view(
         format!("[dem]\nfiles = [{:?}]\n", copernicus.display().to_string()),
     )?;
     let grenoble = scratch.join("grenoble.relevo");
-    prep(&Region::load(&grenoble_toml)?, &grenoble, true)?;
+    prep(&RegionSpec::load(&grenoble_toml)?, &grenoble, true)?;
     bundles.push(("grenoble", grenoble, None));
     if max_side >= 4097 {
         let side = 4097;
@@ -97,7 +97,7 @@ pub fn view(
                 configs.push((
                     format!("mesh tau {tau}"),
                     Settings {
-                        mode: Mode::Mesh,
+                        mode: TerrainMode::Mesh,
                         tau_px: tau,
                         ..Default::default()
                     },
@@ -106,18 +106,18 @@ pub fn view(
             configs.push((
                 "raycast".into(),
                 Settings {
-                    mode: Mode::Raycast,
+                    mode: TerrainMode::Raycast,
                     ..Default::default()
                 },
             ));
             let mut fixed = Settings {
-                mode: Mode::Raycast,
+                mode: TerrainMode::Raycast,
                 ..Default::default()
             };
             fixed.raycast.arithmetic = Arithmetic::Fixed;
             configs.push(("raycast fixed".into(), fixed));
             let mut bands = Settings {
-                mode: Mode::Raycast,
+                mode: TerrainMode::Raycast,
                 ..Default::default()
             };
             bands.raycast.bands = relevo_view::settings::detailed_bands();
@@ -127,7 +127,7 @@ pub fn view(
                     configs.push((
                         format!("zbuffer {} {r:?}", r.letter()),
                         Settings {
-                            mode: Mode::ZBuffer(r),
+                            mode: TerrainMode::ZBuffer(r),
                             ..Default::default()
                         },
                     ));
@@ -136,7 +136,7 @@ pub fn view(
             // The vegetation, from the quadtree cut and, for comparison,
             // from the plain list.
             if scene.vegetation.is_some() {
-                for mode in [Mode::Mesh, Mode::Raycast] {
+                for mode in [TerrainMode::Mesh, TerrainMode::Raycast] {
                     for selection in [VegetationSelection::Quadtree, VegetationSelection::List] {
                         configs.push((
                             format!("{mode} + vegetation {selection}"),
@@ -155,7 +155,7 @@ pub fn view(
                 scene
                     .load_objects(placement)
                     .with_context(|| placement.display().to_string())?;
-                for mode in [Mode::Mesh, Mode::Raycast] {
+                for mode in [TerrainMode::Mesh, TerrainMode::Raycast] {
                     configs.push((
                         format!("{mode} + objects"),
                         Settings {

@@ -9,7 +9,7 @@ use crate::measure::{emit, median};
 use anyhow::{Context, Result};
 use glam::DVec3;
 use relevo::prep::prep;
-use relevo::prep::region::Region;
+use relevo::prep::region::RegionSpec;
 use relevo_core::bundle::Bundle;
 use relevo_core::camera::Camera;
 use relevo_core::cluster::bake::BakeOptions;
@@ -20,7 +20,7 @@ use relevo_core::veg::db::VegObject;
 use relevo_view::gpu::{Device, FrameStats, Queue, Renderer};
 use relevo_view::headless::{device, wait_for_gpu};
 use relevo_view::scene::Scene;
-use relevo_view::settings::{Mode, Settings, VegetationSelection};
+use relevo_view::settings::{Settings, TerrainMode, VegetationSelection};
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -131,7 +131,7 @@ pub fn run(repo: &Path, runs: usize, max_objects: usize, json: bool) -> Result<(
     );
     let bundle = scratch.join("olinda.relevo");
     prep(
-        &Region::load(&repo.join("data/olinda/REGION.toml"))?,
+        &RegionSpec::load(&repo.join("data/olinda/REGION.toml"))?,
         &bundle,
         true,
     )?;
@@ -243,7 +243,7 @@ impl Bench {
                 let mut selections = vec![VegetationSelection::Quadtree];
                 if config == 1 {
                     let plain = |sprites| Settings {
-                        mode: Mode::Mesh,
+                        mode: TerrainMode::Mesh,
                         vegetation: VegetationSelection::List,
                         sprites,
                         alpha: false,
@@ -272,7 +272,7 @@ impl Bench {
                 }
                 for vegetation in selections {
                     let settings = Settings {
-                        mode: Mode::Mesh,
+                        mode: TerrainMode::Mesh,
                         vegetation,
                         ..Default::default()
                     };
@@ -321,7 +321,7 @@ impl Bench {
                 60.0,
             );
             let list = |culling| Settings {
-                mode: Mode::Mesh,
+                mode: TerrainMode::Mesh,
                 vegetation: VegetationSelection::List,
                 vegetation_culling: culling,
                 ..Default::default()
@@ -397,7 +397,7 @@ impl Bench {
                     90.0,
                 );
                 let list = |blur| Settings {
-                    mode: Mode::Mesh,
+                    mode: TerrainMode::Mesh,
                     vegetation: VegetationSelection::List,
                     blur,
                     ..Default::default()
@@ -450,7 +450,7 @@ impl Bench {
                 let ground = scene.ground_height(x, y).unwrap_or(0.0);
                 let camera = camera(DVec3::new(x, y, ground + above), heading, -15.0, 60.0);
                 let settings = Settings {
-                    mode: Mode::Mesh,
+                    mode: TerrainMode::Mesh,
                     ..Default::default()
                 };
                 let (ms, stats) = self.time(&mut scene, &[camera], &settings)?;
@@ -533,7 +533,7 @@ impl Bench {
             })
             .collect();
         let terrain_only = Settings {
-            mode: Mode::Mesh,
+            mode: TerrainMode::Mesh,
             objects: false,
             ..Default::default()
         };
@@ -544,7 +544,7 @@ impl Bench {
             VegetationSelection::List,
         ] {
             let settings = Settings {
-                mode: Mode::Mesh,
+                mode: TerrainMode::Mesh,
                 vegetation: selection,
                 ..Default::default()
             };

@@ -6,7 +6,9 @@
 use crate::bundle::{Bundle, GridInfo};
 use crate::camera::Camera;
 use crate::geo::TerrainFrame;
-use crate::horizon::{render, Arithmetic, Band, Frame, Mode, RenderOptions, Terrain};
+use crate::horizon::{
+    render, Arithmetic, DistanceBand, RaycastFrame, RaycastMode, RenderOptions, Terrain,
+};
 use crate::{Error, Result};
 use glam::DVec3;
 
@@ -197,7 +199,7 @@ pub fn parse_size(text: &str) -> Result<[u32; 2], String> {
 
 /// Parse `UNTIL_M:SLICES_PER_CELL[:sub]` bands, comma-separated, e.g.
 /// `3000:4:sub,10000:2:sub,inf:1`.
-pub fn parse_bands(text: &str) -> Result<Vec<Band>, String> {
+pub fn parse_bands(text: &str) -> Result<Vec<DistanceBand>, String> {
     text.split(',')
         .map(|band| {
             let parts: Vec<&str> = band.split(':').collect();
@@ -219,7 +221,7 @@ pub fn parse_bands(text: &str) -> Result<Vec<Band>, String> {
                 Some(&"sub") => true,
                 Some(_) => return Err(bad()),
             };
-            Ok(Band {
+            Ok(DistanceBand {
                 until_m,
                 slices_per_cell,
                 subvoxel,
@@ -230,9 +232,9 @@ pub fn parse_bands(text: &str) -> Result<Vec<Band>, String> {
 
 /// Raycast options from the command-line switches.
 pub fn render_options(
-    mode: Mode,
+    mode: RaycastMode,
     fixed: bool,
-    bands: Option<Vec<Band>>,
+    bands: Option<Vec<DistanceBand>>,
     prefilter: bool,
 ) -> Result<RenderOptions> {
     let mut o = RenderOptions {
@@ -259,7 +261,7 @@ pub fn render_bundle(
     view: &View,
     options: &RenderOptions,
     hillshade: Option<[f64; 2]>,
-) -> Result<Frame> {
+) -> Result<RaycastFrame> {
     let frame = bundle.frame();
     let heights = bundle.heights()?;
     let mask = bundle.mask()?;

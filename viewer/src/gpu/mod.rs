@@ -13,7 +13,7 @@ mod zbuffer;
 pub use targets::{Readback, Targets, COLOUR_FORMAT, DEPTH_FORMAT};
 
 use crate::scene::Scene;
-use crate::settings::{Mode, Settings};
+use crate::settings::{Settings, TerrainMode};
 use eframe::egui_wgpu::wgpu;
 
 use relevo_core::camera::Camera;
@@ -323,19 +323,19 @@ impl Renderer {
                 self.targets
                     .begin(&mut encoder, Some(sky_colour(&settings.raycast)), "clear");
             }
-            Mode::ZBuffer(representation) => {
+            TerrainMode::ZBuffer(representation) => {
                 self.zbuffer
                     .prepare(device, queue, scene, camera, representation, &mut stats)?;
                 self.zbuffer
                     .draw(&mut encoder, &self.targets, sky_colour(&settings.raycast));
             }
-            Mode::Mesh => {
+            TerrainMode::Mesh => {
                 self.mesh
                     .prepare(device, queue, scene, camera, settings, &mut stats);
                 self.mesh
                     .draw(&mut encoder, &self.targets, sky_colour(&settings.raycast));
             }
-            Mode::Raycast => {
+            TerrainMode::Raycast => {
                 self.raycast.prepare(
                     device,
                     queue,
@@ -359,7 +359,7 @@ impl Renderer {
         if let Some(vegetation) = scene.vegetation.as_mut().filter(|_| settings.objects) {
             let start = Instant::now();
             vegetation.select(camera, settings);
-            if settings.mode == Mode::Mesh {
+            if settings.mode == TerrainMode::Mesh {
                 vegetation.stand_on_mesh(&scene.lp, &scene.terrain, camera, settings);
             }
             stats.cut_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -383,7 +383,7 @@ impl Renderer {
     /// raycast: exactly the CPU depth buffer (not uploaded for such frames).
     pub fn raycast_depth(&self, scene: &Scene, settings: &Settings) -> Option<Vec<f32>> {
         let objects_drawn = settings.objects && scene.has_objects();
-        (settings.mode == Mode::Raycast && settings.terrain && !objects_drawn)
+        (settings.mode == TerrainMode::Raycast && settings.terrain && !objects_drawn)
             .then(|| scene.raycaster.frame().depth_rows())
     }
 }

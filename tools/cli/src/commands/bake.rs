@@ -8,7 +8,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use relevo_core::bundle::Bundle;
 use relevo_core::cluster::bake::BakeOptions;
-use relevo_core::cluster::cut::{Band, CutOptions};
+use relevo_core::cluster::cut::{CutBand, CutOptions};
 use relevo_core::cluster::model::ModelSource;
 use relevo_core::cluster::store::{self, NewVegetation};
 use std::collections::BTreeMap;
@@ -16,7 +16,7 @@ use std::path::PathBuf;
 
 /// Type of a list of bands as clap parses it (an alias keeps clap's
 /// `Vec` handling off).
-type Bands = Vec<Band>;
+type Bands = Vec<CutBand>;
 
 #[derive(Args, Debug)]
 pub struct BakeArgs {

@@ -5,7 +5,7 @@ use crate::ingest::gdalio::Resampling;
 use crate::output;
 use crate::prep::prep;
 use crate::prep::region::{
-    parse_nodata, DemSection, FillSection, GridSection, ImageSection, NoData, Region,
+    parse_nodata, DemSection, FillSection, GridSection, ImageSection, NoData, RegionSpec,
     VegetationSection,
 };
 use anyhow::{bail, Result};
@@ -72,9 +72,9 @@ pub fn run(a: PrepArgs) -> Result<()> {
         bail!("--bands takes three bands R,G,B, e.g. 3,2,1");
     }
     let region = match &a.region {
-        Some(path) => Region::load(path)?,
+        Some(path) => RegionSpec::load(path)?,
         None => {
-            let region = Region {
+            let region = RegionSpec {
                 name: None,
                 crs: a.crs,
                 cell_size_m: a.cell_size,

@@ -5,7 +5,7 @@ use crate::output;
 use anyhow::{bail, Result};
 use clap::Args;
 use relevo_core::bundle::Bundle;
-use relevo_core::horizon::{Band, Mode};
+use relevo_core::horizon::{DistanceBand, RaycastMode};
 use relevo_core::raster::png::encode_rgba;
 use relevo_core::scene::{self, CameraPose, View};
 use std::path::{Path, PathBuf};
@@ -69,7 +69,7 @@ pub struct RenderArgs {
 
 /// One `--bands` value: the whole list (a plain `Vec` would make clap
 /// expect the flag once per band).
-type Bands = Vec<Band>;
+type Bands = Vec<DistanceBand>;
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
 pub enum RenderMode {
@@ -106,8 +106,8 @@ pub fn run(a: RenderArgs) -> Result<()> {
         far_cells: a.far,
     };
     let mode = match a.mode {
-        RenderMode::Raycast => Mode::Raycast,
-        RenderMode::Distorted => Mode::Distorted,
+        RenderMode::Raycast => RaycastMode::Raycast,
+        RenderMode::Distorted => RaycastMode::Distorted,
     };
     let mut options = scene::render_options(mode, a.fixed, a.bands, a.prefilter)?;
     options.grow_steps = a.grow_steps;

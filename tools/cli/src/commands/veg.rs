@@ -7,7 +7,7 @@ use crate::veg_io;
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 use relevo_core::raster::png::encode_rgba;
-use relevo_core::veg::pipeline::{self, Contrast, Mode, VegOptions};
+use relevo_core::veg::pipeline::{self, Contrast, DetectionMode, VegOptions};
 use relevo_core::veg::{baseline, db, eval, samples};
 use std::path::{Path, PathBuf};
 
@@ -193,12 +193,12 @@ pub enum ModeArg {
     Fill,
 }
 
-impl From<ModeArg> for Mode {
-    fn from(m: ModeArg) -> Mode {
+impl From<ModeArg> for DetectionMode {
+    fn from(m: ModeArg) -> DetectionMode {
         match m {
-            ModeArg::Auto => Mode::Auto,
-            ModeArg::Crowns => Mode::Crowns,
-            ModeArg::Fill => Mode::Fill,
+            ModeArg::Auto => DetectionMode::Auto,
+            ModeArg::Crowns => DetectionMode::Crowns,
+            ModeArg::Fill => DetectionMode::Fill,
         }
     }
 }

@@ -14,7 +14,7 @@ use crate::veg_io;
 use anyhow::{bail, Context, Result};
 use gdal::raster::GdalDataType;
 use gdal::spatial_ref::SpatialRef;
-use region::Region;
+use region::RegionSpec;
 use relevo_core::bundle::names;
 use relevo_core::bundle::{
     sha256_file, BundleWriter, ColorInfo, Crs, Description, GridInfo, InputFile, StageTiming,
@@ -72,7 +72,7 @@ pub struct Summary {
 
 /// State carried from stage to stage.
 struct Build<'a> {
-    region: &'a Region,
+    region: &'a RegionSpec,
     name: String,
     writer: BundleWriter,
     /// The DEM stitched onto the bundle's metric grid (heights in metres).
@@ -95,7 +95,7 @@ struct Build<'a> {
 }
 
 /// Run every stage and move the finished bundle to `out`.
-pub fn prep(region: &Region, out: &Path, force: bool) -> Result<Summary> {
+pub fn prep(region: &RegionSpec, out: &Path, force: bool) -> Result<Summary> {
     let name = region.name.clone().unwrap_or_else(|| {
         out.file_stem()
             .map(|s| s.to_string_lossy().to_string())

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Region {
+pub struct RegionSpec {
     /// Region name; default: the output's file stem.
     pub name: Option<String>,
     /// Target CRS of the bundle (anything GDAL accepts). Default: the DEM's
@@ -162,18 +162,18 @@ pub fn parse_nodata(text: &str) -> Result<f64, String> {
         .map_err(|_| format!("{text:?} is neither a number nor nan"))
 }
 
-impl Region {
+impl RegionSpec {
     /// Read and check a REGION.toml, resolving relative paths against its folder.
-    pub fn load(path: &Path) -> Result<Region> {
+    pub fn load(path: &Path) -> Result<RegionSpec> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("{}: cannot read", path.display()))?;
         let base = path.parent().unwrap_or(Path::new("."));
-        Region::parse(&text, base).with_context(|| path.display().to_string())
+        RegionSpec::parse(&text, base).with_context(|| path.display().to_string())
     }
 
-    /// [`Region::load`] on text, relative paths resolved against `base`.
-    pub fn parse(text: &str, base: &Path) -> Result<Region> {
-        let mut region: Region =
+    /// [`RegionSpec::load`] on text, relative paths resolved against `base`.
+    pub fn parse(text: &str, base: &Path) -> Result<RegionSpec> {
+        let mut region: RegionSpec =
             toml::from_str(text).map_err(|e| anyhow!("{}", e.to_string().trim_end()))?;
         let resolve = |p: &mut PathBuf| {
             if p.is_relative() {

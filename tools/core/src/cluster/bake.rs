@@ -14,7 +14,7 @@
 //! render of the members' models is measured in the tests and documented
 //! (docs/algorithms.md#clusters).
 
-use super::cut::{CutOptions, Frame};
+use super::cut::{AtlasFrame, CutOptions};
 use super::image::PremulImage;
 use super::model::{Model, ModelSource};
 use super::quadtree::{ClusterObject, Node, Quadtree, NONE};
@@ -403,7 +403,7 @@ pub fn bake(
             frames: [frames[0], frames[1], frames[2], frames[3], frames[4]],
         })
         .collect();
-    let frames: Vec<Frame> = layout[5 * class_views.len()..].to_vec();
+    let frames: Vec<AtlasFrame> = layout[5 * class_views.len()..].to_vec();
     for (k, &i) in baked_nodes.iter().enumerate() {
         tree.nodes[i].frames = (5 * k) as u32;
     }
@@ -524,7 +524,7 @@ fn compose_view(
 /// shelves; each frame starts [`ALIGN`] texels from the page's top-left
 /// and from its neighbours. The last page is cut to the rows it uses.
 /// Returns each frame's place (input order) and each page's size.
-pub fn pack(sizes: &[[usize; 2]], page_px: usize) -> Result<(Vec<Frame>, Vec<[usize; 2]>)> {
+pub fn pack(sizes: &[[usize; 2]], page_px: usize) -> Result<(Vec<AtlasFrame>, Vec<[usize; 2]>)> {
     let mut order: Vec<usize> = (0..sizes.len()).collect();
     order.sort_by(|&a, &b| {
         sizes[b][1]
@@ -538,7 +538,7 @@ pub fn pack(sizes: &[[usize; 2]], page_px: usize) -> Result<(Vec<Frame>, Vec<[us
             u16::MAX
         )));
     }
-    let mut frames = vec![Frame::default(); sizes.len()];
+    let mut frames = vec![AtlasFrame::default(); sizes.len()];
     let mut pages: Vec<[usize; 2]> = Vec::new();
     let (mut x, mut y, mut shelf) = (ALIGN, ALIGN, 0usize);
     for i in order {
@@ -565,7 +565,7 @@ pub fn pack(sizes: &[[usize; 2]], page_px: usize) -> Result<(Vec<Frame>, Vec<[us
         }
         let page = pages.len() - 1;
         let too_many = || Error::Input(format!("more than {} atlas pages", u16::MAX));
-        frames[i] = Frame {
+        frames[i] = AtlasFrame {
             page: u16::try_from(page).map_err(|_| too_many())?,
             // All below `page_px`, which fits 16 bits (checked above).
             x: x as u16,

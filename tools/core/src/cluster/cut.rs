@@ -20,7 +20,7 @@ use rayon::prelude::*;
 
 /// One distance band.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Band {
+pub struct CutBand {
     /// Outer edge of the band, metres from the eye.
     pub until_m: f64,
     /// Most objects one drawn cluster may stand for inside this band.
@@ -32,7 +32,7 @@ pub struct Band {
 #[serde(default, deny_unknown_fields)]
 pub struct CutOptions {
     /// Bands by increasing distance.
-    pub bands: Vec<Band>,
+    pub bands: Vec<CutBand>,
     /// Elevation of the line of sight above which an impostor shows its top
     /// view, degrees (the seed's θ, 45° after its 0–90° sweep).
     pub view_angle_deg: f64,
@@ -71,7 +71,7 @@ impl Default for CutOptions {
                 (8_000.0, 64),
                 (20_000.0, 256),
             ]
-            .map(|(until_m, max_cluster)| Band {
+            .map(|(until_m, max_cluster)| CutBand {
                 until_m,
                 max_cluster,
             })
@@ -107,7 +107,7 @@ impl CutOptions {
         let until = [diagonal_m / 8.0, diagonal_m / 4.0, 2.0 * diagonal_m];
         Some(CutOptions {
             bands: (0..3)
-                .map(|i| Band {
+                .map(|i| CutBand {
                     until_m: until[i],
                     max_cluster: sizes[i],
                 })
@@ -120,14 +120,14 @@ impl CutOptions {
 
     /// Bands from text `UNTIL_M:MAX_CLUSTER,…`, e.g. `300:1,1000:4,3000:16`
     /// (checked).
-    pub fn parse_bands(text: &str) -> Result<Vec<Band>, String> {
+    pub fn parse_bands(text: &str) -> Result<Vec<CutBand>, String> {
         let bands = text
             .split(',')
             .map(|band| {
                 let (until, size) = band
                     .split_once(':')
                     .ok_or_else(|| format!("{band:?}: expected UNTIL_M:MAX_CLUSTER"))?;
-                Ok(Band {
+                Ok(CutBand {
                     until_m: until
                         .trim()
                         .parse()
@@ -138,7 +138,7 @@ impl CutOptions {
                         .map_err(|_| format!("{size:?} is not a cluster size"))?,
                 })
             })
-            .collect::<Result<Vec<Band>, String>>()?;
+            .collect::<Result<Vec<CutBand>, String>>()?;
         CutOptions {
             bands: bands.clone(),
             ..CutOptions::default()
@@ -231,7 +231,7 @@ pub enum Drawn {
     serde::Serialize,
     serde::Deserialize,
 )]
-pub struct Frame {
+pub struct AtlasFrame {
     pub page: u16,
     pub x: u16,
     pub y: u16,
@@ -245,7 +245,7 @@ pub struct Frame {
 pub struct ViewDraw {
     pub view: ImpostorView,
     pub weight: f32,
-    pub frame: Frame,
+    pub frame: AtlasFrame,
     pub size: [f32; 2],
 }
 
@@ -697,7 +697,7 @@ impl Clusters {
         let mut views = [ViewDraw {
             view: ImpostorView::Top,
             weight: 0.0,
-            frame: Frame::default(),
+            frame: AtlasFrame::default(),
             size: [0.0; 2],
         }; 3];
         for (slot, &(v, weight)) in views.iter_mut().zip(&chosen[..n]) {
@@ -1332,7 +1332,7 @@ mod selection_tests {
         assert_eq!(all, (0..600).collect::<Vec<u32>>());
         assert!(blobs.blobs().len() > 20 && blobs.blobs().len() < 600);
         let options = CutOptions {
-            bands: vec![Band {
+            bands: vec![CutBand {
                 until_m: 1200.0,
                 max_cluster: 1,
             }],

@@ -27,7 +27,7 @@ use crate::horizon::Terrain;
 use crate::veg::db::VegObject;
 use crate::{Error, Result};
 use bake::{BakeOptions, ClassSource};
-use cut::Frame;
+use cut::AtlasFrame;
 use image::PremulImage;
 use model::{ModelSource, TreeKind};
 use quadtree::{ClusterObject, Quadtree};
@@ -43,7 +43,7 @@ pub struct ClassImpostor {
     /// stands d × aspect tall.
     pub aspect: f32,
     /// Atlas frames of the top, front, back, left and right views.
-    pub frames: [Frame; 5],
+    pub frames: [AtlasFrame; 5],
 }
 
 /// Everything the clusters stage makes, and what a viewer draws from.
@@ -52,7 +52,7 @@ pub struct Clusters {
     pub classes: Vec<ClassImpostor>,
     pub tree: Quadtree,
     /// Frames of the baked nodes, five per node (`Node::frames` indexes it).
-    pub frames: Vec<Frame>,
+    pub frames: Vec<AtlasFrame>,
     /// Atlas pages, level 0 (mip levels are [`image::PremulImage::mip_chain`]).
     pub pages: Vec<PremulImage>,
     pub report: bake::BakeReport,

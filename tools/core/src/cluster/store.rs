@@ -3,13 +3,13 @@
 //! - `index.json`: options, classes with their frames, pages, the bake
 //!   report;
 //! - `nodes.bin`, `objects.bin`, `frames.bin`: little-endian records of
-//!   [`Node`], [`ClusterObject`] and [`Frame`] (68, 28 and 10 bytes);
+//!   [`Node`], [`ClusterObject`] and [`AtlasFrame`] (68, 28 and 10 bytes);
 //! - `atlas_NNN.png`: the pages, level 0, RGBA8 **premultiplied**.
 //!
 //! Everything is deterministic, so the files enter the golden hashes.
 
 use super::bake::{BakeOptions, BakeReport, ALIGN, MIP_LEVELS};
-use super::cut::Frame;
+use super::cut::AtlasFrame;
 use super::image::PremulImage;
 use super::model::ModelSource;
 use super::quadtree::{ClusterObject, Node, Quadtree, NONE};
@@ -88,7 +88,7 @@ pub fn write(
         ),
         (
             names::CLUSTER_FRAMES,
-            bytemuck::cast_slice::<Frame, u8>(&clusters.frames),
+            bytemuck::cast_slice::<AtlasFrame, u8>(&clusters.frames),
         ),
     ] {
         writer.put_file(name, bytes)?;
@@ -232,7 +232,7 @@ pub fn read(bundle: &Bundle) -> Result<Option<(ClusterIndex, Clusters)>> {
     };
     let nodes = records::<Node>(bundle, names::CLUSTER_NODES.key, index.nodes)?;
     let objects = records::<ClusterObject>(bundle, names::CLUSTER_OBJECTS.key, index.objects)?;
-    let frames = records::<Frame>(bundle, names::CLUSTER_FRAMES.key, index.frames)?;
+    let frames = records::<AtlasFrame>(bundle, names::CLUSTER_FRAMES.key, index.frames)?;
     let mut pages = Vec::with_capacity(index.pages.len());
     for (i, page) in index.pages.iter().enumerate() {
         let (key, _) = page_name(i);

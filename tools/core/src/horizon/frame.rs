@@ -8,7 +8,7 @@
 //! columns at a time, top row first within a tile, the lines of one packet
 //! write one contiguous block: the march paints into the frame itself, and
 //! no copy follows. A GPU reads the tiles as the layers of a texture array
-//! (one upload, 256 bytes a row); files take [`Frame::to_rows`].
+//! (one upload, 256 bytes a row); files take [`RaycastFrame::to_rows`].
 
 /// Columns per tile: one packet of the march, 256 bytes of colour a row.
 pub const TILE_COLUMNS: usize = 64;
@@ -27,10 +27,10 @@ pub fn tiled_index(x: usize, y: usize, height: usize) -> usize {
 }
 
 /// A rendered image: RGBA8 and [0, 1] depth in column tiles (see the
-/// module; [`Frame::to_rows`] for row-major). Columns past `width` in the
+/// module; [`RaycastFrame::to_rows`] for row-major). Columns past `width` in the
 /// last tile are padding, never drawn.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct Frame {
+pub struct RaycastFrame {
     pub width: usize,
     pub height: usize,
     /// One pixel per element, RGBA bytes in little-endian order, at
@@ -59,7 +59,7 @@ impl Rows {
     }
 }
 
-impl Frame {
+impl RaycastFrame {
     /// Size the buffers for a `width` × `height` frame; a new size starts
     /// from zeros, so the padding of equal frames is equal too.
     pub(super) fn resize(&mut self, width: usize, height: usize) {
@@ -111,7 +111,7 @@ impl Frame {
 
     /// Peak signal-to-noise ratio of this image's RGB against `reference`'s
     /// (same size), dB; infinite when they are equal.
-    pub fn psnr_db(&self, reference: &Frame) -> f64 {
+    pub fn psnr_db(&self, reference: &RaycastFrame) -> f64 {
         let squared: f64 = (0..self.height)
             .flat_map(|y| (0..self.width).map(move |x| (x, y)))
             .map(|(x, y)| {
@@ -139,7 +139,7 @@ mod tests {
     #[test]
     fn tiles_hold_each_pixel_once_and_rows_undo_them() {
         let (w, h) = (150, 7);
-        let mut frame = Frame::default();
+        let mut frame = RaycastFrame::default();
         frame.resize(w, h);
         assert_eq!(frame.rgba.len(), 3 * TILE_COLUMNS * h);
         let mut seen = vec![false; frame.rgba.len()];

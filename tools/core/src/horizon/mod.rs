@@ -28,7 +28,7 @@ mod sample;
 mod screen;
 
 use frame::tiled_len;
-pub use frame::{tiled_index, Frame, Rows, TILE_COLUMNS};
+pub use frame::{tiled_index, RaycastFrame, Rows, TILE_COLUMNS};
 pub use sample::{ColorSource, Terrain};
 pub use screen::{pitch_range, MAX_LINE_DENSITY};
 
@@ -40,7 +40,7 @@ use std::time::Instant;
 
 /// Projection used for the rays.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Mode {
+pub enum RaycastMode {
     /// Distortion-free: rays even on the view plane, screen-parallel slices.
     Raycast,
     /// Voxel-space shortcuts: rays even in angle, radial slices.
@@ -57,7 +57,7 @@ pub enum Arithmetic {
 
 /// A distance band with its own sampling (seed 000, §6.3).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Band {
+pub struct DistanceBand {
     /// The band ends at this forward distance, metres.
     pub until_m: f64,
     /// Slices per grid cell (the seed's FATOR is its inverse).
@@ -68,10 +68,10 @@ pub struct Band {
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct RenderOptions {
-    pub mode: Mode,
+    pub mode: RaycastMode,
     pub arithmetic: Arithmetic,
     /// Bands in increasing distance; the last one should reach the far plane.
-    pub bands: Vec<Band>,
+    pub bands: Vec<DistanceBand>,
     /// Sample prefiltered colour levels chosen by each slice's footprint.
     pub prefilter: bool,
     /// Let the slice spacing grow with distance while one step moves any
@@ -85,9 +85,9 @@ pub struct RenderOptions {
 impl Default for RenderOptions {
     fn default() -> Self {
         RenderOptions {
-            mode: Mode::Raycast,
+            mode: RaycastMode::Raycast,
             arithmetic: Arithmetic::Float,
-            bands: vec![Band {
+            bands: vec![DistanceBand {
                 until_m: f64::INFINITY,
                 slices_per_cell: 1.0,
                 subvoxel: false,
@@ -200,10 +200,10 @@ fn fill_slices(
     }
 }
 
-/// Render `terrain` seen from `camera` into a new frame (see [`Renderer`]
+/// Render `terrain` seen from `camera` into a new frame (see [`Raycaster`]
 /// to reuse buffers from frame to frame).
-pub fn render(terrain: &Terrain, camera: &Camera, opts: &RenderOptions) -> Result<Frame> {
-    let mut renderer = Renderer::default();
+pub fn render(terrain: &Terrain, camera: &Camera, opts: &RenderOptions) -> Result<RaycastFrame> {
+    let mut renderer = Raycaster::default();
     renderer.render(terrain, camera, opts)?;
     Ok(renderer.frame)
 }
@@ -211,7 +211,7 @@ pub fn render(terrain: &Terrain, camera: &Camera, opts: &RenderOptions) -> Resul
 /// Buffers reused from frame to frame: after the first frame of a size and
 /// pitch, rendering allocates nothing.
 #[derive(Debug, Default)]
-pub struct Renderer {
+pub struct Raycaster {
     slices: Vec<Slice>,
     screen: Screen,
     /// Ground direction of each line.
@@ -220,12 +220,12 @@ pub struct Renderer {
     /// pixel takes its nearest line.
     line_colour: Vec<u32>,
     line_depth: Vec<f32>,
-    frame: Frame,
+    frame: RaycastFrame,
 }
 
-impl Renderer {
+impl Raycaster {
     /// The last frame rendered (empty before the first).
-    pub fn frame(&self) -> &Frame {
+    pub fn frame(&self) -> &RaycastFrame {
         &self.frame
     }
 
@@ -236,9 +236,9 @@ impl Renderer {
         terrain: &Terrain,
         camera: &Camera,
         opts: &RenderOptions,
-    ) -> Result<&Frame> {
+    ) -> Result<&RaycastFrame> {
         let start = Instant::now();
-        if opts.mode == Mode::Distorted && camera.pitch_deg != 0.0 {
+        if opts.mode == RaycastMode::Distorted && camera.pitch_deg != 0.0 {
             return Err(Error::Input(
                 "the distorted (voxel-space) mode draws only level cameras (pitch 0)".into(),
             ));
@@ -262,11 +262,11 @@ impl Renderer {
         self.directions.clear();
         self.directions
             .extend((0..screen.lines).map(|j| match opts.mode {
-                Mode::Raycast => {
+                RaycastMode::Raycast => {
                     let a = screen.first_offset + j as f64 * screen.offset_step;
                     [forward[0] + right[0] * a, forward[1] + right[1] * a]
                 }
-                Mode::Distorted => {
+                RaycastMode::Distorted => {
                     let theta = ((j as f64 + 0.5) / w as f64 - 0.5) * q;
                     let (sin, cos) = theta.sin_cos();
                     [
@@ -530,7 +530,7 @@ mod tests {
 
     /// Top pixel (column, row) of each pole in the image, by its red colour,
     /// against where the camera's projection matrix sends the pole's top.
-    fn pole_misses(mode: Mode, pitch_deg: f64) -> Vec<f64> {
+    fn pole_misses(mode: RaycastMode, pitch_deg: f64) -> Vec<f64> {
         let side = 257;
         let (heights, mask, rgba, spots) = poles();
         let color = texel_per_cell(&rgba, side);
@@ -543,7 +543,7 @@ mod tests {
         cam.pitch_deg = pitch_deg;
         let opts = RenderOptions {
             mode,
-            bands: vec![Band {
+            bands: vec![DistanceBand {
                 until_m: f64::INFINITY,
                 slices_per_cell: 8.0,
                 subvoxel: false,
@@ -586,14 +586,14 @@ mod tests {
     #[test]
     fn poles_land_where_the_projection_matrix_puts_them() {
         for pitch in [0.0, -10.0, -25.0, 12.0] {
-            let raycast = pole_misses(Mode::Raycast, pitch);
+            let raycast = pole_misses(RaycastMode::Raycast, pitch);
             eprintln!("pitch {pitch}°: pole misses {raycast:.2?} px");
             assert!(
                 raycast.iter().all(|&m| m <= 1.0),
                 "pitch {pitch}°: raycast misses {raycast:?} px"
             );
         }
-        let distorted = pole_misses(Mode::Distorted, 0.0);
+        let distorted = pole_misses(RaycastMode::Distorted, 0.0);
         let worst = distorted.iter().cloned().fold(0.0, f64::max);
         eprintln!("pole misses, distorted {distorted:.2?} px");
         assert!(
@@ -608,7 +608,7 @@ mod tests {
     /// two disagree on being terrain or sky.
     fn depth_against_exact_surface(terrain: &Terrain, cam: &Camera) -> (Rows, Vec<f64>, usize) {
         let opts = RenderOptions {
-            bands: vec![Band {
+            bands: vec![DistanceBand {
                 until_m: f64::INFINITY,
                 slices_per_cell: 8.0,
                 subvoxel: true,
@@ -741,7 +741,7 @@ mod tests {
             [0.5 * extent, -0.2 * extent, top + 300.0],
             [0.5 * extent, -5e8, top + 300.0],
         ] {
-            let mut renderer = Renderer::default();
+            let mut renderer = Raycaster::default();
             let mut far = camera(240, 135, eye, 0.0, 100.0, 1e12);
             far.near_m = cell;
             renderer.render(&terrain, &far, &opts).unwrap();
@@ -754,7 +754,7 @@ mod tests {
                 .hypot(eye[1].abs().max((eye[1] - extent).abs()));
             let mut bounded = camera(240, 135, eye, 0.0, 100.0, reach + cell);
             bounded.near_m = cell;
-            let mut reference = Renderer::default();
+            let mut reference = Raycaster::default();
             reference.render(&terrain, &bounded, &opts).unwrap();
             if eye[1] > -1e6 {
                 assert!(renderer.slices.len() > 100);
@@ -845,18 +845,18 @@ mod tests {
                     cam.incl_px = 67.5;
                 }
                 for (mode, arithmetic, subvoxel, grow_steps) in [
-                    (Mode::Raycast, Arithmetic::Float, false, false),
-                    (Mode::Raycast, Arithmetic::Float, true, true),
-                    (Mode::Raycast, Arithmetic::Fixed, true, false),
-                    (Mode::Distorted, Arithmetic::Float, false, false),
+                    (RaycastMode::Raycast, Arithmetic::Float, false, false),
+                    (RaycastMode::Raycast, Arithmetic::Float, true, true),
+                    (RaycastMode::Raycast, Arithmetic::Fixed, true, false),
+                    (RaycastMode::Distorted, Arithmetic::Float, false, false),
                 ] {
-                    if mode == Mode::Distorted && pitch != 0.0 {
+                    if mode == RaycastMode::Distorted && pitch != 0.0 {
                         continue;
                     }
                     let options = RenderOptions {
                         mode,
                         arithmetic,
-                        bands: vec![Band {
+                        bands: vec![DistanceBand {
                             until_m: f64::INFINITY,
                             slices_per_cell: 1.0,
                             subvoxel,
@@ -902,11 +902,11 @@ mod tests {
             let cam = camera(240, 135, eye, heading, 90.0, 2.0 * extent);
             for arithmetic in [Arithmetic::Float, Arithmetic::Fixed] {
                 for subvoxel in [true, false] {
-                    for mode in [Mode::Raycast, Mode::Distorted] {
+                    for mode in [RaycastMode::Raycast, RaycastMode::Distorted] {
                         let options = RenderOptions {
                             mode,
                             arithmetic,
-                            bands: vec![Band {
+                            bands: vec![DistanceBand {
                                 until_m: f64::INFINITY,
                                 slices_per_cell: 2.0,
                                 subvoxel,
@@ -968,10 +968,10 @@ mod tests {
                 2.0 * extent,
             );
             cam.near_m = cell;
-            let mut full = Renderer::default();
+            let mut full = Raycaster::default();
             full.render(&terrain, &cam, &RenderOptions::default())
                 .unwrap();
-            let mut grown = Renderer::default();
+            let mut grown = Raycaster::default();
             let options = RenderOptions {
                 grow_steps: true,
                 ..Default::default()

@@ -424,7 +424,7 @@ mod tests {
 
     #[test]
     fn fill_is_deterministic_at_the_density_and_skips_pixels_without_data() {
-        use super::super::segment::{Region, Segmentation};
+        use super::super::segment::{Segment, Segmentation};
         use super::super::Image;
         let (w, h) = (40, 30);
         let image = Image::new(w, h, 1, vec![100; w * h]).unwrap();
@@ -432,7 +432,7 @@ mod tests {
             width: w,
             height: h,
             labels: vec![0; w * h],
-            regions: vec![Region {
+            regions: vec![Segment {
                 pixels: (w * h) as u32,
                 bbox: [0, 0, w as u32, h as u32],
                 centroid: [20.0, 15.0],

@@ -15,7 +15,7 @@
 //! coefficients (Jacobs, Finkelstein & Salesin 1995), which suit aligned
 //! images, not regions of arbitrary position and shape.
 
-use super::segment::{Region, Segmentation};
+use super::segment::{Segment, Segmentation};
 use super::Image;
 use glam::Vec4;
 
@@ -171,7 +171,7 @@ pub fn region_signature(
 
 /// The window a region is described by: its bounding box grown about its
 /// centre to at least `min_side` pixels each way, clipped to the image.
-fn window(region: &Region, min_side: u32, width: usize, height: usize) -> [u32; 4] {
+fn window(region: &Segment, min_side: u32, width: usize, height: usize) -> [u32; 4] {
     let grow = |lo: u32, hi: u32, limit: usize| {
         let side = (hi - lo).max(min_side).min(limit as u32);
         let centre = (lo + hi) / 2;

@@ -7,7 +7,7 @@ use super::classify::{sample_signatures, Classifier, Label};
 use super::db::VegObject;
 use super::detect::{detect, DetectBuffers, Object, Placement};
 use super::samples::Sample;
-use super::segment::{segment, Region, SegmentBuffers, SegmentParams, SegmentSteps, Segmentation};
+use super::segment::{segment, Segment, SegmentBuffers, SegmentParams, SegmentSteps, Segmentation};
 use super::spacing::{self, MarkedCrown, MAX_CROWN_SPACING_M};
 use super::tiles::{Tile, Tiling};
 use super::Image;
@@ -37,7 +37,7 @@ pub struct VegOptions {
     /// The class that marks counter-examples (never vegetation).
     pub negative_class: String,
     /// How regions become objects.
-    pub mode: Mode,
+    pub mode: DetectionMode,
     /// Crowns: smallest distance between crown centres (m); unset, it is
     /// learnt from the marked crowns (see [`super::spacing`]).
     pub crown_spacing_m: Option<f64>,
@@ -63,7 +63,7 @@ impl Default for VegOptions {
             window_px: 8,
             neighbours: 3,
             negative_class: "other".into(),
-            mode: Mode::Auto,
+            mode: DetectionMode::Auto,
             crown_spacing_m: None,
             crown_min_radius_m: 0.5,
             density_per_ha: 100.0,
@@ -96,7 +96,7 @@ const MAX_THRESHOLD_GAIN: f32 = 4.0;
 /// Crowns in fine imagery, filled regions in coarse imagery.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
-pub enum Mode {
+pub enum DetectionMode {
     /// Crowns when a pixel is at most 1 m, else fill.
     Auto,
     Crowns,
@@ -161,9 +161,9 @@ impl VegOptions {
             }
         }
         let crowns = match self.mode {
-            Mode::Auto => pixel_m <= 1.0,
-            Mode::Crowns => true,
-            Mode::Fill => false,
+            DetectionMode::Auto => pixel_m <= 1.0,
+            DetectionMode::Crowns => true,
+            DetectionMode::Fill => false,
         };
         // Crowns closer than a pixel cannot be told apart in the image, and
         // filled objects denser than one per square metre are not
@@ -259,7 +259,7 @@ impl VegImage {
 /// Everything one extraction produced.
 pub struct Extraction {
     /// Every region of the image, numbered tile by tile in tile order.
-    pub regions: Vec<Region>,
+    pub regions: Vec<Segment>,
     /// The region index of every pixel, row-major (`report.width` wide),
     /// when the extraction was asked to keep it ([`RegionMap::Keep`]).
     pub region_map: Option<Vec<u32>>,
@@ -795,7 +795,7 @@ struct TileBuffers {
 /// regions and their classes, and the objects it owns in the image's pixel
 /// coordinates.
 struct TileResult {
-    regions: Vec<Region>,
+    regions: Vec<Segment>,
     labels: Vec<Label>,
     objects: Vec<Object>,
     leaves: usize,
@@ -900,11 +900,11 @@ fn keep_core(
     tile: &Tile,
     context_labels: &[u32],
     context_width: usize,
-    context_regions: Vec<Region>,
+    context_regions: Vec<Segment>,
     labels: &[Label],
     map: Option<&Mutex<Vec<u32>>>,
     map_width: usize,
-) -> (Vec<Region>, Vec<Label>) {
+) -> (Vec<Segment>, Vec<Label>) {
     let [x0, y0, ..] = tile.context;
     let [cx0, cy0, cx1, cy1] = tile.core;
     let side = cx1 - cx0;
@@ -923,7 +923,7 @@ fn keep_core(
     for (k, region) in context_regions.into_iter().enumerate() {
         if index[k] == 0 {
             index[k] = kept_regions.len() as u32;
-            kept_regions.push(Region {
+            kept_regions.push(Segment {
                 pixels: 0,
                 bbox: [u32::MAX, u32::MAX, 0, 0],
                 centroid: [0.0; 2],

@@ -73,7 +73,7 @@ impl SegmentParams {
 
 /// One region of a segmentation.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Region {
+pub struct Segment {
     /// Area in pixels.
     pub pixels: u32,
     /// Bounding box `[x0, y0, x1, y1)` in pixels.
@@ -92,7 +92,7 @@ pub struct Segmentation {
     pub height: usize,
     /// Region index of every pixel, row-major.
     pub labels: Vec<u32>,
-    pub regions: Vec<Region>,
+    pub regions: Vec<Segment>,
     /// Quadtree leaves before merging.
     pub leaves: usize,
     /// Where the time went.
@@ -390,7 +390,7 @@ fn segment_channels<const N: usize>(
     labels
         .par_iter_mut()
         .for_each(|l| *l = region_of_leaf[*l as usize]);
-    let mut regions: Vec<Region> = region_moments
+    let mut regions: Vec<Segment> = region_moments
         .iter()
         .map(|m| {
             let mut mean = [0.0; MAX_BANDS];
@@ -399,7 +399,7 @@ fn segment_channels<const N: usize>(
                 mean[c] = m.mean(c) as f32;
                 std[c] = m.variance(c).sqrt() as f32;
             }
-            Region {
+            Segment {
                 pixels: 0,
                 bbox: [u32::MAX, u32::MAX, 0, 0],
                 centroid: [0.0; 2],
