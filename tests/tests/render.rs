@@ -3,7 +3,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use relevo_core::bundle::Bundle;
-use relevo_core::horizon::{distance_of_depth, pick, DistanceBand, RaycastMode, Terrain};
+use relevo_core::horizon::{distance_of_depth, pick, DistanceBand, RenderOptions, Terrain};
 use relevo_core::scene::{self, camera, View};
 use relevo_tests::{compare_with_reference, prep_dem, prep_region, repo, shared};
 use std::path::{Path, PathBuf};
@@ -22,17 +22,14 @@ fn depth_of_a_real_bundle_matches_the_exact_surface() {
     let d = tempfile::tempdir().unwrap();
     let b = Bundle::open(&bundle_of("dem/srtm_ref.tif", d.path())).unwrap();
     let view = View::home(&b.manifest.grid, [240, 135]);
-    let options = scene::render_options(
-        RaycastMode::Raycast,
-        false,
-        Some(vec![DistanceBand {
+    let options = RenderOptions {
+        bands: vec![DistanceBand {
             until_m: f64::INFINITY,
             slices_per_cell: 8.0,
             subvoxel: true,
-        }]),
-        false,
-    )
-    .unwrap();
+        }],
+        ..RenderOptions::default()
+    };
     let frame = scene::render_bundle(&b, &view, &options, None)
         .unwrap()
         .to_rows();
@@ -92,7 +89,14 @@ fn renders_of_real_bundles_match_their_references() {
         let b = Bundle::open(&bundle_of(input, &dir)).unwrap();
         let view = View::home(&b.manifest.grid, [320, 180]);
         let bands = bands.map(|t| scene::parse_bands(t).unwrap());
-        let options = scene::render_options(RaycastMode::Raycast, false, bands, prefilter).unwrap();
+        let options = scene::with_bands(
+            RenderOptions {
+                prefilter,
+                ..RenderOptions::default()
+            },
+            bands,
+        )
+        .unwrap();
         let frame = scene::render_bundle(&b, &view, &options, hillshade)
             .unwrap()
             .to_rows();

@@ -6,7 +6,7 @@
 mod common;
 use common::*;
 use relevo_core::bundle::Bundle;
-use relevo_core::horizon::RaycastMode;
+use relevo_core::horizon::RenderOptions;
 use relevo_core::scene::{self, View};
 use std::path::{Path, PathBuf};
 
@@ -68,8 +68,10 @@ fn render_command_writes_what_the_library_renders() {
             "--force".as_ref(),
         ]);
         let bands = scene::parse_bands("3000:4:sub,inf:1").unwrap();
-        let options =
-            scene::render_options(RaycastMode::Raycast, false, Some(bands), false).unwrap();
+        let options = RenderOptions {
+            bands,
+            ..RenderOptions::default()
+        };
         let frame = scene::render_bundle(&b, &view, &options, None)
             .unwrap()
             .to_rows();

@@ -6,9 +6,7 @@
 use crate::bundle::{Bundle, GridInfo};
 use crate::camera::Camera;
 use crate::geo::TerrainFrame;
-use crate::horizon::{
-    render, Arithmetic, DistanceBand, RaycastFrame, RaycastMode, RenderOptions, Terrain,
-};
+use crate::horizon::{render, DistanceBand, RaycastFrame, RenderOptions, Terrain};
 use crate::{Error, Result};
 use glam::DVec3;
 
@@ -230,28 +228,25 @@ pub fn parse_bands(text: &str) -> Result<Vec<DistanceBand>, String> {
         .collect()
 }
 
-/// Raycast options from the command-line switches.
-pub fn render_options(
-    mode: RaycastMode,
-    fixed: bool,
+/// Raycast options with `bands` when given (at least one), the options'
+/// own otherwise: what `--bands` sets.
+///
+/// ```
+/// use relevo_core::horizon::RenderOptions;
+/// use relevo_core::scene::{parse_bands, with_bands};
+/// let options = with_bands(RenderOptions::default(), Some(parse_bands("3000:4:sub,inf:1").unwrap()));
+/// assert_eq!(options.unwrap().bands.len(), 2);
+/// assert!(with_bands(RenderOptions::default(), Some(Vec::new())).is_err());
+/// ```
+pub fn with_bands(
+    options: RenderOptions,
     bands: Option<Vec<DistanceBand>>,
-    prefilter: bool,
 ) -> Result<RenderOptions> {
-    let mut o = RenderOptions {
-        mode,
-        prefilter,
-        ..Default::default()
-    };
-    if fixed {
-        o.arithmetic = Arithmetic::Fixed;
+    match bands {
+        Some(b) if b.is_empty() => Err(Error::Input("--bands needs at least one band".into())),
+        Some(bands) => Ok(RenderOptions { bands, ..options }),
+        None => Ok(options),
     }
-    if let Some(b) = bands {
-        if b.is_empty() {
-            return Err(Error::Input("--bands needs at least one band".into()));
-        }
-        o.bands = b;
-    }
-    Ok(o)
 }
 
 /// Raycast `bundle` for `view`, with a baked hillshade (sun azimuth and

@@ -5,7 +5,7 @@ use crate::output;
 use anyhow::{bail, Result};
 use clap::Args;
 use relevo_core::bundle::Bundle;
-use relevo_core::horizon::{DistanceBand, RaycastMode};
+use relevo_core::horizon::{Arithmetic, DistanceBand, RaycastMode, RenderOptions};
 use relevo_core::raster::png::encode_rgba;
 use relevo_core::scene::{self, CameraPose, View};
 use std::path::{Path, PathBuf};
@@ -109,8 +109,19 @@ pub fn run(a: RenderArgs) -> Result<()> {
         RenderMode::Raycast => RaycastMode::Raycast,
         RenderMode::Distorted => RaycastMode::Distorted,
     };
-    let mut options = scene::render_options(mode, a.fixed, a.bands, a.prefilter)?;
-    options.grow_steps = a.grow_steps;
+    let arithmetic = if a.fixed {
+        Arithmetic::Fixed
+    } else {
+        Arithmetic::Float
+    };
+    let options = RenderOptions {
+        mode,
+        arithmetic,
+        prefilter: a.prefilter,
+        grow_steps: a.grow_steps,
+        ..RenderOptions::default()
+    };
+    let options = scene::with_bands(options, a.bands)?;
     let hillshade = a.hillshade.map(|v| [v[0], v[1]]);
     let frame = scene::render_bundle(&bundle, &view, &options, hillshade)?;
     let rows = frame.to_rows();

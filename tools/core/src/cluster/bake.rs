@@ -150,6 +150,11 @@ fn frame_bytes([w, h]: [usize; 2]) -> u64 {
 /// Bake the class impostors and the quadtree over `objects` (terrain
 /// frame, classes indexing `classes`) inside the square at `origin` with
 /// side `side_m`. `progress(done, total)` is told of each cluster composed.
+///
+/// The steps: the class impostors rendered from their models; the texel
+/// density each cluster needs; the atlas planned under the budget (the
+/// density cap); the report per depth; the clusters' views composed from
+/// the class impostors; everything pasted into the pages.
 pub fn bake(
     classes: Vec<ClassSource>,
     objects: Vec<ClusterObject>,
@@ -170,29 +175,7 @@ pub fn bake(
             o.row
         )));
     }
-    // Class impostors: the model over its own box, the longer side at
-    // `class_frame_px`.
-    let class_views: Vec<[PremulImage; 5]> = classes
-        .par_iter()
-        .map(|c| {
-            let (d, h) = c.model.size();
-            let size = [d, d, h];
-            let density = options.class_frame_px as f64 / d.max(h) as f64;
-            let sizes = frame_sizes(size, density, options.class_frame_px);
-            let scene = [Placed {
-                model: &c.model,
-                foot: [0.0; 3],
-                diameter: d,
-                height: h,
-            }];
-            let (min, max) = ([-d / 2.0, -d / 2.0, 0.0], [d / 2.0, d / 2.0, h]);
-            ImpostorView::ALL.map(|v| {
-                let [w, h] = sizes[v as usize];
-                render_view(&scene, v, min, max, w, h)
-            })
-        })
-        .collect();
-    // What the class impostors take once packed into pages.
+    let class_views = render_class_views(&classes, options);
     let class_sizes: Vec<[usize; 2]> = class_views
         .iter()
         .flatten()
@@ -213,136 +196,15 @@ pub fn bake(
 
     let object_count = objects.len();
     let mut tree = Quadtree::build(objects, origin, side_m, options.max_depth);
-
-    // Texel density each cluster needs: the screen's pixels per metre at
-    // the nearest distance its size is allowed at (reference screen), over
-    // the magnification the cut tolerates.
-    let pixels_per_m_at_1m = options.reference_width_px as f64
-        / (2.0 * (options.reference_fov_deg.to_radians() / 2.0).tan());
-    let magnification = options.cut.magnification.max(1.0);
-    let largest = options.cut.largest_cluster();
-    let need: Vec<Option<f64>> = tree
-        .nodes
-        .iter()
-        .map(|n| {
-            if n.count < 2 || n.count > largest {
-                return None;
-            }
-            let near = options.cut.nearest_distance_for(n.count)?;
-            Some(pixels_per_m_at_1m / near.max(1e-9) / magnification)
-        })
-        .collect();
-    let mut parent = vec![NONE; tree.nodes.len()];
-    for (i, n) in tree.nodes.iter().enumerate() {
-        for &c in n.children.iter().filter(|&&c| c != NONE) {
-            parent[c as usize] = i as u32;
-        }
-    }
-
-    // The budget caps the density (texels per metre) of every cluster view.
-    // A capped cluster is only sharp from farther away, where its parent —
-    // if capped too — is drawn instead; so a node whose parent is capped is
-    // not baked at all. Bytes grow with the cap: bisect for the largest cap
-    // whose atlas fits, then pack (and tighten if shelf waste overflows).
-    // A cap of 0 bakes no cluster at all (the class impostors always fit).
-    let plan = |cap: f64| -> Vec<Option<[[usize; 2]; 5]>> {
-        tree.nodes
-            .iter()
-            .enumerate()
-            .map(|(i, n)| {
-                let density = need[i].filter(|_| cap > 0.0)?;
-                let parent_capped =
-                    parent[i] != NONE && need[parent[i] as usize].is_some_and(|p| p > cap);
-                (!parent_capped)
-                    .then(|| frame_sizes(size_of_node(n), density.min(cap), options.max_frame_px))
-            })
-            .collect()
-    };
-    let estimate = |plans: &[Option<[[usize; 2]; 5]>]| -> u64 {
-        class_bytes
-            + plans
-                .iter()
-                .flatten()
-                .flat_map(|sizes| sizes.iter().map(|&s| frame_bytes(s)))
-                .sum::<u64>()
-    };
-    let mut cap = f64::INFINITY;
-    if estimate(&plan(cap)) > options.budget_bytes {
-        let (mut lo, mut hi) = (
-            1e-6f64,
-            need.iter().flatten().fold(1e-6f64, |m, &v| m.max(v)),
-        );
-        for _ in 0..40 {
-            let mid = (lo * hi).sqrt();
-            if estimate(&plan(mid)) <= options.budget_bytes {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        cap = if estimate(&plan(lo)) <= options.budget_bytes {
-            lo
-        } else {
-            0.0
-        };
-    }
-    let (plans, layout, pages_size) = loop {
-        let plans = plan(cap);
-        let mut sizes: Vec<[usize; 2]> = class_views
-            .iter()
-            .flatten()
-            .map(|i| [i.width, i.height])
-            .collect();
-        sizes.extend(plans.iter().flatten().flatten());
-        let (layout, pages_size) = pack(&sizes, options.page_px as usize)?;
-        let bytes: u64 = pages_size.iter().map(|&[w, h]| page_bytes(w, h)).sum();
-        if bytes <= options.budget_bytes {
-            break (plans, layout, pages_size);
-        }
-        if cap == 0.0 {
-            return Err(Error::Input(format!(
-                "an atlas budget of {} bytes is below the {bytes} bytes of the class impostors' pages",
-                options.budget_bytes
-            )));
-        }
-        if cap < 1e-5 {
-            // Not even the coarsest clusters at their smallest fit: none.
-            cap = 0.0;
-            continue;
-        }
-        cap = if cap.is_finite() {
-            cap * 0.9
-        } else {
-            need.iter().flatten().fold(0f64, |m, &v| m.max(v)) * 0.9
-        };
-    };
+    let need = Densities::of(&tree, options);
+    let atlas = AtlasPlan::under_budget(&tree, &need, &class_sizes, class_bytes, options)?;
     let baked_nodes: Vec<usize> = (0..tree.nodes.len())
-        .filter(|&i| plans[i].is_some())
+        .filter(|&i| atlas.plans[i].is_some())
         .collect();
-
-    let depths = tree.nodes_per_depth().len();
-    let mut levels: Vec<LevelReport> = (0..depths)
-        .map(|d| LevelReport {
-            depth: d as u32,
-            nodes: 0,
-            clusters: 0,
-            baked: 0,
-            reduced: 0,
-            atlas_bytes: 0,
-        })
-        .collect();
-    for (i, node) in tree.nodes.iter().enumerate() {
-        let level = &mut levels[node.depth as usize];
-        level.nodes += 1;
-        level.clusters += need[i].is_some() as usize;
-        if let Some(sizes) = &plans[i] {
-            level.baked += 1;
-            level.reduced += need[i].is_some_and(|n| n > cap) as usize;
-            level.atlas_bytes += sizes.iter().map(|&s| frame_bytes(s)).sum::<u64>();
-        }
-    }
-    let sharp_from_m =
-        (cap.is_finite() && cap > 0.0).then(|| pixels_per_m_at_1m / (cap * magnification));
+    let levels = level_reports(&tree, &need, &atlas);
+    let cap = atlas.cap;
+    let sharp_from_m = (cap.is_finite() && cap > 0.0)
+        .then(|| need.pixels_per_m_at_1m / (cap * need.magnification));
     if let Some(d) = sharp_from_m {
         // The report says it too (`relevo info`, `bake`): not a warning.
         tracing::info!(
@@ -351,37 +213,10 @@ pub fn bake(
         );
     }
 
-    // Compose the clusters' views (in parallel; each depends only on its
-    // members, so the result does not depend on the thread count).
-    let class_mips: Vec<[Vec<tiny_skia::Pixmap>; 5]> = class_views
-        .iter()
-        .map(|views| {
-            let mut out: [Vec<tiny_skia::Pixmap>; 5] = Default::default();
-            for (slot, image) in out.iter_mut().zip(views) {
-                *slot = image
-                    .mip_chain(MIP_LEVELS)
-                    .iter()
-                    .filter_map(to_pixmap)
-                    .collect();
-            }
-            out
-        })
-        .collect();
-    let composed: Vec<[PremulImage; 5]> = baked_nodes
-        .par_iter()
-        .map(|&i| {
-            let node = &tree.nodes[i];
-            let members = &tree.objects[node.members()];
-            let sizes = plans[i].unwrap_or_default();
-            let views = ImpostorView::ALL
-                .map(|v| compose_view(node, members, v, sizes[v as usize], &class_mips));
-            progress(1, baked_nodes.len() as u64);
-            views
-        })
-        .collect();
-
+    let composed = compose_clusters(&tree, &baked_nodes, &atlas, &class_views, progress);
     // Paste everything into the pages.
-    let mut pages: Vec<PremulImage> = pages_size
+    let mut pages: Vec<PremulImage> = atlas
+        .pages_size
         .iter()
         .map(|&[w, h]| PremulImage::transparent(w, h))
         .collect();
@@ -389,10 +224,10 @@ pub fn bake(
         .iter()
         .flatten()
         .chain(composed.iter().flatten());
-    for (image, frame) in images.zip(&layout) {
+    for (image, frame) in images.zip(&atlas.layout) {
         pages[frame.page as usize].paste(image, frame.x as usize, frame.y as usize);
     }
-    let mut class_frames = layout.chunks_exact(5);
+    let mut class_frames = atlas.layout.chunks_exact(5);
     let classes = classes
         .iter()
         .zip(&mut class_frames)
@@ -403,11 +238,15 @@ pub fn bake(
             frames: [frames[0], frames[1], frames[2], frames[3], frames[4]],
         })
         .collect();
-    let frames: Vec<AtlasFrame> = layout[5 * class_views.len()..].to_vec();
+    let frames: Vec<AtlasFrame> = atlas.layout[5 * class_views.len()..].to_vec();
     for (k, &i) in baked_nodes.iter().enumerate() {
         tree.nodes[i].frames = (5 * k) as u32;
     }
-    let atlas_bytes = pages_size.iter().map(|&[w, h]| page_bytes(w, h)).sum();
+    let atlas_bytes = atlas
+        .pages_size
+        .iter()
+        .map(|&[w, h]| page_bytes(w, h))
+        .sum();
     Ok(Clusters {
         classes,
         tree,
@@ -423,6 +262,243 @@ pub fn bake(
             sharp_from_m,
         },
     })
+}
+
+/// Class impostors: each model's five views over its own box, the longer
+/// side at `class_frame_px`.
+fn render_class_views(classes: &[ClassSource], options: &BakeOptions) -> Vec<[PremulImage; 5]> {
+    classes
+        .par_iter()
+        .map(|c| {
+            let (d, h) = c.model.size();
+            let size = [d, d, h];
+            let density = options.class_frame_px as f64 / d.max(h) as f64;
+            let sizes = frame_sizes(size, density, options.class_frame_px);
+            let scene = [Placed {
+                model: &c.model,
+                foot: [0.0; 3],
+                diameter: d,
+                height: h,
+            }];
+            let (min, max) = ([-d / 2.0, -d / 2.0, 0.0], [d / 2.0, d / 2.0, h]);
+            ImpostorView::ALL.map(|v| {
+                let [w, h] = sizes[v as usize];
+                render_view(&scene, v, min, max, w, h)
+            })
+        })
+        .collect()
+}
+
+/// The texel density each node needs as a cluster — the reference screen's
+/// pixels per metre at the nearest distance its size is drawn at, over the
+/// magnification the cut tolerates — `None` for nodes never drawn as
+/// clusters; and each node's parent.
+struct Densities {
+    per_node: Vec<Option<f64>>,
+    parent: Vec<u32>,
+    /// Pixels per metre at 1 m on the reference screen.
+    pixels_per_m_at_1m: f64,
+    magnification: f64,
+}
+
+impl Densities {
+    fn of(tree: &Quadtree, options: &BakeOptions) -> Densities {
+        let pixels_per_m_at_1m = options.reference_width_px as f64
+            / (2.0 * (options.reference_fov_deg.to_radians() / 2.0).tan());
+        let magnification = options.cut.magnification.max(1.0);
+        let largest = options.cut.largest_cluster();
+        let per_node = tree
+            .nodes
+            .iter()
+            .map(|n| {
+                if n.count < 2 || n.count > largest {
+                    return None;
+                }
+                let near = options.cut.nearest_distance_for(n.count)?;
+                Some(pixels_per_m_at_1m / near.max(1e-9) / magnification)
+            })
+            .collect();
+        let mut parent = vec![NONE; tree.nodes.len()];
+        for (i, n) in tree.nodes.iter().enumerate() {
+            for &c in n.children.iter().filter(|&&c| c != NONE) {
+                parent[c as usize] = i as u32;
+            }
+        }
+        Densities {
+            per_node,
+            parent,
+            pixels_per_m_at_1m,
+            magnification,
+        }
+    }
+
+    /// The highest density any node needs.
+    fn highest(&self) -> f64 {
+        self.per_node.iter().flatten().fold(0f64, |m, &v| m.max(v))
+    }
+}
+
+/// The atlas under the budget: per node the sizes of its five views when
+/// baked, where every frame lies in the pages, the pages' sizes, and the
+/// density cap that made it fit (infinite when none was needed, 0 when no
+/// cluster fits).
+struct AtlasPlan {
+    plans: Vec<Option<[[usize; 2]; 5]>>,
+    layout: Vec<AtlasFrame>,
+    pages_size: Vec<[usize; 2]>,
+    cap: f64,
+}
+
+impl AtlasPlan {
+    /// The budget caps the density (texels per metre) of every cluster
+    /// view. A capped cluster is only sharp from farther away, where its
+    /// parent — if capped too — is drawn instead; so a node whose parent is
+    /// capped is not baked at all. Bytes grow with the cap: bisect for the
+    /// largest cap whose atlas fits, then pack (and tighten if shelf waste
+    /// overflows). A cap of 0 bakes no cluster at all (the class impostors
+    /// always fit, as checked before).
+    fn under_budget(
+        tree: &Quadtree,
+        need: &Densities,
+        class_sizes: &[[usize; 2]],
+        class_bytes: u64,
+        options: &BakeOptions,
+    ) -> Result<AtlasPlan> {
+        let plan = |cap: f64| -> Vec<Option<[[usize; 2]; 5]>> {
+            tree.nodes
+                .iter()
+                .enumerate()
+                .map(|(i, n)| {
+                    let density = need.per_node[i].filter(|_| cap > 0.0)?;
+                    let parent = need.parent[i];
+                    let parent_capped =
+                        parent != NONE && need.per_node[parent as usize].is_some_and(|p| p > cap);
+                    (!parent_capped).then(|| {
+                        frame_sizes(size_of_node(n), density.min(cap), options.max_frame_px)
+                    })
+                })
+                .collect()
+        };
+        let estimate = |plans: &[Option<[[usize; 2]; 5]>]| -> u64 {
+            class_bytes
+                + plans
+                    .iter()
+                    .flatten()
+                    .flat_map(|sizes| sizes.iter().map(|&s| frame_bytes(s)))
+                    .sum::<u64>()
+        };
+        let mut cap = f64::INFINITY;
+        if estimate(&plan(cap)) > options.budget_bytes {
+            let (mut lo, mut hi) = (1e-6f64, need.highest().max(1e-6));
+            for _ in 0..40 {
+                let mid = (lo * hi).sqrt();
+                if estimate(&plan(mid)) <= options.budget_bytes {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            cap = if estimate(&plan(lo)) <= options.budget_bytes {
+                lo
+            } else {
+                0.0
+            };
+        }
+        loop {
+            let plans = plan(cap);
+            let mut sizes = class_sizes.to_vec();
+            sizes.extend(plans.iter().flatten().flatten());
+            let (layout, pages_size) = pack(&sizes, options.page_px as usize)?;
+            let bytes: u64 = pages_size.iter().map(|&[w, h]| page_bytes(w, h)).sum();
+            if bytes <= options.budget_bytes {
+                return Ok(AtlasPlan {
+                    plans,
+                    layout,
+                    pages_size,
+                    cap,
+                });
+            }
+            if cap == 0.0 {
+                return Err(Error::Input(format!(
+                    "an atlas budget of {} bytes is below the {bytes} bytes of the class impostors' pages",
+                    options.budget_bytes
+                )));
+            }
+            cap = if cap < 1e-5 {
+                // Not even the coarsest clusters at their smallest fit: none.
+                0.0
+            } else if cap.is_finite() {
+                cap * 0.9
+            } else {
+                need.highest() * 0.9
+            };
+        }
+    }
+}
+
+/// Per quadtree depth: nodes, clusters a cut may draw, clusters baked,
+/// those reduced by the cap, and their atlas bytes.
+fn level_reports(tree: &Quadtree, need: &Densities, atlas: &AtlasPlan) -> Vec<LevelReport> {
+    let depths = tree.nodes_per_depth().len();
+    let mut levels: Vec<LevelReport> = (0..depths)
+        .map(|d| LevelReport {
+            depth: d as u32,
+            nodes: 0,
+            clusters: 0,
+            baked: 0,
+            reduced: 0,
+            atlas_bytes: 0,
+        })
+        .collect();
+    for (i, node) in tree.nodes.iter().enumerate() {
+        let level = &mut levels[node.depth as usize];
+        level.nodes += 1;
+        level.clusters += need.per_node[i].is_some() as usize;
+        if let Some(sizes) = &atlas.plans[i] {
+            level.baked += 1;
+            level.reduced += need.per_node[i].is_some_and(|n| n > atlas.cap) as usize;
+            level.atlas_bytes += sizes.iter().map(|&s| frame_bytes(s)).sum::<u64>();
+        }
+    }
+    levels
+}
+
+/// Compose the baked clusters' views from the class impostors' mip chains
+/// (in parallel; each depends only on its members, so the result does not
+/// depend on the thread count).
+fn compose_clusters(
+    tree: &Quadtree,
+    baked_nodes: &[usize],
+    atlas: &AtlasPlan,
+    class_views: &[[PremulImage; 5]],
+    progress: &(dyn Fn(u64, u64) + Sync),
+) -> Vec<[PremulImage; 5]> {
+    let class_mips: Vec<[Vec<tiny_skia::Pixmap>; 5]> = class_views
+        .iter()
+        .map(|views| {
+            let mut out: [Vec<tiny_skia::Pixmap>; 5] = Default::default();
+            for (slot, image) in out.iter_mut().zip(views) {
+                *slot = image
+                    .mip_chain(MIP_LEVELS)
+                    .iter()
+                    .filter_map(to_pixmap)
+                    .collect();
+            }
+            out
+        })
+        .collect();
+    baked_nodes
+        .par_iter()
+        .map(|&i| {
+            let node = &tree.nodes[i];
+            let members = &tree.objects[node.members()];
+            let sizes = atlas.plans[i].unwrap_or_default();
+            let views = ImpostorView::ALL
+                .map(|v| compose_view(node, members, v, sizes[v as usize], &class_mips));
+            progress(1, baked_nodes.len() as u64);
+            views
+        })
+        .collect()
 }
 
 /// Extents (x, y, z) of the box a node's members fill, metres.

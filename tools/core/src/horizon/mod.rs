@@ -202,6 +202,33 @@ fn fill_slices(
 
 /// Render `terrain` seen from `camera` into a new frame (see [`Raycaster`]
 /// to reuse buffers from frame to frame).
+///
+/// ```
+/// use relevo_core::camera::Camera;
+/// use relevo_core::horizon::{render, RenderOptions, Terrain};
+/// // A 129² ridge of 30 m cells, every vertex data, no drape.
+/// let side = 129;
+/// let heights: Vec<f32> = (0..side * side)
+///     .map(|i| 200.0 - ((i % side) as f32 - 64.0).abs() * 3.0)
+///     .collect();
+/// let terrain = Terrain::new(side, 30.0, heights, vec![1u8; side * side], None);
+/// let camera = Camera {
+///     position: glam::DVec3::new(1920.0, -500.0, 150.0),
+///     heading_deg: 0.0,
+///     pitch_deg: 0.0,
+///     incl_px: 60.0,
+///     fov_x_deg: 60.0,
+///     width: 320,
+///     height: 180,
+///     near_m: 30.0,
+///     far_m: 30_000.0,
+/// };
+/// let frame = render(&terrain, &camera, &RenderOptions::default()).unwrap();
+/// let rows = frame.to_rows();
+/// // The ridge fills the bottom row; the top row is sky (depth 1).
+/// assert!(rows.depth[(rows.height - 1) * rows.width + rows.width / 2] < 1.0);
+/// assert_eq!(rows.depth[rows.width / 2], 1.0);
+/// ```
 pub fn render(terrain: &Terrain, camera: &Camera, opts: &RenderOptions) -> Result<RaycastFrame> {
     let mut renderer = Raycaster::default();
     renderer.render(terrain, camera, opts)?;

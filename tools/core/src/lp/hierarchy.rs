@@ -100,6 +100,19 @@ impl<'a> Hierarchy<'a> {
     /// heights (metres). Arithmetic is f64; results are stored as f32, radii
     /// and bounds rounded up so that nesting and the bound survive the
     /// rounding (midpoint errors are rounded to nearest, as martini does).
+    ///
+    /// ```
+    /// use relevo_core::lp::{ErrorMetric, Hierarchy};
+    /// // A 17² grid, 10 m cells: a plane (no error) with one 8 m bump.
+    /// let side = 17;
+    /// let mut heights: Vec<f32> = (0..side * side).map(|i| (i % side) as f32).collect();
+    /// heights[8 * side + 8] += 8.0;
+    /// let h = Hierarchy::compute(&heights, side, 10.0, ErrorMetric::Bound);
+    /// // The bump's vertex is only skipped by triangles that miss it by 8 m,
+    /// // and a parent's error bounds its children's (nesting).
+    /// assert!(h.error(8 * side + 8) >= 8.0);
+    /// assert!(h.error(0) == 0.0 && h.error(side * side - 1) == 0.0);
+    /// ```
     pub fn compute(
         heights: &[f32],
         side: usize,

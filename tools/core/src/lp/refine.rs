@@ -192,6 +192,34 @@ impl Refiner {
     }
 
     /// Refine `h` (with its `heights`) for `p` and return the strip.
+    ///
+    /// ```
+    /// use relevo_core::camera::Camera;
+    /// use relevo_core::lp::refine::{RefineParams, Refiner};
+    /// use relevo_core::lp::{ErrorMetric, Hierarchy};
+    /// let side = 65;
+    /// let heights: Vec<f32> = (0..side * side)
+    ///     .map(|i| (((i % side) as f32) * 0.3).sin() * 40.0 + (i / side) as f32)
+    ///     .collect();
+    /// let h = Hierarchy::compute(&heights, side, 30.0, ErrorMetric::Bound);
+    /// let camera = Camera {
+    ///     position: glam::DVec3::new(960.0, -200.0, 300.0),
+    ///     heading_deg: 0.0,
+    ///     pitch_deg: -20.0,
+    ///     incl_px: 360.0,
+    ///     fov_x_deg: 60.0,
+    ///     width: 1280,
+    ///     height: 720,
+    ///     near_m: 1.0,
+    ///     far_m: 10_000.0,
+    /// };
+    /// let mut refiner = Refiner::new();
+    /// // τ = 1 px, no geomorphing, culled to the frustum.
+    /// let fine = refiner.refine(&h, &heights, &RefineParams::for_camera(&camera, 1.0, None, true));
+    /// let fine_triangles = fine.triangles().count();
+    /// let coarse = refiner.refine(&h, &heights, &RefineParams::for_camera(&camera, 8.0, None, true));
+    /// assert!(coarse.triangles().count() < fine_triangles);
+    /// ```
     pub fn refine(&mut self, h: &Hierarchy, heights: &[f32], p: &RefineParams) -> &Strip {
         self.refine_in(
             Layout::RowMajor,

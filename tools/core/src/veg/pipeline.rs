@@ -374,6 +374,30 @@ impl Watch {
 
 /// Segment, learn from the samples, classify every region and place
 /// objects, keeping the region map.
+///
+/// ```
+/// use relevo_core::raster::png::decode_rgba;
+/// use relevo_core::veg::pipeline::{extract, VegImage, VegOptions};
+/// use relevo_core::veg::{samples, Image};
+/// // A real NEON crop (0.1 m RGB) and the ten rectangles marked on it.
+/// let data = concat!(env!("CARGO_MANIFEST_DIR"), "/../../data");
+/// let png = std::fs::read(format!("{data}/crops/SOAP_061.png")).unwrap();
+/// let (rgba, width, height) = decode_rgba(&png).unwrap();
+/// let rgb = rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
+/// let image = VegImage {
+///     image: Image::new(width, height, 3, rgb).unwrap(),
+///     crs_wkt: String::new(),
+///     geotransform: None,
+///     pixel_m: 0.1,
+///     valid: None,
+/// };
+/// let marks = std::fs::read_to_string(format!("{data}/trees/soap_061_samples.csv")).unwrap();
+/// let marked = samples::parse_csv(&marks, width, height).unwrap();
+/// let found = extract(&image, &marked, &VegOptions::default()).unwrap();
+/// // Crowns of the marked classes, each with a size and a score.
+/// assert!(found.objects.len() > 10);
+/// assert!(found.objects.iter().all(|o| ["alive", "dead"].contains(&o.class.as_str())));
+/// ```
 pub fn extract(image: &VegImage, samples: &[Sample], options: &VegOptions) -> Result<Extraction> {
     extract_watched(image, samples, options, RegionMap::Keep, &Watch::default())
 }
@@ -398,7 +422,10 @@ pub fn extract_watched(
     extract_tiled(image, samples, options, tiling, region_map, watch)
 }
 
-/// [`extract_watched`] with a given tiling.
+/// [`extract_watched`] with a given tiling: the thresholds set for the
+/// image, learning from the samples while the first free tiles are
+/// segmented ahead, then every tile classified and placed, the tiles'
+/// results numbered in tile order into one extraction.
 pub fn extract_tiled(
     image: &VegImage,
     samples: &[Sample],
@@ -430,74 +457,163 @@ pub fn extract_tiled(
         let (x, y) = (x.clamp(0.0, w as f64 - 0.5), y.clamp(0.0, h as f64 - 0.5));
         tiles.iter().position(|t| t.owns(x, y)).unwrap_or(0)
     };
-    let owners: Vec<usize> = samples.iter().map(owner).collect();
-    let sample_tiles = (0..tiles.len()).filter(|t| owners.contains(t)).count();
-    // Tiles analysed at once, each its pixels, opponent colours, quadtree,
-    // adjacency and labels: about TILE_BYTES_PER_PIXEL bytes a pixel; and
-    // the segmentations made while learning (the samples' tiles, and one
-    // tile for each other thread segmented meanwhile), kept for their tiles.
-    let at_once = rayon::current_num_threads().clamp(1, tiles.len());
-    let context_pixels = tiles
-        .iter()
-        .map(|t| t.context_size().0 * t.context_size().1)
-        .max()
-        .unwrap_or(0) as u64;
-    crate::memory::check(
-        &format!(
-            "vegetation extraction in {at_once} tile(s) of up to {context_pixels} pixels at once"
-        ),
-        context_pixels
-            * (at_once as u64 * TILE_BYTES_PER_PIXEL
-                + (sample_tiles + at_once - 1) as u64 * SEGMENTATION_BYTES_PER_PIXEL),
-        1,
-        "use smaller tiles (tile_px, --tile)",
-    )?;
-    watch.start(1 + tiles.len());
+    let work = Work {
+        image,
+        samples,
+        options,
+        owners: samples.iter().map(owner).collect(),
+        at_once: rayon::current_num_threads().clamp(1, tiles.len()),
+        tiles,
+        params,
+    };
+    work.check_memory()?;
+    watch.start(1 + work.tiles.len());
     let wall = Instant::now();
 
     // Learn: each sample from its tile, in marking order. Meanwhile, when
     // a thread is free, the first tiles no sample touches are segmented
     // ahead (one for each other thread): segmentation needs nothing learnt.
     let segmented: Vec<Mutex<Option<Segmentation>>> =
-        tiles.iter().map(|_| Mutex::new(None)).collect();
+        work.tiles.iter().map(|_| Mutex::new(None)).collect();
     let learning_done = AtomicBool::new(false);
-    let learn = || -> Result<Learnt> {
+    let (learnt, ()) = rayon::join(
+        || {
+            let learnt = work.learn(placement, &segmented);
+            learning_done.store(true, Ordering::Release);
+            learnt
+        },
+        || work.segment_ahead(&segmented, &learning_done),
+    );
+    let learnt = learnt?;
+    watch.step_done()?;
+
+    let labels_map = (region_map == RegionMap::Keep).then(|| Mutex::new(vec![0u32; w * h]));
+    let done = work.analyse_tiles(&segmented, &learnt, labels_map.as_ref(), watch);
+    let mut labels_map =
+        labels_map.map(|map| map.into_inner().unwrap_or_else(PoisonError::into_inner));
+    let gathered = gather(done, &work.tiles, labels_map.as_mut(), w)?;
+    tracing::info!(
+        tiles = work.tiles.len(),
+        leaves = gathered.leaves,
+        regions = gathered.regions.len(),
+        ms = wall.elapsed().as_secs_f64() * 1e3,
+        "vegetation extraction"
+    );
+    let objects = world_objects(&gathered.found, image, &learnt.classifier);
+    let report = Report {
+        width: w,
+        height: h,
+        pixel_m: image.pixel_m,
+        brightness_span,
+        threshold_gain,
+        placement: learnt.placement,
+        tiles: work.tiles.len(),
+        leaves: gathered.leaves,
+        regions: gathered.regions.len(),
+        classes: class_reports(&learnt, &gathered),
+        objects: objects.len(),
+        segment_ms: gathered.segment_ms + learnt.segment_ms,
+        classify_ms: gathered.classify_ms + learnt.ms - learnt.segment_ms,
+        detect_ms: gathered.detect_ms,
+        total_ms: wall.elapsed().as_secs_f64() * 1e3,
+    };
+    Ok(Extraction {
+        regions: gathered.regions,
+        region_map: labels_map,
+        steps: gathered.steps,
+        classifier: learnt.classifier,
+        labels: gathered.labels,
+        objects,
+        report,
+    })
+}
+
+/// What every stage of one extraction reads: the image, the samples and
+/// options, the tiles with the tile owning each sample, the segmentation's
+/// thresholds (scaled for the image) and how many tiles run at once.
+struct Work<'a> {
+    image: &'a VegImage,
+    samples: &'a [Sample],
+    options: &'a VegOptions,
+    tiles: Vec<Tile>,
+    /// Per sample, the tile owning its centre.
+    owners: Vec<usize>,
+    params: SegmentParams,
+    at_once: usize,
+}
+
+impl Work<'_> {
+    /// Refuse the extraction when its working set exceeds the budget: the
+    /// tiles analysed at once, each its pixels, opponent colours, quadtree,
+    /// adjacency and labels (about `TILE_BYTES_PER_PIXEL` bytes a pixel),
+    /// and the segmentations made while learning (the samples' tiles, and
+    /// one tile for each other thread segmented meanwhile), kept for their
+    /// tiles.
+    fn check_memory(&self) -> Result<()> {
+        let sample_tiles = (0..self.tiles.len())
+            .filter(|t| self.owners.contains(t))
+            .count();
+        let context_pixels = self
+            .tiles
+            .iter()
+            .map(|t| t.context_size().0 * t.context_size().1)
+            .max()
+            .unwrap_or(0) as u64;
+        let at_once = self.at_once;
+        crate::memory::check(
+            &format!(
+                "vegetation extraction in {at_once} tile(s) of up to {context_pixels} pixels at once"
+            ),
+            context_pixels
+                * (at_once as u64 * TILE_BYTES_PER_PIXEL
+                    + (sample_tiles + at_once - 1) as u64 * SEGMENTATION_BYTES_PER_PIXEL),
+            1,
+            "use smaller tiles (tile_px, --tile)",
+        )
+    }
+
+    /// Learn the classifier from the samples, each from its tile, in
+    /// marking order, and the crown spacing from the marked crowns when the
+    /// options leave it to the samples. A tile's segmentation serves
+    /// learning and then its own analysis (left in `segmented`).
+    fn learn(
+        &self,
+        placement: Placement,
+        segmented: &[Mutex<Option<Segmentation>>],
+    ) -> Result<Learnt> {
+        let (image, samples, options) = (self.image, self.samples, self.options);
         let start = Instant::now();
         let mut marked: Vec<Vec<Vec<f32>>> = vec![Vec::new(); samples.len()];
         let mut learn_segment_ms = 0.0;
         let learn_spacing =
             matches!(placement, Placement::Crowns { .. }) && options.crown_spacing_m.is_none();
         let mut marked_crowns = Vec::new();
-        // A tile's segmentation serves learning and then its own analysis.
         let mut learn_buffers = SegmentBuffers::default();
-        for (t, tile) in tiles.iter().enumerate() {
-            if !owners.contains(&t) {
+        for (t, tile) in self.tiles.iter().enumerate() {
+            if !self.owners.contains(&t) {
                 continue;
             }
             let context = TileImage::of(image, tile, Vec::new());
             let seg_start = Instant::now();
-            let segmentation = segment(context.image(), &params, &mut learn_buffers)?;
+            let segmentation = segment(context.image(), &self.params, &mut learn_buffers)?;
             learn_segment_ms += seg_start.elapsed().as_secs_f64() * 1e3;
             let [x0, y0, ..] = tile.context;
             for (k, sample) in samples.iter().enumerate() {
-                if owners[k] == t {
-                    let local = sample.translated(-(x0 as f64), -(y0 as f64));
-                    marked[k] = sample_signatures(
+                if self.owners[k] != t {
+                    continue;
+                }
+                let local = sample.translated(-(x0 as f64), -(y0 as f64));
+                marked[k] =
+                    sample_signatures(context.image(), &segmentation, &local, options.window_px);
+                if learn_spacing && sample.class != options.negative_class {
+                    marked_crowns.push(MarkedCrown::cut(
                         context.image(),
+                        context.valid(image),
                         &segmentation,
                         &local,
+                        spacing::margin_px(image.pixel_m),
                         options.window_px,
-                    );
-                    if learn_spacing && sample.class != options.negative_class {
-                        marked_crowns.push(MarkedCrown::cut(
-                            context.image(),
-                            context.valid(image),
-                            &segmentation,
-                            &local,
-                            spacing::margin_px(image.pixel_m),
-                            options.window_px,
-                        ));
-                    }
+                    ));
                 }
             }
             *locked(&segmented[t]) = Some(segmentation);
@@ -535,107 +651,125 @@ pub fn extract_tiled(
             }
             placement => placement,
         };
-        let learn_ms = start.elapsed().as_secs_f64() * 1e3;
         Ok(Learnt {
             classifier,
             vegetation,
             placement,
             segment_ms: learn_segment_ms,
-            ms: learn_ms,
+            ms: start.elapsed().as_secs_f64() * 1e3,
         })
-    };
-    let segment_ahead = || {
+    }
+
+    /// Segment the first tiles no sample touches, one for each thread
+    /// beside the learning one, until learning is done.
+    fn segment_ahead(&self, segmented: &[Mutex<Option<Segmentation>>], learning_done: &AtomicBool) {
         let mut buffers = SegmentBuffers::default();
-        let free = (0..tiles.len()).filter(|t| !owners.contains(t));
-        for t in free.take(at_once - 1) {
+        let free = (0..self.tiles.len()).filter(|t| !self.owners.contains(t));
+        for t in free.take(self.at_once - 1) {
             if learning_done.load(Ordering::Acquire) {
                 break;
             }
-            let context = TileImage::of(image, &tiles[t], Vec::new());
+            let context = TileImage::of(self.image, &self.tiles[t], Vec::new());
             // A failure here comes back when the tile is analysed.
-            if let Ok(s) = segment(context.image(), &params, &mut buffers) {
+            if let Ok(s) = segment(context.image(), &self.params, &mut buffers) {
                 *locked(&segmented[t]) = Some(s);
             }
         }
-    };
-    let (learnt, ()) = rayon::join(
-        || {
-            let learnt = learn();
-            learning_done.store(true, Ordering::Release);
-            learnt
-        },
-        segment_ahead,
-    );
-    let Learnt {
-        classifier,
-        vegetation,
-        placement,
-        segment_ms: learn_segment_ms,
-        ms: learn_ms,
-    } = learnt?;
-    watch.step_done()?;
+    }
 
-    // Classify and place, as many tiles at once as threads: each of
-    // `at_once` workers takes the next tile as soon as its last is done, and
-    // writes its core's labels (numbered within the tile) into the map.
-    let next_tile = AtomicUsize::new(0);
-    let labels_map = (region_map == RegionMap::Keep).then(|| Mutex::new(vec![0u32; w * h]));
-    let done: Mutex<Vec<(usize, Result<TileResult>)>> = Mutex::new(Vec::new());
-    rayon::scope(|scope| {
-        for _ in 0..at_once {
-            scope.spawn(|_| {
-                let mut buffers = TileBuffers::default();
-                loop {
-                    let t = next_tile.fetch_add(1, Ordering::Relaxed);
-                    let Some(tile) = tiles.get(t) else { break };
-                    let segmented = locked(&segmented[t]).take();
-                    let result = analyse_tile(
-                        image,
-                        tile,
-                        segmented,
-                        &mut buffers,
-                        labels_map.as_ref(),
-                        &params,
-                        &classifier,
-                        &vegetation,
-                        placement,
-                    )
-                    .and_then(|r| watch.step_done().map(|()| r));
-                    // The other workers stop after their current tile.
-                    if result.is_err() {
-                        next_tile.store(tiles.len(), Ordering::Relaxed);
+    /// Classify and place, as many tiles at once as threads: each of
+    /// `at_once` workers takes the next tile as soon as its last is done, and
+    /// writes its core's labels (numbered within the tile) into the map.
+    /// Returns each tile's result with its index, in the order they ended.
+    fn analyse_tiles(
+        &self,
+        segmented: &[Mutex<Option<Segmentation>>],
+        learnt: &Learnt,
+        labels_map: Option<&Mutex<Vec<u32>>>,
+        watch: &Watch,
+    ) -> Vec<(usize, Result<TileResult>)> {
+        let next_tile = AtomicUsize::new(0);
+        let done: Mutex<Vec<(usize, Result<TileResult>)>> = Mutex::new(Vec::new());
+        rayon::scope(|scope| {
+            for _ in 0..self.at_once {
+                scope.spawn(|_| {
+                    let mut buffers = TileBuffers::default();
+                    loop {
+                        let t = next_tile.fetch_add(1, Ordering::Relaxed);
+                        let Some(tile) = self.tiles.get(t) else { break };
+                        let segmented = locked(&segmented[t]).take();
+                        let result = analyse_tile(
+                            self.image,
+                            tile,
+                            segmented,
+                            &mut buffers,
+                            labels_map,
+                            &self.params,
+                            &learnt.classifier,
+                            &learnt.vegetation,
+                            learnt.placement,
+                        )
+                        .and_then(|r| watch.step_done().map(|()| r));
+                        // The other workers stop after their current tile.
+                        if result.is_err() {
+                            next_tile.store(self.tiles.len(), Ordering::Relaxed);
+                        }
+                        locked(&done).push((t, result));
                     }
-                    locked(&done).push((t, result));
-                }
-            });
-        }
-    });
-    let mut done = done.into_inner().unwrap_or_else(PoisonError::into_inner);
-    let mut labels_map =
-        labels_map.map(|map| map.into_inner().unwrap_or_else(PoisonError::into_inner));
-    // Number the regions in tile order. Tiles are missing only after a
-    // tile's error, which the loop returns.
+                });
+            }
+        });
+        done.into_inner().unwrap_or_else(PoisonError::into_inner)
+    }
+}
+
+/// The tiles' results as one: regions numbered in tile order (the map's
+/// labels offset to match), objects sorted by position, counts and times
+/// summed.
+struct Gathered {
+    regions: Vec<Segment>,
+    labels: Vec<Label>,
+    found: Vec<Object>,
+    leaves: usize,
+    steps: SegmentSteps,
+    segment_ms: f64,
+    classify_ms: f64,
+    detect_ms: f64,
+}
+
+/// Gather the tiles' results (`done`, in any order) of an image `w` pixels
+/// wide. Tiles are missing only after a tile's error, which this returns.
+fn gather(
+    mut done: Vec<(usize, Result<TileResult>)>,
+    tiles: &[Tile],
+    labels_map: Option<&mut Vec<u32>>,
+    w: usize,
+) -> Result<Gathered> {
     done.sort_by_key(|(t, _)| *t);
-    let mut regions = Vec::new();
-    let mut labels = Vec::new();
-    let mut found = Vec::new();
-    let mut leaves = 0;
-    let mut steps = SegmentSteps::default();
-    let (mut segment_ms, mut classify_ms, mut detect_ms) = (0.0, 0.0, 0.0);
+    let mut g = Gathered {
+        regions: Vec::new(),
+        labels: Vec::new(),
+        found: Vec::new(),
+        leaves: 0,
+        steps: SegmentSteps::default(),
+        segment_ms: 0.0,
+        classify_ms: 0.0,
+        detect_ms: 0.0,
+    };
     let mut offsets = Vec::with_capacity(tiles.len());
     for (_, result) in done {
         let r = result?;
-        offsets.push(regions.len() as u32);
-        regions.extend(r.regions);
-        labels.extend(r.labels);
-        found.extend(r.objects);
-        leaves += r.leaves;
-        steps.add(&r.steps);
-        segment_ms += r.segment_ms;
-        classify_ms += r.classify_ms;
-        detect_ms += r.detect_ms;
+        offsets.push(g.regions.len() as u32);
+        g.regions.extend(r.regions);
+        g.labels.extend(r.labels);
+        g.found.extend(r.objects);
+        g.leaves += r.leaves;
+        g.steps.add(&r.steps);
+        g.segment_ms += r.segment_ms;
+        g.classify_ms += r.classify_ms;
+        g.detect_ms += r.detect_ms;
     }
-    if let Some(map) = &mut labels_map {
+    if let Some(map) = labels_map {
         for (tile, offset) in tiles.iter().zip(offsets) {
             let [x0, y0, x1, y1] = tile.core;
             map[y0 * w..y1 * w]
@@ -643,15 +777,15 @@ pub fn extract_tiled(
                 .for_each(|row| row[x0..x1].iter_mut().for_each(|l| *l += offset));
         }
     }
-    found.sort_by(|a, b| a.y.total_cmp(&b.y).then(a.x.total_cmp(&b.x)));
-    tracing::info!(
-        tiles = tiles.len(),
-        leaves,
-        regions = regions.len(),
-        ms = wall.elapsed().as_secs_f64() * 1e3,
-        "vegetation extraction"
-    );
-    let objects: Vec<VegObject> = found
+    g.found
+        .sort_by(|a, b| a.y.total_cmp(&b.y).then(a.x.total_cmp(&b.x)));
+    Ok(g)
+}
+
+/// The objects found, numbered from 1, in the image's world coordinates
+/// with their class names and sizes in metres.
+fn world_objects(found: &[Object], image: &VegImage, classifier: &Classifier) -> Vec<VegObject> {
+    found
         .iter()
         .enumerate()
         .map(|(k, o)| {
@@ -665,55 +799,34 @@ pub fn extract_tiled(
                 score: o.score,
             }
         })
-        .collect();
-    let signatures = classifier.signatures_per_class();
-    let classes = classifier
+        .collect()
+}
+
+/// Per class: signatures learnt, regions, pixels and objects.
+fn class_reports(learnt: &Learnt, g: &Gathered) -> Vec<ClassReport> {
+    let signatures = learnt.classifier.signatures_per_class();
+    learnt
+        .classifier
         .classes
         .iter()
         .enumerate()
         .map(|(c, name)| {
             let of_class = || {
-                labels
+                g.labels
                     .iter()
-                    .zip(&regions)
+                    .zip(&g.regions)
                     .filter(move |(l, _)| l.class == c)
             };
             ClassReport {
                 class: name.clone(),
-                vegetation: vegetation[c],
+                vegetation: learnt.vegetation[c],
                 signatures: signatures[c],
                 regions: of_class().count(),
                 pixels: of_class().map(|(_, r)| r.pixels as u64).sum(),
-                objects: found.iter().filter(|o| o.class == c).count(),
+                objects: g.found.iter().filter(|o| o.class == c).count(),
             }
         })
-        .collect();
-    let report = Report {
-        width: w,
-        height: h,
-        pixel_m: image.pixel_m,
-        brightness_span,
-        threshold_gain,
-        placement,
-        tiles: tiles.len(),
-        leaves,
-        regions: regions.len(),
-        classes,
-        objects: objects.len(),
-        segment_ms: segment_ms + learn_segment_ms,
-        classify_ms: classify_ms + learn_ms - learn_segment_ms,
-        detect_ms,
-        total_ms: wall.elapsed().as_secs_f64() * 1e3,
-    };
-    Ok(Extraction {
-        regions,
-        region_map: labels_map,
-        steps,
-        classifier,
-        labels,
-        objects,
-        report,
-    })
+        .collect()
 }
 
 /// A lock's guard. A worker that panics ends its scope with its panic, so
