@@ -3,10 +3,10 @@
 //! through [`Flight`] and [`gpu::Renderer`], the same code the headless
 //! renders use; what is on screen comes from relevo-core.
 //!
-//! - [`input`]: keys and camera strings.
-//! - [`panel`]: the side panel.
-//! - [`view`]: the 3D view, HUD and help.
-//! - [`tour`]: the scripted tour.
+//! - `input`: keys and camera strings.
+//! - `panel`: the side panel.
+//! - `view`: the 3D view, HUD and help.
+//! - `tour`: the scripted tour.
 
 mod input;
 mod panel;

@@ -63,7 +63,7 @@ pub struct Instance {
     pub view_count: u8,
     /// The share of the pixels this instance draws, as an interval of
     /// ordered-dither thresholds `[from, to)`: `[0, 1)` except while a
-    /// cluster fades into its children ([`CutOptions::level_fade`]), when
+    /// cluster fades into its children ([`CutOptions::level_fade`](super::CutOptions::level_fade)), when
     /// the cluster and its children split the interval. The views split
     /// the instance's share by their weights.
     pub share: [f32; 2],
