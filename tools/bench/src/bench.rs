@@ -124,9 +124,7 @@ pub fn hierarchy(
     max_side: usize,
     json_lines: bool,
 ) -> Result<()> {
-    use relevo_core::camera::Camera;
-    use relevo_core::lp::refine::{RefineParams, Refiner};
-    use relevo_core::lp::{ErrorMetric, Hierarchy, Layout};
+    use relevo_core::lp::{ErrorMetric, Hierarchy};
 
     let scratch = tempfile_dir()?;
     let mut grids: Vec<(String, usize, Vec<f32>)> = [257usize, 1025, 4097, 8193]
@@ -158,111 +156,15 @@ pub fn hierarchy(
         let midpoint = Hierarchy::compute(heights, *side, cell, ErrorMetric::Midpoint);
         mesh_bound(name, heights, *side, [&midpoint, &h], json_lines);
 
-        // martini needs the terrain as raw float32; 8193² exceeds its u16 coordinates.
-        let martini = if *side <= 4097 {
-            let file = scratch.join(format!("{side}.f32"));
-            std::fs::write(&file, bytemuck::cast_slice::<f32, u8>(heights))?;
-            let out = Command::new("node")
-                .arg(&script)
-                .arg(runs.min(5).to_string())
-                .arg(&file)
-                .arg(side.to_string())
-                .output()
-                .context("cannot run node (scripts/setup-test installs it and martini)")?;
-            if !out.status.success() {
-                bail!(
-                    "martini benchmark failed: {}",
-                    String::from_utf8_lossy(&out.stderr)
-                );
-            }
-            let v: serde_json::Value = serde_json::from_slice(&out.stdout)?;
-            v["create_ms"].as_f64()
-        } else {
-            None
-        };
+        let martini = martini_ms(&script, &scratch, heights, *side, runs)?;
 
-        // Refinement: 1920×1080, τ = 1 px, culling on, eight headings, from
-        // above the middle of the grid looking 20° down.
-        let extent = (*side - 1) as f64 * cell;
-        let top = heights.iter().cloned().fold(f32::MIN, f32::max) as f64;
-        let mut refiner = Refiner::new();
-        let mut times = Vec::new();
-        let mut triangles = Vec::new();
-        let view = |k: usize| Camera {
-            position: glam::DVec3::new(extent * 0.5, extent * 0.5, top + 300.0),
-            heading_deg: k as f64 * 45.0,
-            pitch_deg: -20.0,
-            incl_px: 540.0,
-            fov_x_deg: 60.0,
-            width: 1920,
-            height: 1080,
-            near_m: 1.0,
-            far_m: extent * 2.0,
-        };
-        for k in 0..8 {
-            let params = RefineParams::for_camera(&view(k), 1.0, None, true);
-            refiner.refine(&h, heights, &params); // warm the buffers
-            let ms = median_ms(runs, || {
-                std::hint::black_box(refiner.refine(&h, heights, &params));
-                Ok(())
-            })?;
-            times.push(ms);
-            triangles.push(refiner.refine(&h, heights, &params).triangles().count());
-        }
-        // The same views with every per-vertex array in 64×64 tiles.
-        let tiled_er = Layout::Tiled.arrange(*side, &h.error_radius);
-        let tiled_z = Layout::Tiled.arrange(*side, heights);
-        let mut tiled_times = Vec::new();
-        for k in 0..8 {
-            let params = RefineParams::for_camera(&view(k), 1.0, None, true);
-            tiled_times.push(median_ms(runs, || {
-                std::hint::black_box(refiner.refine_in(
-                    Layout::Tiled,
-                    *side,
-                    cell,
-                    &tiled_er,
-                    &tiled_z,
-                    &params,
-                ));
-                Ok(())
-            })?);
-        }
-        let refine_tiled_ms = median(&tiled_times);
+        let Refinement {
+            times,
+            triangles,
+            tiled_ms: refine_tiled_ms,
+        } = refinement(&h, heights, *side, cell, runs)?;
 
-        // Whole `prep` on the grid written as a GeoTIFF (30 m, UTM 33N).
-        let prep_ms = {
-            let tif = scratch.join(format!("{side}.tif"));
-            let raster = relevo_core::raster::Raster::from_data(
-                *side,
-                *side,
-                1,
-                heights.iter().map(|&v| v as f64).collect(),
-            );
-            let spec = gdalio::GridSpec {
-                crs_wkt: relevo::ingest::crs::to_wkt(&relevo::ingest::crs::parse("EPSG:32633")?)?,
-                geotransform: relevo_core::geo::GeoTransform::north_up(
-                    500_000.0,
-                    5_000_000.0,
-                    cell,
-                    cell,
-                ),
-                width: *side,
-                height: *side,
-            };
-            gdalio::write_geotiff(
-                &tif,
-                &raster,
-                &spec,
-                gdal::raster::GdalDataType::Float32,
-                None,
-            )?;
-            let region: RegionSpec = toml::from_str(&format!(
-                "[dem]\nfiles = [{:?}]\n",
-                tif.display().to_string()
-            ))?;
-            let out = scratch.join(format!("{side}.relevo"));
-            median_ms(1, || prep(&region, &out, true).map(|_| ()))?
-        };
+        let prep_ms = prep_ms(heights, *side, cell, &scratch)?;
 
         let refine_ms = median(&times);
         let mtris = (0..8)
@@ -330,52 +232,13 @@ fn mesh_bound(
 /// images up to `max_side`² beside scikit-image's felzenszwalb (when Python
 /// with scikit-image is installed).
 pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: bool) -> Result<()> {
+    use relevo_core::veg::eval;
     use relevo_core::veg::pipeline::{
         extract, extract_watched, RegionMap, VegImage, VegOptions, Watch,
     };
-    use relevo_core::veg::{baseline, eval};
 
     let options = VegOptions::default();
-    let mut yellowstone = None;
-    for crop in crate::veg_protocol::annotated(repo, data)? {
-        let (name, image, samples, truth) = (crop.name, crop.image, crop.samples, crop.truth);
-        let result = extract(&image, &samples, &options)?;
-        let ours: Vec<(f64, f64, f32)> =
-            result.objects.iter().map(|o| (o.x, o.y, o.score)).collect();
-        // Baseline components must be at least a crown of the smallest radius.
-        let min_area = (std::f64::consts::PI * (options.crown_min_radius_m / 0.1).powi(2)) as usize;
-        let theirs = baseline::excess_green(&image.image, min_area);
-        let e = eval::evaluate(&ours, &truth);
-        let b = eval::evaluate(&theirs, &truth);
-        // The same away from the samples: boxes and detections whose centre
-        // lies in a marked rectangle are left out (a marked crown is easy).
-        let marked = |x: f64, y: f64| samples.iter().any(|s| s.contains(x, y));
-        let unmarked_truth: Vec<[f64; 4]> = truth
-            .iter()
-            .filter(|b| !marked((b[0] + b[2]) / 2.0, (b[1] + b[3]) / 2.0))
-            .copied()
-            .collect();
-        let unmarked = |d: &[(f64, f64, f32)]| -> Vec<(f64, f64, f32)> {
-            d.iter().filter(|p| !marked(p.0, p.1)).copied().collect()
-        };
-        let e_away = eval::evaluate(&unmarked(&ours), &unmarked_truth);
-        let b_away = eval::evaluate(&unmarked(&theirs), &unmarked_truth);
-        emit(
-            json_lines,
-            json!({"bench": "veg-accuracy", "image": name, "boxes": truth.len(),
-                   "haar": e, "excess_green": b,
-                   "away_from_samples": {"boxes": unmarked_truth.len(), "haar": e_away, "excess_green": b_away}}),
-            format!(
-                "veg accuracy {name} ({} boxes): Haar P {:.3} R {:.3} F1 {:.3} ({} objects) | excess green P {:.3} R {:.3} F1 {:.3} ({} objects) | away from the samples ({} boxes): Haar F1 {:.3}, excess green F1 {:.3}",
-                truth.len(), e.precision, e.recall, e.f1, e.detections,
-                b.precision, b.recall, b.f1, b.detections,
-                unmarked_truth.len(), e_away.f1, b_away.f1
-            ),
-        );
-        if name == "yellowstone" {
-            yellowstone = Some((image, samples, truth));
-        }
-    }
+    let yellowstone = veg_accuracy(repo, data, &options, json_lines)?;
 
     // Speed: the Yellowstone crop, and the crop mirrored into larger
     // images, with its truth boxes mirrored the same way.
@@ -456,24 +319,7 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
         // felzenszwalb runs at about 0.3 Mpx/s here: once above 2 Mpx, and
         // not at all above 25 Mpx (it would take minutes per run).
         let fz_runs = if mpx > 2.0 { 1 } else { runs.min(3) };
-        let felzenszwalb = if mpx > 25.0 {
-            None
-        } else {
-            let raw = scratch.join("image.u8");
-            std::fs::write(&raw, &veg_image.image.pixels)?;
-            let out = Command::new("python3")
-                .arg(&script)
-                .arg(&raw)
-                .args([w, h, veg_image.image.bands, fz_runs].map(|v| v.to_string()))
-                .output();
-            let _ = std::fs::remove_file(&raw);
-            match out {
-                Ok(o) if o.status.success() => {
-                    serde_json::from_slice::<serde_json::Value>(&o.stdout).ok()
-                }
-                _ => None,
-            }
-        };
+        let felzenszwalb = felzenszwalb(&script, &scratch, &veg_image.image, fz_runs, mpx)?;
         let fz_ms = felzenszwalb.as_ref().and_then(|v| v["ms"].as_f64());
         emit(
             json_lines,
@@ -638,4 +484,234 @@ fn mirror_tile(image: &relevo_core::veg::Image, side: usize) -> Result<relevo_co
         }
     }
     Ok(relevo_core::veg::Image::new(side, side, b, pixels)?)
+}
+
+/// @mapbox/martini's `createTile` on the same heights, median ms (node,
+/// `tools/js/martini-bench.mjs`); `None` past its largest grid.
+fn martini_ms(
+    script: &Path,
+    scratch: &Path,
+    heights: &[f32],
+    side: usize,
+    runs: usize,
+) -> Result<Option<f64>> {
+    if side > 4097 {
+        // 8193² exceeds martini's u16 coordinates.
+        return Ok(None);
+    }
+    // martini reads the terrain as raw float32.
+    {
+        let file = scratch.join(format!("{side}.f32"));
+        std::fs::write(&file, bytemuck::cast_slice::<f32, u8>(heights))?;
+        let out = Command::new("node")
+            .arg(script)
+            .arg(runs.min(5).to_string())
+            .arg(&file)
+            .arg(side.to_string())
+            .output()
+            .context("cannot run node (scripts/setup-test installs it and martini)")?;
+        if !out.status.success() {
+            bail!(
+                "martini benchmark failed: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout)?;
+        Ok(v["create_ms"].as_f64())
+    }
+}
+
+/// Refinement timings over one grid: per heading the median ms and the
+/// triangles, row-major; and the median over headings with every
+/// per-vertex array in 64×64 tiles.
+struct Refinement {
+    times: Vec<f64>,
+    triangles: Vec<usize>,
+    tiled_ms: f64,
+}
+
+/// Refinement at 1920×1080, τ = 1 px, culling on, eight headings, from
+/// above the middle of the grid looking 20° down.
+fn refinement(
+    h: &relevo_core::lp::Hierarchy,
+    heights: &[f32],
+    side: usize,
+    cell: f64,
+    runs: usize,
+) -> Result<Refinement> {
+    use relevo_core::camera::Camera;
+    use relevo_core::lp::refine::{RefineParams, Refiner};
+    use relevo_core::lp::Layout;
+    let extent = (side - 1) as f64 * cell;
+    let top = heights.iter().cloned().fold(f32::MIN, f32::max) as f64;
+    let mut refiner = Refiner::new();
+    let mut times = Vec::new();
+    let mut triangles = Vec::new();
+    let view = |k: usize| Camera {
+        position: glam::DVec3::new(extent * 0.5, extent * 0.5, top + 300.0),
+        heading_deg: k as f64 * 45.0,
+        pitch_deg: -20.0,
+        incl_px: 540.0,
+        fov_x_deg: 60.0,
+        width: 1920,
+        height: 1080,
+        near_m: 1.0,
+        far_m: extent * 2.0,
+    };
+    for k in 0..8 {
+        let params = RefineParams::for_camera(&view(k), 1.0, None, true);
+        refiner.refine(h, heights, &params); // warm the buffers
+        let ms = median_ms(runs, || {
+            std::hint::black_box(refiner.refine(h, heights, &params));
+            Ok(())
+        })?;
+        times.push(ms);
+        triangles.push(refiner.refine(h, heights, &params).triangles().count());
+    }
+    // The same views with every per-vertex array in 64×64 tiles.
+    let tiled_er = Layout::Tiled.arrange(side, &h.error_radius);
+    let tiled_z = Layout::Tiled.arrange(side, heights);
+    let mut tiled_times = Vec::new();
+    for k in 0..8 {
+        let params = RefineParams::for_camera(&view(k), 1.0, None, true);
+        tiled_times.push(median_ms(runs, || {
+            std::hint::black_box(refiner.refine_in(
+                Layout::Tiled,
+                side,
+                cell,
+                &tiled_er,
+                &tiled_z,
+                &params,
+            ));
+            Ok(())
+        })?);
+    }
+    let refine_tiled_ms = median(&tiled_times);
+    Ok(Refinement {
+        times,
+        triangles,
+        tiled_ms: refine_tiled_ms,
+    })
+}
+
+/// The whole `prep` of the grid written as a GeoTIFF (30 m cells, UTM
+/// 33N), ms.
+fn prep_ms(heights: &[f32], side: usize, cell: f64, scratch: &Path) -> Result<f64> {
+    let tif = scratch.join(format!("{side}.tif"));
+    let raster = relevo_core::raster::Raster::from_data(
+        side,
+        side,
+        1,
+        heights.iter().map(|&v| v as f64).collect(),
+    );
+    let spec = gdalio::GridSpec {
+        crs_wkt: relevo::ingest::crs::to_wkt(&relevo::ingest::crs::parse("EPSG:32633")?)?,
+        geotransform: relevo_core::geo::GeoTransform::north_up(500_000.0, 5_000_000.0, cell, cell),
+        width: side,
+        height: side,
+    };
+    gdalio::write_geotiff(
+        &tif,
+        &raster,
+        &spec,
+        gdal::raster::GdalDataType::Float32,
+        None,
+    )?;
+    let region: RegionSpec = toml::from_str(&format!(
+        "[dem]\nfiles = [{:?}]\n",
+        tif.display().to_string()
+    ))?;
+    let out = scratch.join(format!("{side}.relevo"));
+    median_ms(1, || prep(&region, &out, true).map(|_| ()))
+}
+
+/// An annotated crop: the image, the samples marked on it, the truth boxes.
+type MarkedCrop = (
+    relevo_core::veg::pipeline::VegImage,
+    Vec<relevo_core::veg::samples::Sample>,
+    Vec<[f64; 4]>,
+);
+
+/// Crown accuracy on each annotated crop with its committed samples,
+/// beside excess green, overall and away from the samples; returns the
+/// Yellowstone crop, its samples and boxes for the speed runs.
+fn veg_accuracy(
+    repo: &Path,
+    data: &Path,
+    options: &relevo_core::veg::pipeline::VegOptions,
+    json_lines: bool,
+) -> Result<Option<MarkedCrop>> {
+    use relevo_core::veg::pipeline::extract;
+    use relevo_core::veg::{baseline, eval};
+    let mut yellowstone = None;
+    for crop in crate::veg_protocol::annotated(repo, data)? {
+        let (name, image, samples, truth) = (crop.name, crop.image, crop.samples, crop.truth);
+        let result = extract(&image, &samples, options)?;
+        let ours: Vec<(f64, f64, f32)> =
+            result.objects.iter().map(|o| (o.x, o.y, o.score)).collect();
+        // Baseline components must be at least a crown of the smallest radius.
+        let min_area = (std::f64::consts::PI * (options.crown_min_radius_m / 0.1).powi(2)) as usize;
+        let theirs = baseline::excess_green(&image.image, min_area);
+        let e = eval::evaluate(&ours, &truth);
+        let b = eval::evaluate(&theirs, &truth);
+        // The same away from the samples: boxes and detections whose centre
+        // lies in a marked rectangle are left out (a marked crown is easy).
+        let marked = |x: f64, y: f64| samples.iter().any(|s| s.contains(x, y));
+        let unmarked_truth: Vec<[f64; 4]> = truth
+            .iter()
+            .filter(|b| !marked((b[0] + b[2]) / 2.0, (b[1] + b[3]) / 2.0))
+            .copied()
+            .collect();
+        let unmarked = |d: &[(f64, f64, f32)]| -> Vec<(f64, f64, f32)> {
+            d.iter().filter(|p| !marked(p.0, p.1)).copied().collect()
+        };
+        let e_away = eval::evaluate(&unmarked(&ours), &unmarked_truth);
+        let b_away = eval::evaluate(&unmarked(&theirs), &unmarked_truth);
+        emit(
+            json_lines,
+            json!({"bench": "veg-accuracy", "image": name, "boxes": truth.len(),
+                   "haar": e, "excess_green": b,
+                   "away_from_samples": {"boxes": unmarked_truth.len(), "haar": e_away, "excess_green": b_away}}),
+            format!(
+                "veg accuracy {name} ({} boxes): Haar P {:.3} R {:.3} F1 {:.3} ({} objects) | excess green P {:.3} R {:.3} F1 {:.3} ({} objects) | away from the samples ({} boxes): Haar F1 {:.3}, excess green F1 {:.3}",
+                truth.len(), e.precision, e.recall, e.f1, e.detections,
+                b.precision, b.recall, b.f1, b.detections,
+                unmarked_truth.len(), e_away.f1, b_away.f1
+            ),
+        );
+        if name == "yellowstone" {
+            yellowstone = Some((image, samples, truth));
+        }
+    }
+    Ok(yellowstone)
+}
+
+/// scikit-image's felzenszwalb on the same pixels (`runs` runs, median ms
+/// and segments as JSON); not run above 25 Mpx (it would take minutes).
+fn felzenszwalb(
+    script: &Path,
+    scratch: &Path,
+    image: &relevo_core::veg::Image,
+    runs: usize,
+    mpx: f64,
+) -> Result<Option<serde_json::Value>> {
+    if mpx > 25.0 {
+        return Ok(None);
+    }
+    {
+        let raw = scratch.join("image.u8");
+        std::fs::write(&raw, &image.pixels)?;
+        let out = Command::new("python3")
+            .arg(script)
+            .arg(&raw)
+            .args([image.width, image.height, image.bands, runs].map(|v| v.to_string()))
+            .output();
+        let _ = std::fs::remove_file(&raw);
+        Ok(match out {
+            Ok(o) if o.status.success() => {
+                serde_json::from_slice::<serde_json::Value>(&o.stdout).ok()
+            }
+            _ => None,
+        })
+    }
 }

@@ -165,117 +165,8 @@ pub fn render(
             size.unwrap_or("")
         );
     }
-    let wanted = |name: &str| grid.is_none_or(|part| name.contains(part));
-    let mut grids = Vec::new();
-    if wanted("fractal 4097²") {
-        let heights = fractal_heights(4097, 1);
-        grids.push(Grid {
-            name: "fractal 4097²".into(),
-            side: 4097,
-            top_m: highest_m(&heights),
-            heights,
-            mask: vec![1u8; 4097 * 4097],
-            cell_m: 30.0,
-            drape: None,
-        });
-    }
-    if wanted("srtm_ref 1025²") {
-        let srtm = srtm_padded(data)?;
-        grids.push(Grid {
-            name: "srtm_ref 1025²".into(),
-            side: srtm.side,
-            top_m: highest_m(&srtm.heights),
-            heights: srtm.heights,
-            mask: srtm.mask,
-            cell_m: 90.0,
-            drape: None,
-        });
-    }
-    if let Some(path) = bundle {
-        let bundle = Bundle::open(path)?;
-        let frame = bundle.frame();
-        let name = path.file_stem().map_or_else(
-            || "bundle".into(),
-            |stem| stem.to_string_lossy().into_owned(),
-        );
-        let drape = bundle.drape()?.and_then(|d| d.color_source(&frame));
-        anyhow::ensure!(
-            drape.is_some(),
-            "{}: the bundle has no drape",
-            path.display()
-        );
-        let name = format!("{name} {}² (drape)", frame.side);
-        if wanted(&name) {
-            let heights = bundle.heights()?;
-            grids.push(Grid {
-                name,
-                side: frame.side,
-                top_m: highest_m(&heights),
-                heights: heights.to_vec(),
-                mask: bundle.mask()?.to_vec(),
-                cell_m: frame.cell_size_m,
-                drape,
-            });
-        }
-    }
-    if grids.is_empty() {
-        anyhow::bail!(
-            "--grid {}: the grids are fractal, srtm and a --bundle's name",
-            grid.unwrap_or("")
-        );
-    }
-    let band = |spc: f64, subvoxel: bool| {
-        vec![DistanceBand {
-            until_m: f64::INFINITY,
-            slices_per_cell: spc,
-            subvoxel,
-        }]
-    };
-    // (name, options, pitch): the first of each pitch is its reference.
-    let configs: Vec<(&str, RenderOptions, f64)> = vec![
-        ("raycast", RenderOptions::default(), 0.0),
-        (
-            "raycast, growing steps",
-            RenderOptions {
-                grow_steps: true,
-                ..Default::default()
-            },
-            0.0,
-        ),
-        (
-            "raycast, 16.16 fixed point",
-            RenderOptions {
-                arithmetic: Arithmetic::Fixed,
-                ..Default::default()
-            },
-            0.0,
-        ),
-        (
-            "raycast, 2 slices/cell + sub-voxel",
-            RenderOptions {
-                bands: band(2.0, true),
-                ..Default::default()
-            },
-            0.0,
-        ),
-        (
-            "distorted (voxel-space shortcuts)",
-            RenderOptions {
-                mode: RaycastMode::Distorted,
-                ..Default::default()
-            },
-            0.0,
-        ),
-        ("raycast, pitch -30°", RenderOptions::default(), -30.0),
-        (
-            "raycast, pitch -30°, growing steps",
-            RenderOptions {
-                grow_steps: true,
-                ..Default::default()
-            },
-            -30.0,
-        ),
-    ];
+    let mut grids = bench_grids(data, grid, bundle)?;
+    let configs = configurations();
     let threads = rayon::current_num_threads();
     for grid in &mut grids {
         let drape = grid.drape.take();
@@ -360,28 +251,7 @@ pub fn render(
                 );
             }
             if mode.is_none_or(|part| FRAME_WRITE.contains(part)) {
-                // A frame of the renderer's, which has drawn this size's
-                // references: the raycaster's own buffers and layout.
-                let frame = renderer.frame().clone();
-                anyhow::ensure!(
-                    [frame.width, frame.height] == [size[0] as usize, size[1] as usize],
-                    "the floor needs a frame of {}×{}",
-                    size[0],
-                    size[1]
-                );
-                let ms = frame_write_ms(frame, runs);
-                emit(
-                    json_lines,
-                    json!({"bench": "render", "grid": grid.name, "mode": FRAME_WRITE,
-                           "threads": threads, "width": size[0], "height": size[1], "ms": ms}),
-                    format!(
-                        "{:>15} {}×{} {FRAME_WRITE:>36}: {ms:7.2} ms/frame ({threads} thread{})",
-                        grid.name,
-                        size[0],
-                        size[1],
-                        if threads == 1 { "" } else { "s" }
-                    ),
-                );
+                frame_write_floor(grid, &renderer, size, runs, json_lines)?;
             }
             for threads in [1, 2] {
                 if mode.is_some_and(|part| !"classic voxel space".contains(part)) {
@@ -493,4 +363,161 @@ fn terrain_colours(terrain: &Terrain, grid: &Grid) -> Vec<u32> {
             terrain.color(c * grid.cell_m, (last - r) * grid.cell_m, false, 0)
         })
         .collect()
+}
+
+/// The grids to time: the fractal 4097² and srtm_ref 1025² (both shaded),
+/// and a bundle's terrain with its drape when given; `grid` keeps those
+/// whose name contains it.
+fn bench_grids(data: &Path, grid: Option<&str>, bundle: Option<&Path>) -> Result<Vec<Grid>> {
+    let wanted = |name: &str| grid.is_none_or(|part| name.contains(part));
+    let mut grids = Vec::new();
+    if wanted("fractal 4097²") {
+        let heights = fractal_heights(4097, 1);
+        grids.push(Grid {
+            name: "fractal 4097²".into(),
+            side: 4097,
+            top_m: highest_m(&heights),
+            heights,
+            mask: vec![1u8; 4097 * 4097],
+            cell_m: 30.0,
+            drape: None,
+        });
+    }
+    if wanted("srtm_ref 1025²") {
+        let srtm = srtm_padded(data)?;
+        grids.push(Grid {
+            name: "srtm_ref 1025²".into(),
+            side: srtm.side,
+            top_m: highest_m(&srtm.heights),
+            heights: srtm.heights,
+            mask: srtm.mask,
+            cell_m: 90.0,
+            drape: None,
+        });
+    }
+    if let Some(path) = bundle {
+        let bundle = Bundle::open(path)?;
+        let frame = bundle.frame();
+        let name = path.file_stem().map_or_else(
+            || "bundle".into(),
+            |stem| stem.to_string_lossy().into_owned(),
+        );
+        let drape = bundle.drape()?.and_then(|d| d.color_source(&frame));
+        anyhow::ensure!(
+            drape.is_some(),
+            "{}: the bundle has no drape",
+            path.display()
+        );
+        let name = format!("{name} {}² (drape)", frame.side);
+        if wanted(&name) {
+            let heights = bundle.heights()?;
+            grids.push(Grid {
+                name,
+                side: frame.side,
+                top_m: highest_m(&heights),
+                heights: heights.to_vec(),
+                mask: bundle.mask()?.to_vec(),
+                cell_m: frame.cell_size_m,
+                drape,
+            });
+        }
+    }
+    if grids.is_empty() {
+        anyhow::bail!(
+            "--grid {}: the grids are fractal, srtm and a --bundle's name",
+            grid.unwrap_or("")
+        );
+    }
+    Ok(grids)
+}
+
+/// The configurations timed, as (name, options, pitch): the first of each
+/// pitch is its reference.
+fn configurations() -> Vec<(&'static str, RenderOptions, f64)> {
+    let band = |spc: f64, subvoxel: bool| {
+        vec![DistanceBand {
+            until_m: f64::INFINITY,
+            slices_per_cell: spc,
+            subvoxel,
+        }]
+    };
+    // (name, options, pitch): the first of each pitch is its reference.
+    vec![
+        ("raycast", RenderOptions::default(), 0.0),
+        (
+            "raycast, growing steps",
+            RenderOptions {
+                grow_steps: true,
+                ..Default::default()
+            },
+            0.0,
+        ),
+        (
+            "raycast, 16.16 fixed point",
+            RenderOptions {
+                arithmetic: Arithmetic::Fixed,
+                ..Default::default()
+            },
+            0.0,
+        ),
+        (
+            "raycast, 2 slices/cell + sub-voxel",
+            RenderOptions {
+                bands: band(2.0, true),
+                ..Default::default()
+            },
+            0.0,
+        ),
+        (
+            "distorted (voxel-space shortcuts)",
+            RenderOptions {
+                mode: RaycastMode::Distorted,
+                ..Default::default()
+            },
+            0.0,
+        ),
+        ("raycast, pitch -30°", RenderOptions::default(), -30.0),
+        (
+            "raycast, pitch -30°, growing steps",
+            RenderOptions {
+                grow_steps: true,
+                ..Default::default()
+            },
+            -30.0,
+        ),
+    ]
+}
+
+/// The frame write floor: writing a frame of the renderer's — which has
+/// drawn this size's references: the raycaster's own buffers and layout —
+/// with nothing drawn.
+fn frame_write_floor(
+    grid: &Grid,
+    renderer: &horizon::Raycaster,
+    size: [u32; 2],
+    runs: usize,
+    json_lines: bool,
+) -> Result<()> {
+    let threads = rayon::current_num_threads();
+    let frame = renderer.frame().clone();
+    anyhow::ensure!(
+        [frame.width, frame.height] == [size[0] as usize, size[1] as usize],
+        "the floor needs a frame of {}×{}",
+        size[0],
+        size[1]
+    );
+    let ms = frame_write_ms(frame, runs);
+    emit(
+        json_lines,
+        json!({"bench": "render", "grid": grid.name, "mode": FRAME_WRITE,
+           "threads": threads, "width": size[0], "height": size[1], "ms": ms}),
+        format!(
+            "{:>15} {}×{} {FRAME_WRITE:>36}: {ms:7.2} ms/frame ({threads} thread{})",
+            grid.name,
+            size[0],
+            size[1],
+            if threads == 1 { "" } else { "s" }
+        ),
+    );
+    Ok(())
 }

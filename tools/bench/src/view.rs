@@ -41,50 +41,7 @@ pub fn view(
         format!("adapter: {adapter}"),
     );
 
-    // The sample regions, and a 4097² fractal terrain for scale.
-    let mut bundles = Vec::new();
-    let olinda = scratch.join("olinda.relevo");
-    prep(
-        &RegionSpec::load(&repo.join("data/olinda/REGION.toml"))?,
-        &olinda,
-        true,
-    )?;
-    bundles.push((
-        "olinda 129²",
-        olinda,
-        Some(repo.join("data/olinda/objects.geojson")),
-    ));
-    let grenoble_toml = scratch.join("grenoble.toml");
-    let copernicus = data.join("dem/Copernicus_DSM_10_N45_00_E005_00_DEM.tif");
-    std::fs::write(
-        &grenoble_toml,
-        format!("[dem]\nfiles = [{:?}]\n", copernicus.display().to_string()),
-    )?;
-    let grenoble = scratch.join("grenoble.relevo");
-    prep(&RegionSpec::load(&grenoble_toml)?, &grenoble, true)?;
-    bundles.push(("grenoble", grenoble, None));
-    if max_side >= 4097 {
-        let side = 4097;
-        let grid = HeightGrid {
-            side,
-            heights: fractal_heights(side, 1),
-            mask: vec![1; side * side],
-            geotransform: GeoTransform::north_up(0.0, side as f64 * 30.0, 30.0, 30.0),
-        };
-        let crs = Crs {
-            wkt: String::new(),
-            epsg: None,
-        };
-        let fractal = write_terrain_bundle(
-            &scratch.join("fractal.relevo"),
-            "fractal",
-            &grid,
-            30.0,
-            crs,
-            true,
-        )?;
-        bundles.push(("fractal 4097²", fractal, None));
-    }
+    let bundles = bench_bundles(repo, data, &scratch, max_side)?;
 
     for (name, path, objects) in &bundles {
         let mut scene = Scene::open(path)?;
@@ -92,47 +49,7 @@ pub fn view(
         let home = Flight::home(&scene);
         for size in [[1280u32, 720u32], [1920, 1080]] {
             let mut renderer = Renderer::new(&device, &queue, &scene, size);
-            let mut configs: Vec<(String, Settings)> = Vec::new();
-            for tau in [1.0, 2.0] {
-                configs.push((
-                    format!("mesh tau {tau}"),
-                    Settings {
-                        mode: TerrainMode::Mesh,
-                        tau_px: tau,
-                        ..Default::default()
-                    },
-                ));
-            }
-            configs.push((
-                "raycast".into(),
-                Settings {
-                    mode: TerrainMode::Raycast,
-                    ..Default::default()
-                },
-            ));
-            let mut fixed = Settings {
-                mode: TerrainMode::Raycast,
-                ..Default::default()
-            };
-            fixed.raycast.arithmetic = Arithmetic::Fixed;
-            configs.push(("raycast fixed".into(), fixed));
-            let mut bands = Settings {
-                mode: TerrainMode::Raycast,
-                ..Default::default()
-            };
-            bands.raycast.bands = relevo_view::settings::detailed_bands();
-            configs.push(("raycast bands+sub".into(), bands));
-            if side * side <= zbuffer::MAX_VERTICES {
-                for r in Representation::ALL {
-                    configs.push((
-                        format!("zbuffer {} {r:?}", r.letter()),
-                        Settings {
-                            mode: TerrainMode::ZBuffer(r),
-                            ..Default::default()
-                        },
-                    ));
-                }
-            }
+            let mut configs = terrain_configurations(side);
             // The vegetation, from the quadtree cut and, for comparison,
             // from the plain list.
             if scene.vegetation.is_some() {
@@ -232,4 +149,107 @@ fn frame_time(
         }
     }
     Ok((median(&times), stats))
+}
+
+/// The bundles the viewer is timed over: the sample regions (Olinda with
+/// its objects) and, when `max_side` allows, a 4097² fractal terrain for
+/// scale; each with its name and the objects to composite.
+fn bench_bundles(
+    repo: &Path,
+    data: &Path,
+    scratch: &Path,
+    max_side: usize,
+) -> Result<Vec<(&'static str, std::path::PathBuf, Option<std::path::PathBuf>)>> {
+    let mut bundles = Vec::new();
+    let olinda = scratch.join("olinda.relevo");
+    prep(
+        &RegionSpec::load(&repo.join("data/olinda/REGION.toml"))?,
+        &olinda,
+        true,
+    )?;
+    bundles.push((
+        "olinda 129²",
+        olinda,
+        Some(repo.join("data/olinda/objects.geojson")),
+    ));
+    let grenoble_toml = scratch.join("grenoble.toml");
+    let copernicus = data.join("dem/Copernicus_DSM_10_N45_00_E005_00_DEM.tif");
+    std::fs::write(
+        &grenoble_toml,
+        format!("[dem]\nfiles = [{:?}]\n", copernicus.display().to_string()),
+    )?;
+    let grenoble = scratch.join("grenoble.relevo");
+    prep(&RegionSpec::load(&grenoble_toml)?, &grenoble, true)?;
+    bundles.push(("grenoble", grenoble, None));
+    if max_side >= 4097 {
+        let side = 4097;
+        let grid = HeightGrid {
+            side,
+            heights: fractal_heights(side, 1),
+            mask: vec![1; side * side],
+            geotransform: GeoTransform::north_up(0.0, side as f64 * 30.0, 30.0, 30.0),
+        };
+        let crs = Crs {
+            wkt: String::new(),
+            epsg: None,
+        };
+        let fractal = write_terrain_bundle(
+            &scratch.join("fractal.relevo"),
+            "fractal",
+            &grid,
+            30.0,
+            crs,
+            true,
+        )?;
+        bundles.push(("fractal 4097²", fractal, None));
+    }
+    Ok(bundles)
+}
+
+/// The terrain's configurations: mesh at τ = 1 and 2 px, the raycast as it
+/// is, in fixed point and with detailed bands, and the Z-buffer baselines on
+/// grids they can hold.
+fn terrain_configurations(side: usize) -> Vec<(String, Settings)> {
+    let mut configs: Vec<(String, Settings)> = Vec::new();
+    for tau in [1.0, 2.0] {
+        configs.push((
+            format!("mesh tau {tau}"),
+            Settings {
+                mode: TerrainMode::Mesh,
+                tau_px: tau,
+                ..Default::default()
+            },
+        ));
+    }
+    configs.push((
+        "raycast".into(),
+        Settings {
+            mode: TerrainMode::Raycast,
+            ..Default::default()
+        },
+    ));
+    let mut fixed = Settings {
+        mode: TerrainMode::Raycast,
+        ..Default::default()
+    };
+    fixed.raycast.arithmetic = Arithmetic::Fixed;
+    configs.push(("raycast fixed".into(), fixed));
+    let mut bands = Settings {
+        mode: TerrainMode::Raycast,
+        ..Default::default()
+    };
+    bands.raycast.bands = relevo_view::settings::detailed_bands();
+    configs.push(("raycast bands+sub".into(), bands));
+    if side * side <= zbuffer::MAX_VERTICES {
+        for r in Representation::ALL {
+            configs.push((
+                format!("zbuffer {} {r:?}", r.letter()),
+                Settings {
+                    mode: TerrainMode::ZBuffer(r),
+                    ..Default::default()
+                },
+            ));
+        }
+    }
+    configs
 }

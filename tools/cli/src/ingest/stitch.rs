@@ -240,40 +240,7 @@ fn warp_all(
         (Some(a), Some(b)) => a == b,
         _ => true,
     };
-
-    // The native grid: the finest tile already in the target CRS sets the
-    // cell size and the cell lines; tiles in other CRSs are resampled onto
-    // it. Only when no tile is native does the finest detail-preserving
-    // cell of the reprojected tiles set the size (lines at its multiples).
-    let mut native: Option<GeoTransform> = None;
-    for s in sources.iter().filter(|s| same_crs(s)) {
-        let geo = georeferenced(s)?;
-        let area = |g: &GeoTransform| g.cell_size().0 * g.cell_size().1;
-        if native.as_ref().is_none_or(|n| area(&geo) < area(n)) {
-            native = Some(geo);
-        }
-    }
-    let (rx, ry) = match (opts.resolution, &native) {
-        (Some(r), _) => r,
-        (None, Some(geo)) => geo.cell_size(),
-        (None, None) => {
-            let mut best = f64::INFINITY;
-            for s in sources {
-                let geo = georeferenced(s)?;
-                let (Some(from), Some(to)) = (s.srs.as_ref(), target.as_ref()) else {
-                    bail!("{}: no CRS to reproject from", s.path.display());
-                };
-                let cell = crs::detail_preserving_cell(&geo, s.width, s.height, from, to)
-                    .with_context(|| s.path.display().to_string())?;
-                best = best.min(cell);
-            }
-            (best, best)
-        }
-    };
-    if !(rx > 0.0 && ry > 0.0) {
-        bail!("target resolution must be positive, got {rx} × {ry}");
-    }
-
+    let (native, (rx, ry)) = resolution(sources, opts, target.as_ref(), &same_crs)?;
     let footprints: Vec<[f64; 4]> = sources
         .iter()
         .map(|s| {
@@ -282,49 +249,8 @@ fn warp_all(
                 .with_context(|| s.path.display().to_string())
         })
         .collect::<Result<_>>()?;
-
-    let (origin_x, origin_y, width, height) = match opts.extent {
-        Some([xmin, ymin, xmax, ymax]) => {
-            if !(xmax > xmin && ymax > ymin) {
-                bail!("extent must have xmin < xmax and ymin < ymax");
-            }
-            let w = ((xmax - xmin) / rx).round().max(1.0) as usize;
-            let h = ((ymax - ymin) / ry).round().max(1.0) as usize;
-            (xmin, ymax, w, h)
-        }
-        None => {
-            let union = footprints.iter().fold(
-                [
-                    f64::INFINITY,
-                    f64::INFINITY,
-                    f64::NEG_INFINITY,
-                    f64::NEG_INFINITY,
-                ],
-                |b, f| {
-                    [
-                        b[0].min(f[0]),
-                        b[1].min(f[1]),
-                        b[2].max(f[2]),
-                        b[3].max(f[3]),
-                    ]
-                },
-            );
-            // Align to the native tile's cell lines when it lies on the
-            // target grid, so aligned tiles are copied without resampling;
-            // otherwise to multiples of the resolution.
-            let (anchor_x, anchor_y) = match &native {
-                Some(geo) if geo.is_north_up() && geo.cell_size() == (rx, ry) => {
-                    (geo.0[0], geo.0[3])
-                }
-                _ => (0.0, 0.0),
-            };
-            let ox = anchor_x + ((union[0] - anchor_x) / rx + 1e-6).floor() * rx;
-            let oy = anchor_y + ((union[3] - anchor_y) / ry - 1e-6).ceil() * ry;
-            let w = ((union[2] - ox) / rx - 1e-6).ceil().max(1.0) as usize;
-            let h = ((oy - union[1]) / ry - 1e-6).ceil().max(1.0) as usize;
-            (ox, oy, w, h)
-        }
-    };
+    let (origin_x, origin_y, width, height) =
+        grid_extent(opts.extent, &footprints, native.as_ref(), (rx, ry))?;
     let crs_wkt = match &target {
         Some(t) => crs::to_wkt(t)?,
         None => String::new(),
@@ -370,31 +296,7 @@ fn warp_all(
             width: c1 - c0,
             height: r1 - r0,
         };
-        let raster = if opts.encoding == Encoding::Plain {
-            match aligned_offset(s, &window, same_crs(s)) {
-                Some(offset) => copy_aligned(s, &window, offset, opts.src_nodata.or(s.nodata))?,
-                None => {
-                    // GDAL's warper would take NaN for no-data silently;
-                    // reading once refuses undeclared NaN with the file named.
-                    let nodata = opts.src_nodata.or(s.nodata);
-                    if gdalio::is_float(s.band_type) && !nodata.is_some_and(f64::is_nan) {
-                        s.read(nodata)?;
-                    }
-                    gdalio::warp(
-                        &s.dataset,
-                        &s.path,
-                        &window,
-                        opts.resampling,
-                        opts.src_nodata,
-                    )?
-                }
-            }
-        } else {
-            let decoded = decode(s, opts)?;
-            let geo = georeferenced(s)?;
-            let mem = gdalio::mem_dataset(&decoded, &geo, s.srs.as_ref())?;
-            gdalio::warp(&mem, &s.path, &window, opts.resampling, None)?
-        };
+        let raster = warp_tile(s, &window, same_crs(s), opts)?;
         tiles.push(PlacedTile {
             col: c0,
             row: r0,
@@ -407,6 +309,130 @@ fn warp_all(
         bail!("no input tile reaches the target extent");
     }
     Ok((tiles, grid, target))
+}
+
+/// The target grid's cell size, and the native grid it follows when one
+/// tile is already in the target CRS. The native grid: the finest tile
+/// already in the target CRS sets the cell size and the cell lines; tiles
+/// in other CRSs are resampled onto it. Only when no tile is native does
+/// the finest detail-preserving cell of the reprojected tiles set the size
+/// (lines at its multiples). `--tr` overrides the size.
+fn resolution(
+    sources: &[Source],
+    opts: &StitchOptions,
+    target: Option<&SpatialRef>,
+    same_crs: &dyn Fn(&Source) -> bool,
+) -> Result<(Option<GeoTransform>, (f64, f64))> {
+    let mut native: Option<GeoTransform> = None;
+    for s in sources.iter().filter(|s| same_crs(s)) {
+        let geo = georeferenced(s)?;
+        let area = |g: &GeoTransform| g.cell_size().0 * g.cell_size().1;
+        if native.as_ref().is_none_or(|n| area(&geo) < area(n)) {
+            native = Some(geo);
+        }
+    }
+    let (rx, ry) = match (opts.resolution, &native) {
+        (Some(r), _) => r,
+        (None, Some(geo)) => geo.cell_size(),
+        (None, None) => {
+            let mut best = f64::INFINITY;
+            for s in sources {
+                let geo = georeferenced(s)?;
+                let (Some(from), Some(to)) = (s.srs.as_ref(), target) else {
+                    bail!("{}: no CRS to reproject from", s.path.display());
+                };
+                let cell = crs::detail_preserving_cell(&geo, s.width, s.height, from, to)
+                    .with_context(|| s.path.display().to_string())?;
+                best = best.min(cell);
+            }
+            (best, best)
+        }
+    };
+    if !(rx > 0.0 && ry > 0.0) {
+        bail!("target resolution must be positive, got {rx} × {ry}");
+    }
+    Ok((native, (rx, ry)))
+}
+
+/// The target grid's origin (top-left corner) and size in cells: the
+/// extent asked for, or the union of the tiles' footprints aligned to the
+/// native tile's cell lines when it lies on the target grid (so aligned
+/// tiles are copied without resampling), otherwise to multiples of the
+/// resolution.
+fn grid_extent(
+    extent: Option<[f64; 4]>,
+    footprints: &[[f64; 4]],
+    native: Option<&GeoTransform>,
+    (rx, ry): (f64, f64),
+) -> Result<(f64, f64, usize, usize)> {
+    if let Some([xmin, ymin, xmax, ymax]) = extent {
+        if !(xmax > xmin && ymax > ymin) {
+            bail!("extent must have xmin < xmax and ymin < ymax");
+        }
+        let w = ((xmax - xmin) / rx).round().max(1.0) as usize;
+        let h = ((ymax - ymin) / ry).round().max(1.0) as usize;
+        return Ok((xmin, ymax, w, h));
+    }
+    let union = footprints.iter().fold(
+        [
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ],
+        |b, f| {
+            [
+                b[0].min(f[0]),
+                b[1].min(f[1]),
+                b[2].max(f[2]),
+                b[3].max(f[3]),
+            ]
+        },
+    );
+    let (anchor_x, anchor_y) = match native {
+        Some(geo) if geo.is_north_up() && geo.cell_size() == (rx, ry) => (geo.0[0], geo.0[3]),
+        _ => (0.0, 0.0),
+    };
+    let ox = anchor_x + ((union[0] - anchor_x) / rx + 1e-6).floor() * rx;
+    let oy = anchor_y + ((union[3] - anchor_y) / ry - 1e-6).ceil() * ry;
+    let w = ((union[2] - ox) / rx - 1e-6).ceil().max(1.0) as usize;
+    let h = ((oy - union[1]) / ry - 1e-6).ceil().max(1.0) as usize;
+    Ok((ox, oy, w, h))
+}
+
+/// One tile on its `window` of the target grid: copied cell for cell when
+/// it lies on that grid, else warped by GDAL; encoded elevation tiles are
+/// decoded first.
+fn warp_tile(
+    s: &Source,
+    window: &GridSpec,
+    same_crs: bool,
+    opts: &StitchOptions,
+) -> Result<Raster> {
+    if opts.encoding != Encoding::Plain {
+        let decoded = decode(s, opts)?;
+        let geo = georeferenced(s)?;
+        let mem = gdalio::mem_dataset(&decoded, &geo, s.srs.as_ref())?;
+        return gdalio::warp(&mem, &s.path, window, opts.resampling, None);
+    }
+    let nodata = opts.src_nodata.or(s.nodata);
+    match aligned_offset(s, window, same_crs) {
+        Some(offset) => copy_aligned(s, window, offset, nodata),
+        None => {
+            // GDAL's warper would take NaN for no-data silently; reading
+            // once refuses undeclared NaN with the file named.
+            if gdalio::is_float(s.band_type) && !nodata.is_some_and(f64::is_nan) {
+                s.read(nodata)?;
+            }
+            gdalio::warp(
+                &s.dataset,
+                &s.path,
+                window,
+                opts.resampling,
+                opts.src_nodata,
+            )
+        }
+    }
 }
 
 /// When `source` lies on the window's own grid (same CRS, north-up, same
