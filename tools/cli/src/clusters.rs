@@ -3,9 +3,10 @@
 
 use crate::progress;
 use anyhow::Result;
-use relevo_core::cluster::bake::{BakeOptions, BakeReport};
+use relevo_core::cluster::bake::BakeOptions;
 use relevo_core::cluster::model::ModelSource;
-use relevo_core::cluster::{bake_database, Clusters};
+use relevo_core::cluster::stage::bake_database;
+use relevo_core::cluster::{BakeReport, Clusters};
 use relevo_core::geo::TerrainFrame;
 use relevo_core::veg::db::VegObject;
 use serde::Serialize;

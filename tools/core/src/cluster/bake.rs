@@ -14,12 +14,12 @@
 //! render of the members' models is measured in the tests and documented
 //! (docs/algorithms.md#clusters).
 
-use super::cut::{AtlasFrame, CutOptions};
+use super::cut::CutOptions;
 use super::image::PremulImage;
 use super::model::{Model, ModelSource};
 use super::quadtree::{ClusterObject, Node, Quadtree, NONE};
 use super::views::{render_view, ImpostorView, Placed};
-use super::{ClassImpostor, Clusters};
+use super::{AtlasFrame, BakeReport, ClassImpostor, Clusters, LevelReport};
 use crate::{Error, Result};
 use rayon::prelude::*;
 
@@ -83,49 +83,6 @@ pub struct ClassSource {
     pub name: String,
     pub source: ModelSource,
     pub model: Model,
-}
-
-/// Counts and bytes of one quadtree depth.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct LevelReport {
-    pub depth: u32,
-    pub nodes: usize,
-    /// Nodes a cut may draw as clusters (2 to the largest band size members).
-    pub clusters: usize,
-    /// Clusters whose views were baked; the others were left out because
-    /// the budget capped their parent too (the parent serves the same
-    /// distances).
-    pub baked: usize,
-    /// Baked clusters whose texel density the budget reduced (sharp only
-    /// from farther than their band starts).
-    pub reduced: usize,
-    /// Texture bytes of the baked views with their mip levels, estimated
-    /// from their frames and gutters.
-    pub atlas_bytes: u64,
-}
-
-/// What a bake did.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct BakeReport {
-    pub objects: usize,
-    pub levels: Vec<LevelReport>,
-    /// Bytes of the class impostors' pages on their own.
-    pub class_bytes: u64,
-    /// Bytes of the atlas pages as written, with mip levels.
-    pub atlas_bytes: u64,
-    pub budget_bytes: u64,
-    /// When the budget binds: the texel density cluster views were capped
-    /// at (texels per metre), and the distance from which capped clusters
-    /// are sharp on the reference screen (metres).
-    pub density_cap: Option<f64>,
-    pub sharp_from_m: Option<f64>,
-}
-
-impl BakeReport {
-    /// Clusters left out of the atlas.
-    pub fn left_out(&self) -> usize {
-        self.levels.iter().map(|l| l.clusters - l.baked).sum()
-    }
 }
 
 /// The five views' sizes in texels, each a multiple of [`ALIGN`], for a

@@ -16,7 +16,7 @@ use crate::camera::Camera;
 pub const FRINGE_TOLERANCE: f64 = 2.0;
 
 /// The texels of an atlas frame.
-pub fn frame_image(clusters: &Clusters, f: &super::cut::AtlasFrame) -> PremulImage {
+pub fn frame_image(clusters: &Clusters, f: &super::AtlasFrame) -> PremulImage {
     clusters.pages[f.page as usize].crop(
         f.x as usize,
         f.y as usize,

@@ -8,10 +8,14 @@
 //! - [`image`]: premultiplied images and their mip levels.
 //! - [`quadtree`]: the tree over the objects.
 //! - [`bake`]: class impostors, cluster views, atlas packing, the budget.
+//! - [`stage`]: the clusters stage on a vegetation database over a terrain.
 //! - [`cut`]: selection from a camera — quadtree cut, plain list, blobs.
 //! - [`store`]: the `clusters/` folder of a bundle, and its validation.
 //! - [`checks`]: properties of bakes and cuts (no fringe, each object
 //!   once), shared by the tests and validation.
+//!
+//! This file holds what the others share: the baked [`Clusters`], each
+//! class's [`ClassImpostor`], the [`AtlasFrame`]s and the [`BakeReport`].
 
 pub mod bake;
 pub mod checks;
@@ -19,19 +23,13 @@ pub mod cut;
 pub mod image;
 pub mod model;
 pub mod quadtree;
+pub mod stage;
 pub mod store;
 pub mod views;
 
-use crate::geo::TerrainFrame;
-use crate::horizon::Terrain;
-use crate::veg::db::VegObject;
-use crate::{Error, Result};
-use bake::{BakeOptions, ClassSource};
-use cut::AtlasFrame;
 use image::PremulImage;
-use model::{ModelSource, TreeKind};
-use quadtree::{ClusterObject, Quadtree};
-use std::collections::BTreeMap;
+use model::ModelSource;
+use quadtree::Quadtree;
 
 /// The impostor of one vegetation class.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -55,120 +53,70 @@ pub struct Clusters {
     pub frames: Vec<AtlasFrame>,
     /// Atlas pages, level 0 (mip levels are [`image::PremulImage::mip_chain`]).
     pub pages: Vec<PremulImage>,
-    pub report: bake::BakeReport,
+    pub report: BakeReport,
 }
 
-/// The classes of a database, sorted by name: what [`ClusterObject::class`]
-/// indexes.
-pub fn class_names(database: &[VegObject]) -> Vec<String> {
-    let set: std::collections::BTreeSet<&str> = database.iter().map(|o| o.class.as_str()).collect();
-    set.into_iter().map(str::to_string).collect()
+/// An atlas frame: page and texel rectangle (of page level 0).
+#[repr(C)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    bytemuck::Pod,
+    bytemuck::Zeroable,
+    serde::Serialize,
+    serde::Deserialize,
+)]
+pub struct AtlasFrame {
+    pub page: u16,
+    pub x: u16,
+    pub y: u16,
+    pub width: u16,
+    pub height: u16,
 }
 
-/// The database's objects in the terrain frame, standing on the ground:
-/// `ground(x, y)` is the terrain height at a terrain-frame point (`None` off
-/// the terrain), `aspect[class]` the height-to-diameter ratio of each class
-/// of `classes`. Returns the objects and how many were off the terrain
-/// (left out).
-pub fn objects_on_terrain(
-    database: &[VegObject],
-    classes: &[String],
-    aspect: &[f32],
-    frame: &TerrainFrame,
-    ground: &dyn Fn(f64, f64) -> Option<f64>,
-) -> (Vec<ClusterObject>, usize) {
-    let mut off = 0;
-    let mut objects = Vec::with_capacity(database.len());
-    for (row, o) in database.iter().enumerate() {
-        let class = classes.iter().position(|c| *c == o.class);
-        let placed = class
-            .zip(frame.terrain_from_world(o.x, o.y))
-            .and_then(|(class, (x, y))| {
-                let z = ground(x, y)?;
-                Some(ClusterObject {
-                    foot: [x as f32, y as f32, z as f32],
-                    diameter: o.size as f32,
-                    height: o.size as f32 * aspect[class],
-                    class: class as u32,
-                    row: row as u32,
-                })
-            });
-        match placed {
-            Some(p) if p.diameter > 0.0 => objects.push(p),
-            _ => off += 1,
-        }
+/// Counts and bytes of one quadtree depth.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LevelReport {
+    pub depth: u32,
+    pub nodes: usize,
+    /// Nodes a cut may draw as clusters (2 to the largest band size members).
+    pub clusters: usize,
+    /// Clusters whose views were baked; the others were left out because
+    /// the budget capped their parent too (the parent serves the same
+    /// distances).
+    pub baked: usize,
+    /// Baked clusters whose texel density the budget reduced (sharp only
+    /// from farther than their band starts).
+    pub reduced: usize,
+    /// Texture bytes of the baked views with their mip levels, estimated
+    /// from their frames and gutters.
+    pub atlas_bytes: u64,
+}
+
+/// What a bake did.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BakeReport {
+    pub objects: usize,
+    pub levels: Vec<LevelReport>,
+    /// Bytes of the class impostors' pages on their own.
+    pub class_bytes: u64,
+    /// Bytes of the atlas pages as written, with mip levels.
+    pub atlas_bytes: u64,
+    pub budget_bytes: u64,
+    /// When the budget binds: the texel density cluster views were capped
+    /// at (texels per metre), and the distance from which capped clusters
+    /// are sharp on the reference screen (metres).
+    pub density_cap: Option<f64>,
+    pub sharp_from_m: Option<f64>,
+}
+
+impl BakeReport {
+    /// Clusters left out of the atlas.
+    pub fn left_out(&self) -> usize {
+        self.levels.iter().map(|l| l.clusters - l.baked).sum()
     }
-    (objects, off)
-}
-
-/// The model of each class: `models` maps a class name to a built-in kind
-/// or an OBJ file; a class not named gets the kind its name suggests
-/// ([`TreeKind::for_class`]).
-pub fn class_sources(
-    classes: &[String],
-    models: &BTreeMap<String, ModelSource>,
-) -> Result<Vec<ClassSource>> {
-    classes
-        .iter()
-        .map(|name| {
-            let source = models
-                .get(name)
-                .cloned()
-                .unwrap_or_else(|| ModelSource::Procedural(TreeKind::for_class(name)));
-            Ok(ClassSource {
-                name: name.clone(),
-                model: source.load()?,
-                source,
-            })
-        })
-        .collect()
-}
-
-/// The whole clusters stage on a vegetation database over a terrain (the
-/// one path `prep`, `bake`, the tests and the benchmarks take): models per
-/// class, objects on the ground, the bake. Returns the clusters and the
-/// number of objects left out off the terrain.
-pub fn bake_database(
-    database: &[VegObject],
-    frame: &TerrainFrame,
-    heights: &[f32],
-    mask: &[u8],
-    models: &BTreeMap<String, ModelSource>,
-    options: &BakeOptions,
-    progress: &(dyn Fn(u64, u64) + Sync),
-) -> Result<(Clusters, usize)> {
-    if database.is_empty() {
-        return Err(Error::Input(
-            "the vegetation database is empty: there is nothing to cluster".into(),
-        ));
-    }
-    // The atlases with their mip levels and the views composed before
-    // packing (measured: a peak of 1.3× a 256 MiB budget on the sample
-    // region), and per object its record, its share of the quadtree's
-    // nodes (1.6 per object at 1M) and the work lists.
-    crate::memory::check(
-        &format!(
-            "the cluster bake of {} objects with a {} atlas budget",
-            database.len(),
-            crate::memory::human(options.budget_bytes)
-        ),
-        1,
-        (options.budget_bytes / 2 * 3).saturating_add(512 * database.len() as u64),
-        "lower the atlas budget (--budget-mib, or budget_bytes under [clusters])",
-    )?;
-    let classes = class_names(database);
-    let sources = class_sources(&classes, models)?;
-    let aspect: Vec<f32> = sources.iter().map(|c| c.model.aspect()).collect();
-    let terrain = Terrain::new(frame.side, frame.cell_size_m, heights, mask, None);
-    let ground = |x: f64, y: f64| terrain.surface(x, y);
-    let (objects, off_terrain) = objects_on_terrain(database, &classes, &aspect, frame, &ground);
-    if objects.is_empty() {
-        return Err(Error::Input(format!(
-            "none of the {} vegetation objects stands on the terrain",
-            database.len()
-        )));
-    }
-    let side_m = ((frame.side - 1) as f64 * frame.cell_size_m) as f32;
-    let clusters = bake::bake(sources, objects, [0.0, 0.0], side_m, options, progress)?;
-    Ok((clusters, off_terrain))
 }

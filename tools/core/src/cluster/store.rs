@@ -8,11 +8,11 @@
 //!
 //! Everything is deterministic, so the files enter the golden hashes.
 
-use super::bake::{BakeOptions, BakeReport, ALIGN, MIP_LEVELS};
-use super::cut::AtlasFrame;
+use super::bake::{BakeOptions, ALIGN, MIP_LEVELS};
 use super::image::PremulImage;
 use super::model::ModelSource;
 use super::quadtree::{ClusterObject, Node, Quadtree, NONE};
+use super::{AtlasFrame, BakeReport};
 use super::{ClassImpostor, Clusters};
 use crate::bundle::names;
 use crate::bundle::{Bundle, BundleWriter};
@@ -148,7 +148,7 @@ pub fn rewrite_bundle(
         }
     };
     let (heights, mask) = (bundle.heights()?, bundle.mask()?);
-    let (clusters, off_terrain) = super::bake_database(
+    let (clusters, off_terrain) = super::stage::bake_database(
         database,
         &bundle.frame(),
         &heights,

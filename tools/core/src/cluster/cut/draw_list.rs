@@ -3,6 +3,7 @@
 //! the list of them with its counts.
 
 use crate::cluster::views::ImpostorView;
+use crate::cluster::AtlasFrame;
 use rayon::prelude::*;
 
 /// What one instance stands for.
@@ -12,28 +13,6 @@ pub enum Drawn {
     Object(u32),
     /// A quadtree node drawn from its baked views: all its members.
     Node(u32),
-}
-
-/// An atlas frame: page and texel rectangle (of page level 0).
-#[repr(C)]
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Eq,
-    Default,
-    bytemuck::Pod,
-    bytemuck::Zeroable,
-    serde::Serialize,
-    serde::Deserialize,
-)]
-pub struct AtlasFrame {
-    pub page: u16,
-    pub x: u16,
-    pub y: u16,
-    pub width: u16,
-    pub height: u16,
 }
 
 /// One view of an instance: which, how much of it (cross-fade weight),

@@ -13,7 +13,7 @@
 
 use super::quadtree::Node;
 use super::views::ImpostorView;
-use super::Clusters;
+use super::{AtlasFrame, Clusters};
 use crate::camera::Camera;
 use glam::DVec3;
 
@@ -26,7 +26,7 @@ mod quadtree_cut;
 mod view_choice;
 
 pub use blobs::{group_blobs, Blob, Blobs};
-pub use draw_list::{AtlasFrame, DrawList, Drawn, Instance, ViewDraw};
+pub use draw_list::{DrawList, Drawn, Instance, ViewDraw};
 use geometry::box_farthest_distance_squared;
 pub use geometry::{box_distance, box_distance_squared, box_in_frustum, frustum_mask, ALL_PLANES};
 pub use list::ObjectList;

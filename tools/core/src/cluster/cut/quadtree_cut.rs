@@ -20,7 +20,7 @@ use rayon::prelude::*;
 /// ```
 /// use relevo_core::camera::Camera;
 /// use relevo_core::cluster::bake::BakeOptions;
-/// use relevo_core::cluster::bake_database;
+/// use relevo_core::cluster::stage::bake_database;
 /// use relevo_core::cluster::cut::{DrawList, ObjectList, QuadtreeCut, Selection};
 /// use relevo_core::geo::{GeoTransform, TerrainFrame};
 /// use relevo_core::veg::db::VegObject;
