@@ -3,8 +3,8 @@
 //! padding or voids (mask 0) are not drawn. The vertex buffer grows to the
 //! largest frame seen and is reused; nothing else is allocated per frame.
 
+use super::shared::{self, eye_relative_view_projection, FrameStats, SUN};
 use super::targets::{Targets, COLOUR_FORMAT};
-use super::{eye_relative_view_projection, FrameStats, SUN};
 use crate::scene::Scene;
 use crate::settings::Settings;
 use bytemuck::{Pod, Zeroable};
@@ -55,7 +55,7 @@ impl MeshPass {
             ),
             None => (upload_mipmapped(device, queue, 1, 1, &[255; 4]), false),
         };
-        let sampler = super::mipmap_sampler(device, "drape sampler");
+        let sampler = shared::mipmap_sampler(device, "drape sampler");
         let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("mesh uniforms"),
             size: size_of::<Uniforms>() as u64,
@@ -63,8 +63,8 @@ impl MeshPass {
             mapped_at_creation: false,
         });
         let layout =
-            super::textured_layout(device, "mesh bindings", wgpu::TextureViewDimension::D2);
-        let bind_group = super::textured_bind_group(
+            shared::textured_layout(device, "mesh bindings", wgpu::TextureViewDimension::D2);
+        let bind_group = shared::textured_bind_group(
             device,
             "mesh bindings",
             &layout,
@@ -79,7 +79,7 @@ impl MeshPass {
         let attributes = wgpu::vertex_attr_array![
             0 => Float32x3, 1 => Float32x2, 2 => Float32x3, 3 => Float32x3, 4 => Float32
         ];
-        let pipeline = super::pipeline(
+        let pipeline = shared::pipeline(
             device,
             "mesh",
             &shader,
@@ -97,7 +97,7 @@ impl MeshPass {
             pipeline,
             bind_group,
             uniforms,
-            vertex_buffer: super::vertex_buffer(device, "mesh vertices", 1 << 16),
+            vertex_buffer: shared::vertex_buffer(device, "mesh vertices", 1 << 16),
             vertices: Vec::new(),
             vertex_count: 0,
             has_drape,
@@ -164,7 +164,7 @@ impl MeshPass {
         let bytes: &[u8] = bytemuck::cast_slice(&self.vertices);
         if bytes.len() as u64 > self.vertex_buffer.size() {
             let grown = (bytes.len() as u64).next_power_of_two();
-            self.vertex_buffer = super::vertex_buffer(device, "mesh vertices", grown);
+            self.vertex_buffer = shared::vertex_buffer(device, "mesh vertices", grown);
         }
         queue.write_buffer(&self.vertex_buffer, 0, bytes);
         self.vertex_count = self.vertices.len() as u32;

@@ -2,8 +2,8 @@
 //! targets after the terrain, depth-tested against whatever the terrain
 //! wrote — the refined mesh's depth or the raycast's uploaded depth.
 
+use super::shared::{self, eye_relative_view_projection, SUN};
 use super::targets::Targets;
-use super::{eye_relative_view_projection, SUN};
 use bytemuck::{Pod, Zeroable};
 use eframe::egui_wgpu::wgpu;
 use glam::DVec3;
@@ -39,13 +39,13 @@ impl ObjectPass {
     pub fn new(device: &wgpu::Device, objects: &ObjectMesh) -> Self {
         // Sized for `objects`; `prepare` grows it for a larger placement.
         let (uniforms, layout, bind_group) =
-            super::uniforms(device, "object uniforms", size_of::<Uniforms>() as u64);
+            shared::uniforms(device, "object uniforms", size_of::<Uniforms>() as u64);
         let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("objects.wgsl"),
             source: wgpu::ShaderSource::Wgsl(include_str!("objects.wgsl").into()),
         });
         let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Unorm8x4];
-        let pipeline = super::pipeline(
+        let pipeline = shared::pipeline(
             device,
             "objects",
             &shader,
@@ -64,7 +64,7 @@ impl ObjectPass {
             pipeline,
             bind_group,
             uniforms,
-            vertex_buffer: super::vertex_buffer(device, "object vertices", bytes),
+            vertex_buffer: shared::vertex_buffer(device, "object vertices", bytes),
             vertices: Vec::with_capacity(objects.positions.len()),
             count: objects.positions.len() as u32,
         }
@@ -96,7 +96,7 @@ impl ObjectPass {
         let bytes: &[u8] = bytemuck::cast_slice(&self.vertices);
         if bytes.len() as u64 > self.vertex_buffer.size() {
             self.vertex_buffer =
-                super::vertex_buffer(device, "object vertices", bytes.len() as u64);
+                shared::vertex_buffer(device, "object vertices", bytes.len() as u64);
         }
         queue.write_buffer(&self.vertex_buffer, 0, bytes);
         self.count = self.vertices.len() as u32;

@@ -5,8 +5,8 @@
 //! both into the shared targets with `frag_depth`. A terrain-only frame
 //! uploads colour alone (Szenberg 1997, table 8.1).
 
+use super::shared::{self, FrameStats};
 use super::targets::{Targets, COLOUR_FORMAT};
-use super::FrameStats;
 use crate::scene::Scene;
 use crate::settings::Settings;
 use eframe::egui_wgpu::wgpu;
@@ -51,7 +51,7 @@ impl RaycastPass {
             source: wgpu::ShaderSource::Wgsl(include_str!("raycast.wgsl").into()),
         });
         let pipeline = |fragment: &str, write_depth: bool| {
-            super::pipeline(
+            shared::pipeline(
                 device,
                 fragment,
                 &shader,

@@ -3,8 +3,9 @@
 //! instance of relevo-core's quadtree cut, drawn after the terrain and
 //! depth-tested against it. The instance buffer is reused across frames.
 
+use super::shared::{self, eye_relative_view_projection};
 use super::targets::Targets;
-use super::{eye_relative_view_projection, COLOUR_FORMAT};
+use super::targets::COLOUR_FORMAT;
 use crate::scene::Vegetation;
 use crate::settings::Settings;
 use bytemuck::{Pod, Zeroable};
@@ -59,7 +60,7 @@ pub struct VegetationPass {
 impl VegetationPass {
     pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, clusters: &Clusters) -> Self {
         let (atlas, atlas_size) = upload_atlas(device, queue, clusters);
-        let sampler = super::mipmap_sampler(device, "impostor sampler");
+        let sampler = shared::mipmap_sampler(device, "impostor sampler");
         let sharp_sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("impostor sampler, nearest"),
             lod_max_clamp: 0.0,
@@ -71,13 +72,13 @@ impl VegetationPass {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let layout = super::textured_layout(
+        let layout = shared::textured_layout(
             device,
             "vegetation bindings",
             wgpu::TextureViewDimension::D2Array,
         );
         let bind = |sampler: &wgpu::Sampler| {
-            super::textured_bind_group(
+            shared::textured_bind_group(
                 device,
                 "vegetation bindings",
                 &layout,
@@ -95,7 +96,7 @@ impl VegetationPass {
             0 => Float32x3, 1 => Uint32, 2 => Float32x2, 3 => Float32x2,
             4 => Float32, 5 => Float32x2, 6 => Float32x4, 7 => Uint32
         ];
-        let pipeline = super::pipeline(
+        let pipeline = shared::pipeline(
             device,
             "vegetation",
             &shader,
@@ -114,7 +115,7 @@ impl VegetationPass {
             bind_group,
             sharp_bind_group,
             uniforms,
-            instance_buffer: super::vertex_buffer(device, "impostors", 4),
+            instance_buffer: shared::vertex_buffer(device, "impostors", 4),
             instances: Vec::new(),
             blur: true,
             atlas_size,
@@ -188,7 +189,7 @@ impl VegetationPass {
         }
         let bytes: &[u8] = bytemuck::cast_slice(&self.instances);
         if bytes.len() as u64 > self.instance_buffer.size() {
-            self.instance_buffer = super::vertex_buffer(
+            self.instance_buffer = shared::vertex_buffer(
                 device,
                 "impostors",
                 (bytes.len() as u64).next_power_of_two(),

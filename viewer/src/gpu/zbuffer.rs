@@ -2,8 +2,8 @@
 //! whole grid (Szenberg 1997, ch. 3, table 3.1), uploaded once per
 //! representation and drawn by the rasterizer with its depth test.
 
+use super::shared::{self, FrameStats};
 use super::targets::Targets;
-use super::FrameStats;
 use crate::scene::Scene;
 use anyhow::{Context, Result};
 use bytemuck::{Pod, Zeroable};
@@ -39,14 +39,14 @@ pub struct ZBufferPass {
 
 impl ZBufferPass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let (uniforms, layout, bind_group) = super::uniforms(device, "z-buffer uniforms", 64);
+        let (uniforms, layout, bind_group) = shared::uniforms(device, "z-buffer uniforms", 64);
         let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("zbuffer.wgsl"),
             source: wgpu::ShaderSource::Wgsl(include_str!("zbuffer.wgsl").into()),
         });
         let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Unorm8x4];
         let pipeline = |topology| {
-            super::pipeline(
+            shared::pipeline(
                 device,
                 "z-buffer",
                 &shader,
@@ -112,7 +112,7 @@ impl ZBufferPass {
                 .map(|(&position, &colour)| Vertex { position, colour })
                 .collect();
             let bytes = (vertices.len() * size_of::<Vertex>()) as u64;
-            let vertex_buffer = super::vertex_buffer(device, "z-buffer vertices", bytes);
+            let vertex_buffer = shared::vertex_buffer(device, "z-buffer vertices", bytes);
             queue.write_buffer(&vertex_buffer, 0, bytemuck::cast_slice(&vertices));
             self.uploaded = Some(Uploaded {
                 representation,

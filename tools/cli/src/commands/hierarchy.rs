@@ -1,6 +1,6 @@
 //! `relevo hierarchy`: LP errors and radii of a (2^n+1)² heightfield as a GeoTIFF.
 
-use crate::commands::ErrorMetricArg;
+use super::args::ErrorMetricArg;
 use crate::ingest::gdalio;
 use crate::output;
 use anyhow::{bail, Result};

@@ -1,6 +1,6 @@
 //! `relevo prep`: build a bundle from a REGION.toml or straight from rasters.
 
-use super::{parse_percentiles, EncodingArg, ErrorMetricArg};
+use super::args::{parse_percentiles, EncodingArg, ErrorMetricArg};
 use crate::ingest::gdalio::Resampling;
 use crate::output;
 use crate::prep::prep;

@@ -1,6 +1,6 @@
 //! `relevo stitch`: mosaic georeferenced tiles into one GeoTIFF.
 
-use super::EncodingArg;
+use super::args::EncodingArg;
 use crate::ingest::gdalio::{self, Resampling};
 use crate::ingest::stitch::{stitch, StitchOptions};
 use crate::output;

@@ -1,7 +1,7 @@
 //! `relevo veg detect | eval`: vegetation from marked samples, and its score
 //! against truth boxes.
 
-use super::parse_percentiles;
+use super::args::parse_percentiles;
 use crate::output;
 use crate::veg_io;
 use anyhow::{Context, Result};

@@ -18,9 +18,7 @@ pub use manifest::{
     Artifact, ColorInfo, Crs, Dtype, GridInfo, InputFile, Manifest, StageTiming, FORMAT,
     FORMAT_VERSION,
 };
+pub use names::MANIFEST_FILE;
 pub use reader::{Array, Bundle, Drape, LpArray, MAX_IMAGE_SIDE, MAX_SIDE};
 pub use validate::validate_artifacts;
 pub use writer::{write_terrain_bundle, BundleWriter, Description};
-
-/// File name of the manifest inside a bundle.
-pub const MANIFEST_FILE: &str = "manifest.json";

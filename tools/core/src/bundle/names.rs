@@ -1,6 +1,9 @@
 //! The artifacts Relevo writes into a bundle, each named once: the key it
 //! has in the manifest and its file inside the bundle directory.
 
+/// File name of the manifest inside a bundle.
+pub const MANIFEST_FILE: &str = "manifest.json";
+
 /// An artifact's manifest key and file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ArtifactName {

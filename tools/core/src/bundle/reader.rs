@@ -1,5 +1,5 @@
-use super::names::{self, ArtifactName};
-use super::{Artifact, ColorInfo, Manifest, FORMAT, FORMAT_VERSION, MANIFEST_FILE};
+use super::manifest::{Artifact, ColorInfo, Manifest, FORMAT, FORMAT_VERSION};
+use super::names::{self, ArtifactName, MANIFEST_FILE};
 use crate::geo::TerrainFrame;
 use crate::horizon::ColorSource;
 use crate::lp::Hierarchy;

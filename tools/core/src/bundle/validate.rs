@@ -1,4 +1,6 @@
-use super::{names, sha256_file, Bundle};
+use super::hash::sha256_file;
+use super::names;
+use super::reader::Bundle;
 use crate::grid::pow2_plus_1_at_least;
 
 /// Check a bundle against its manifest: every file present with the recorded

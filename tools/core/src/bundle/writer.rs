@@ -1,8 +1,10 @@
-use super::Bundle;
-use super::{
-    names, sha256_bytes, sha256_file, Artifact, ColorInfo, Crs, Dtype, GridInfo, InputFile,
-    Manifest, StageTiming, FORMAT, FORMAT_VERSION, MANIFEST_FILE,
+use super::hash::{sha256_bytes, sha256_file};
+use super::manifest::{
+    Artifact, ColorInfo, Crs, Dtype, GridInfo, InputFile, Manifest, StageTiming, FORMAT,
+    FORMAT_VERSION,
 };
+use super::names::{self, MANIFEST_FILE};
+use super::reader::Bundle;
 use crate::grid::HeightGrid;
 use crate::lp::{ErrorMetric, Hierarchy};
 use crate::veg::db::{self, VegObject};

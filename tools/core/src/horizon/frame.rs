@@ -38,7 +38,7 @@ pub struct RaycastFrame {
     pub rgba: Vec<u32>,
     /// At [`tiled_index`].
     pub depth: Vec<f32>,
-    pub steps: super::Steps,
+    pub steps: Steps,
 }
 
 /// A frame in row-major order, top row first: what image files and depth
@@ -128,6 +128,18 @@ impl RaycastFrame {
             10.0 * (255.0f64 * 255.0 / mse).log10()
         }
     }
+}
+
+/// Wall time of each step of a render, milliseconds (in the spirit of the
+/// seed's table 8.1).
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct Steps {
+    /// Slice distances, depth vector and column rays.
+    pub setup_ms: f64,
+    /// Marching the columns.
+    pub march_ms: f64,
+    /// A pitched camera's lines to the screen's pixels.
+    pub output_ms: f64,
 }
 
 #[cfg(test)]

@@ -18,7 +18,29 @@
 use super::frame::{tiled_index, tiled_len, TILE_COLUMNS};
 use super::sample::{LaneCells, Terrain};
 use super::screen::Screen;
-use super::Slice;
+
+/// One slice: horizontal forward distance and its band.
+#[derive(Debug)]
+pub(super) struct Slice {
+    pub(super) distance_m: f64,
+    pub(super) subvoxel: bool,
+    /// With prefiltering: a screen pixel's ground footprint across the ray
+    /// (s/d) and the factor s²/d that, divided by the eye's height above the
+    /// ground, gives its footprint along the ray; metres.
+    pub(super) footprint: Option<(f64, f64)>,
+}
+
+impl Slice {
+    /// Colour level for a sample at height `z` seen from `eye_z`: the
+    /// larger of the pixel's two ground footprints picks it.
+    #[inline]
+    fn level(&self, terrain: &Terrain, eye_z: f64, z: f64) -> usize {
+        match self.footprint {
+            None => 0,
+            Some((across, along)) => terrain.color_level(across.max(along / (eye_z - z).max(1e-3))),
+        }
+    }
+}
 
 /// Lines marched together.
 pub(super) const PACKET: usize = 64;

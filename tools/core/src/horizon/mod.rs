@@ -28,7 +28,8 @@ mod sample;
 mod screen;
 
 use frame::tiled_len;
-pub use frame::{tiled_index, RaycastFrame, Rows, TILE_COLUMNS};
+pub use frame::{tiled_index, RaycastFrame, Rows, Steps, TILE_COLUMNS};
+use march::Slice;
 pub use sample::{ColorSource, Terrain};
 pub use screen::{pitch_range, MAX_LINE_DENSITY};
 
@@ -95,41 +96,6 @@ impl Default for RenderOptions {
             prefilter: false,
             grow_steps: false,
             sky: [135, 170, 215, 255],
-        }
-    }
-}
-
-/// Wall time of each step of a render, milliseconds (in the spirit of the
-/// seed's table 8.1).
-#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
-pub struct Steps {
-    /// Slice distances, depth vector and column rays.
-    pub setup_ms: f64,
-    /// Marching the columns.
-    pub march_ms: f64,
-    /// A pitched camera's lines to the screen's pixels.
-    pub output_ms: f64,
-}
-
-/// One slice: horizontal forward distance and its band.
-#[derive(Debug)]
-struct Slice {
-    distance_m: f64,
-    subvoxel: bool,
-    /// With prefiltering: a screen pixel's ground footprint across the ray
-    /// (s/d) and the factor s²/d that, divided by the eye's height above the
-    /// ground, gives its footprint along the ray; metres.
-    footprint: Option<(f64, f64)>,
-}
-
-impl Slice {
-    /// Colour level for a sample at height `z` seen from `eye_z`: the
-    /// larger of the pixel's two ground footprints picks it.
-    #[inline]
-    fn level(&self, terrain: &Terrain, eye_z: f64, z: f64) -> usize {
-        match self.footprint {
-            None => 0,
-            Some((across, along)) => terrain.color_level(across.max(along / (eye_z - z).max(1e-3))),
         }
     }
 }

@@ -9,7 +9,7 @@
 
 use super::extract::extract;
 use super::hierarchy::Hierarchy;
-use super::terrain_position;
+use super::vertices::terrain_position;
 use crate::geo::{GeoTransform, TerrainFrame};
 use crate::grid::vertex_normal;
 use crate::raster::png::encode_rgba;

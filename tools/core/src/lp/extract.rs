@@ -7,7 +7,7 @@
 //! their digests.
 
 use super::hierarchy::triangle_deviation;
-use super::Hierarchy;
+use super::hierarchy::Hierarchy;
 use rayon::prelude::*;
 
 /// An indexed triangle mesh on grid vertices.

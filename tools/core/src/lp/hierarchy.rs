@@ -30,7 +30,7 @@
 //! own(m) ≤ δ(m) ≤ τ of it. Lindstrom and Pascucci (2002, §4) define the
 //! error the same way, over the points a vertex's removal affects.
 
-use super::terrain_position;
+use super::vertices::terrain_position;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::borrow::Cow;

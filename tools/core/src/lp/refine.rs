@@ -12,7 +12,8 @@
 //! each vertex's height between the edge it replaces and its own (seed eqs.
 //! 3–8), cascading through the heights of already-morphed ancestors.
 
-use super::{levels, terrain_position, Hierarchy, Layout};
+use super::hierarchy::Hierarchy;
+use super::vertices::{levels, terrain_position, Layout};
 
 /// What to refine for.
 #[derive(Debug, Clone, Copy, PartialEq)]

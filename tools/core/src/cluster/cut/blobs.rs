@@ -1,7 +1,9 @@
 //! The seed's blobs baseline (§4.2.4.2): objects grouped into squares of a
 //! fixed side, each square drawn when in view.
 
-use super::{CutOptions, DrawList, Drawn, Selection, View};
+use super::draw_list::{DrawList, Drawn};
+use super::options::CutOptions;
+use super::selection::{Selection, View};
 use crate::camera::Camera;
 use crate::cluster::Clusters;
 

@@ -1,6 +1,8 @@
 //! The plain list baseline: every object in view, one by one.
 
-use super::{CutOptions, DrawList, Drawn, Selection, View};
+use super::draw_list::{DrawList, Drawn};
+use super::options::CutOptions;
+use super::selection::{Selection, View};
 use crate::camera::Camera;
 use crate::cluster::Clusters;
 

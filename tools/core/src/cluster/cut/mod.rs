@@ -11,10 +11,8 @@
 //! per metre against pixels per metre at its nearest point); the cut then
 //! descends to its children.
 
-use super::quadtree::Node;
 use super::views::ImpostorView;
 use super::{AtlasFrame, Clusters};
-use crate::camera::Camera;
 use glam::DVec3;
 
 mod blobs;
@@ -23,86 +21,18 @@ mod geometry;
 mod list;
 mod options;
 mod quadtree_cut;
+mod selection;
 mod view_choice;
 
 pub use blobs::{group_blobs, Blob, Blobs};
 pub use draw_list::{DrawList, Drawn, Instance, ViewDraw};
-use geometry::box_farthest_distance_squared;
 pub use geometry::{box_distance, box_distance_squared, box_in_frustum, frustum_mask, ALL_PLANES};
 pub use list::ObjectList;
 pub use options::{CutBand, CutOptions};
 pub use quadtree_cut::QuadtreeCut;
+pub use selection::Selection;
+use selection::View;
 pub use view_choice::{choose_views, ViewChoice};
-
-/// A way to choose what to draw.
-pub trait Selection: Sync {
-    fn name(&self) -> &'static str;
-    /// Fill `out` (cleared first) for `camera`.
-    fn select(&self, camera: &Camera, options: &CutOptions, out: &mut DrawList);
-}
-
-/// Frustum and distance of one camera, computed once per selection.
-struct View<'c> {
-    camera: &'c Camera,
-    planes: [[f64; 4]; 6],
-    /// The planes a box is tested against: all of them, or none when
-    /// culling is off ([`CutOptions::cull`]).
-    planes_tested: u8,
-    last_squared: f64,
-    /// Screen pixels per metre at 1 m from the eye.
-    pixels_per_m_at_1m: f64,
-    choice: ViewChoice,
-    /// Per-impostor thresholds ([`CutOptions::automatic_view_angle`]).
-    automatic: bool,
-    crossfade_deg: f64,
-}
-
-impl<'c> View<'c> {
-    fn new(camera: &'c Camera, options: &CutOptions) -> Self {
-        View {
-            camera,
-            planes: camera.frustum_planes(),
-            planes_tested: if options.cull { ALL_PLANES } else { 0 },
-            last_squared: options.last_distance().powi(2),
-            pixels_per_m_at_1m: camera.plane_distance_px(),
-            choice: ViewChoice::new(options),
-            automatic: options.automatic_view_angle,
-            crossfade_deg: options.crossfade_deg,
-        }
-    }
-
-    /// Inside the frustum and no further than the last band: the distance.
-    fn sees(&self, min: [f32; 3], max: [f32; 3]) -> Option<f64> {
-        self.sees_within(self.planes_tested, min, max)
-            .map(|(d, _)| d)
-    }
-
-    /// Members of `node` (its box straddling the planes in `mask`) inside
-    /// the frustum and the last band: all of them when the box lies wholly
-    /// inside both, else counted one by one.
-    fn members_in_view(&self, clusters: &Clusters, node: &Node, mask: u8) -> usize {
-        let far = box_farthest_distance_squared(self.camera.position, node.min, node.max);
-        if mask == 0 && far <= self.last_squared {
-            return node.count as usize;
-        }
-        clusters.tree.objects[node.members()]
-            .iter()
-            .filter(|o| {
-                let [min, max] = o.bounds();
-                self.sees_within(mask, min, max).is_some()
-            })
-            .count()
-    }
-
-    /// [`View::sees`] testing only the planes in `mask`: the distance and
-    /// the planes the box straddles.
-    #[inline]
-    fn sees_within(&self, mask: u8, min: [f32; 3], max: [f32; 3]) -> Option<(f64, u8)> {
-        let straddled = frustum_mask(&self.planes, mask, min, max)?;
-        let d2 = box_distance_squared(self.camera.position, min, max);
-        (d2 <= self.last_squared).then(|| (d2.sqrt(), straddled))
-    }
-}
 
 /// Builds instances with their view choice.
 impl Clusters {
@@ -327,6 +257,7 @@ mod tests {
 #[cfg(test)]
 mod selection_tests {
     use super::*;
+    use crate::camera::Camera;
     use crate::cluster::bake::tests::baked_clusters;
     use crate::cluster::checks;
     use std::collections::HashSet;

@@ -3,7 +3,9 @@
 //! cluster fading into its children near the distance it is refined at.
 
 use super::draw_list::Branch;
-use super::{CutOptions, DrawList, Drawn, Selection, View};
+use super::draw_list::{DrawList, Drawn};
+use super::options::CutOptions;
+use super::selection::{Selection, View};
 use crate::camera::Camera;
 use crate::cluster::quadtree::{Node, NONE};
 use crate::cluster::views::ImpostorView;

@@ -2,7 +2,7 @@
 //! to the eye, the top view from above a threshold angle, cross-faded
 //! between them (vegetation thesis, §4.1.3 and fig. 4.4).
 
-use super::CutOptions;
+use super::options::CutOptions;
 use crate::cluster::views::ImpostorView;
 use glam::DVec3;
 
