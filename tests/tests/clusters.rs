@@ -159,8 +159,12 @@ fn validate_finds_clusters_that_disagree_with_the_database() {
     let bundle = Bundle::open(&out).unwrap();
     let mut database = bundle.vegetation().unwrap().unwrap();
     database[10].x += 100.0;
-    let mut writer =
-        relevo_core::bundle::BundleWriter::rewrite(&bundle, |key| key != "vegetation").unwrap();
+    let mut writer = relevo_core::bundle::BundleWriter::rewrite(
+        relevo_core::bundle::BundleLock::acquire(&out).unwrap(),
+        &bundle,
+        |key| key != "vegetation",
+    )
+    .unwrap();
     writer.write_vegetation(&database).unwrap();
     drop(bundle);
     let out = writer.commit().unwrap();

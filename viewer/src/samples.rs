@@ -7,7 +7,7 @@
 //! 3D view reloads them.
 
 use eframe::egui;
-use relevo_core::bundle::Bundle;
+use relevo_core::bundle::{Bundle, BundleLock};
 use relevo_core::cluster::model::ModelSource;
 use relevo_core::cluster::store::{self, NewVegetation};
 use relevo_core::veg::db::VegObject;
@@ -185,6 +185,7 @@ impl SamplesTab {
     /// Write the samples and the detections into the bundle and re-bake its
     /// clusters with the options they were baked with.
     pub fn accept(&mut self) -> anyhow::Result<()> {
+        let lock = BundleLock::acquire(&self.bundle)?;
         let bundle = Bundle::open(&self.bundle)?;
         let (options, models) = match store::read_index(&bundle)? {
             Some(index) => {
@@ -202,7 +203,7 @@ impl SamplesTab {
             database: Some(&self.detections),
             samples_csv: Some(&csv),
         };
-        store::rewrite_bundle(&bundle, &new, &models, &options, &|_, _| {})?;
+        store::rewrite_bundle(lock, &bundle, &new, &models, &options, &|_, _| {})?;
         self.fresh = false;
         self.problem = None;
         self.status = format!("{} objects written and clustered", self.detections.len());

@@ -10,7 +10,7 @@ use anyhow::{Context, Result};
 use glam::DVec3;
 use relevo::prep::prep;
 use relevo::prep::region::RegionSpec;
-use relevo_core::bundle::Bundle;
+use relevo_core::bundle::{Bundle, BundleLock};
 use relevo_core::camera::Camera;
 use relevo_core::cluster::bake::BakeOptions;
 use relevo_core::cluster::cut::CutOptions;
@@ -162,12 +162,20 @@ pub fn run(repo: &Path, runs: usize, max_objects: usize, json: bool) -> Result<(
 impl Bench {
     /// Rewrite the bundle with `objects` baked with `options`, and open it.
     fn scene(&self, objects: &[VegObject], options: &BakeOptions) -> Result<Scene> {
+        let lock = BundleLock::acquire(&self.bundle)?;
         let bundle = Bundle::open(&self.bundle)?;
         let new = NewVegetation {
             database: Some(objects),
             samples_csv: None,
         };
-        rewrite_bundle(&bundle, &new, &Default::default(), options, &|_, _| {})?;
+        rewrite_bundle(
+            lock,
+            &bundle,
+            &new,
+            &Default::default(),
+            options,
+            &|_, _| {},
+        )?;
         drop(bundle);
         Scene::open(&self.bundle)
     }

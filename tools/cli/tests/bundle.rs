@@ -76,11 +76,13 @@ fn existing_bundles_are_kept_unless_forced() {
     let again = relevo(args);
     assert!(!again.status.success());
     assert!(out.join("marker").exists(), "existing bundle was touched");
+    let before = std::fs::read(out.join("manifest.json")).unwrap();
     relevo_ok(args.iter().chain(&["--force"]));
-    assert!(
-        !out.join("marker").exists(),
-        "--force did not replace the bundle"
-    );
+    let after = std::fs::read(out.join("manifest.json")).unwrap();
+    assert_ne!(before, after, "--force did not replace the bundle");
+    // A file the bundle does not list is the user's: replacing the bundle
+    // carries it over instead of deleting it.
+    assert_eq!(std::fs::read_to_string(out.join("marker")).unwrap(), "old");
     assert_eq!(listing(d.path()), ["lux.relevo"]);
 }
 
@@ -88,16 +90,25 @@ fn existing_bundles_are_kept_unless_forced() {
 fn stale_staging_is_cleared_and_failures_leave_nothing() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("lux.relevo");
-    // Debris of a killed run.
-    std::fs::create_dir_all(d.path().join("lux.relevo.tmp/junk")).unwrap();
     let dem = shared("dem/luxembourg_elev.tif");
-    relevo_ok([
+    let args = [
         "prep",
         "--dem",
         dem.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
-    ]);
+    ];
+    // A folder in the staging place that Relevo did not make is refused by
+    // name and left alone.
+    std::fs::create_dir_all(d.path().join("lux.relevo.tmp/junk")).unwrap();
+    let refused = relevo(args);
+    assert!(!refused.status.success());
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(stderr.contains("lux.relevo.tmp") && stderr.contains("not made by Relevo"));
+    assert!(d.path().join("lux.relevo.tmp/junk").exists());
+    // Debris of a killed run carries the staging mark and is cleared.
+    std::fs::write(d.path().join("lux.relevo.tmp/.relevo-staging"), "").unwrap();
+    relevo_ok(args);
     assert_eq!(listing(d.path()), ["lux.relevo"]);
     assert!(!out.join("junk").exists());
 

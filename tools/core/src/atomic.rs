@@ -68,6 +68,67 @@ fn same_path(a: &Path, b: &Path) -> bool {
     a == b || resolved(a) == resolved(b)
 }
 
+/// Rename `from` onto `to` only if nothing is at `to`: a folder or file that
+/// appeared there meanwhile is never replaced (`renameat2` with
+/// `RENAME_NOREPLACE`; where the file system lacks it, a check just before
+/// an ordinary rename, which a folder that appears in between can still
+/// lose only if it is empty).
+pub fn rename_no_replace(from: &Path, to: &Path) -> std::io::Result<()> {
+    match renameat2(from, to, libc::RENAME_NOREPLACE) {
+        Err(e) if unsupported(&e) => {
+            if to.symlink_metadata().is_ok() {
+                return Err(std::io::ErrorKind::AlreadyExists.into());
+            }
+            std::fs::rename(from, to)
+        }
+        done => done,
+    }
+}
+
+/// Swap `a` and `b` in one step (`renameat2` with `RENAME_EXCHANGE`), so
+/// neither path is ever missing. Returns `Ok(false)` where the file system
+/// cannot exchange, leaving both untouched.
+pub fn exchange(a: &Path, b: &Path) -> std::io::Result<bool> {
+    match renameat2(a, b, libc::RENAME_EXCHANGE) {
+        Ok(()) => Ok(true),
+        Err(e) if unsupported(&e) => Ok(false),
+        Err(e) => Err(e),
+    }
+}
+
+/// Does an error mean the kernel or file system lacks a `renameat2` flag?
+fn unsupported(e: &std::io::Error) -> bool {
+    matches!(
+        e.raw_os_error(),
+        Some(libc::EINVAL | libc::ENOSYS | libc::ENOTSUP)
+    )
+}
+
+fn renameat2(from: &Path, to: &Path, flags: libc::c_uint) -> std::io::Result<()> {
+    use std::os::unix::ffi::OsStrExt;
+    let c = |p: &Path| {
+        std::ffi::CString::new(p.as_os_str().as_bytes())
+            .map_err(|_| std::io::Error::from(std::io::ErrorKind::InvalidInput))
+    };
+    let (from, to) = (c(from)?, c(to)?);
+    // SAFETY: both arguments are NUL-terminated strings that live across
+    // the call; AT_FDCWD resolves relative paths as `rename` does.
+    let rc = unsafe {
+        libc::renameat2(
+            libc::AT_FDCWD,
+            from.as_ptr(),
+            libc::AT_FDCWD,
+            to.as_ptr(),
+            flags,
+        )
+    };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
 /// `DIR/.NAME.partial` beside `path`.
 pub fn partial_path(path: &Path) -> PathBuf {
     let name = path
@@ -115,6 +176,24 @@ pub fn write_files(files: &[(&Path, &[u8])]) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_rename_never_replaces_what_appeared_and_an_exchange_swaps() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+        std::fs::create_dir(&a).unwrap();
+        std::fs::write(a.join("new"), b"1").unwrap();
+        std::fs::create_dir(&b).unwrap(); // empty: rename(2) would replace it
+        let refused = rename_no_replace(&a, &b).unwrap_err();
+        assert_eq!(refused.kind(), std::io::ErrorKind::AlreadyExists);
+        assert!(a.join("new").exists() && b.is_dir());
+        if exchange(&a, &b).unwrap() {
+            assert!(b.join("new").exists() && !a.join("new").exists());
+        }
+        std::fs::remove_dir(&a).unwrap();
+        rename_no_replace(&b, &a).unwrap();
+        assert!(a.join("new").exists());
+    }
 
     #[test]
     fn files_appear_whole_and_failures_leave_nothing() {

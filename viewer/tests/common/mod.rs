@@ -41,7 +41,7 @@ pub fn grenoble_bundle(dir: &Path) -> PathBuf {
 /// hillshade, one pixel per vertex), for the samples tab.
 #[allow(dead_code)] // used by the UI and window tests, not the flight tests
 pub fn grenoble_bundle_with_drape(dir: &Path) -> PathBuf {
-    use relevo_core::bundle::{Bundle, BundleWriter, ColorInfo};
+    use relevo_core::bundle::{Bundle, BundleLock, BundleWriter, ColorInfo};
     let path = grenoble_bundle(dir);
     let bundle = Bundle::open(&path).unwrap();
     let side = bundle.manifest.grid.side;
@@ -54,7 +54,9 @@ pub fn grenoble_bundle_with_drape(dir: &Path) -> PathBuf {
         bundle.manifest.grid.cell_size_m,
         bundle.manifest.grid.height_range_m,
     );
-    let mut writer = BundleWriter::rewrite(&bundle, |_| true).unwrap();
+    let mut writer =
+        BundleWriter::rewrite(BundleLock::acquire(&bundle.dir).unwrap(), &bundle, |_| true)
+            .unwrap();
     let info = ColorInfo {
         width: side,
         height: side,

@@ -6,7 +6,7 @@ use crate::clusters::{count_on, print_report};
 use crate::progress;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use relevo_core::bundle::Bundle;
+use relevo_core::bundle::{Bundle, BundleLock};
 use relevo_core::cluster::bake::BakeOptions;
 use relevo_core::cluster::cut::{CutBand, CutOptions};
 use relevo_core::cluster::model::ModelSource;
@@ -42,6 +42,8 @@ pub struct BakeArgs {
 }
 
 pub fn run(a: BakeArgs) -> Result<()> {
+    // Locked before it is read: what is baked is what is replaced.
+    let lock = BundleLock::acquire(&a.bundle)?;
     let bundle = Bundle::open(&a.bundle)?;
     if bundle.vegetation()?.is_none() {
         bail!(
@@ -79,6 +81,7 @@ pub fn run(a: BakeArgs) -> Result<()> {
     }
     let bar = progress::bar(0, "clusters");
     let (path, clusters, off_terrain) = store::rewrite_bundle(
+        lock,
         &bundle,
         &NewVegetation::default(),
         &models,

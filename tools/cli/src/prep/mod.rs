@@ -540,7 +540,7 @@ fn finish(b: Build, timings: Vec<StageTiming>) -> Result<Summary> {
         parameters,
         timings: timings.clone(),
     });
-    let bundle = writer.commit()?;
+    let bundle = writer.commit_checked(&store::validate)?;
     Ok(Summary {
         bundle,
         region: b.name,

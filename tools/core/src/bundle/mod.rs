@@ -3,10 +3,12 @@
 //!
 //! Writing goes through [`BundleWriter`], which builds everything in a
 //! sibling staging directory and renames it into place only when complete,
-//! so a reader never sees half a bundle. Reading maps arrays into memory
+//! so a reader never sees half a bundle, and holds the bundle's
+//! [`BundleLock`] meanwhile, so that two writers never interleave. Reading maps arrays into memory
 //! without copying.
 
 mod hash;
+mod lock;
 mod manifest;
 pub mod names;
 mod reader;
@@ -14,6 +16,7 @@ mod validate;
 mod writer;
 
 pub use hash::{sha256_bytes, sha256_file};
+pub use lock::{lock_path, BundleLock};
 pub use manifest::{
     Artifact, ColorInfo, Crs, Dtype, GridInfo, InputFile, Manifest, StageTiming, FORMAT,
     FORMAT_VERSION,

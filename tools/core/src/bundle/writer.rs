@@ -1,16 +1,19 @@
 use super::hash::{sha256_bytes, sha256_file};
+use super::lock::BundleLock;
 use super::manifest::{
     Artifact, ColorInfo, Crs, Dtype, GridInfo, InputFile, Manifest, StageTiming, FORMAT,
     FORMAT_VERSION,
 };
 use super::names::{self, MANIFEST_FILE};
 use super::reader::Bundle;
+use super::validate::validate_artifacts;
+use crate::atomic;
 use crate::grid::HeightGrid;
 use crate::lp::{ErrorMetric, Hierarchy};
 use crate::veg::db::{self, VegObject};
 use crate::{Error, Result};
 use names::ArtifactName;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fs;
 use std::path::{Path, PathBuf};
 
@@ -84,6 +87,8 @@ pub struct BundleWriter {
     target: PathBuf,
     staging: PathBuf,
     committed: bool,
+    /// Held from start to commit: one writer per bundle at a time.
+    _lock: BundleLock,
     /// `relevo` version the manifest names: this build's for a new bundle,
     /// the original's for a rewrite.
     tool_version: String,
@@ -94,9 +99,19 @@ pub struct BundleWriter {
 }
 
 impl BundleWriter {
-    /// Start a bundle at `target`. Fails if `target` exists, unless `force`
-    /// and it is a Relevo bundle: `--force` replaces only what Relevo wrote.
+    /// Start a bundle at `target`, holding its [`BundleLock`] until the
+    /// writer is committed or dropped. Fails if `target` exists, unless
+    /// `force` and it is a Relevo bundle: `--force` replaces only what
+    /// Relevo wrote.
     pub fn create(target: &Path, force: bool) -> Result<Self> {
+        if let Some(parent) = target.parent().filter(|p| !p.as_os_str().is_empty()) {
+            fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+        }
+        BundleWriter::start(BundleLock::acquire(target)?, target, force)
+    }
+
+    /// [`create`](BundleWriter::create) under a lock already held.
+    fn start(lock: BundleLock, target: &Path, force: bool) -> Result<Self> {
         if target.symlink_metadata().is_ok() {
             if !force {
                 return Err(Error::invalid(
@@ -113,15 +128,25 @@ impl BundleWriter {
             }
         }
         let staging = staging_path(target);
-        if staging.exists() {
+        if staging.symlink_metadata().is_ok() {
+            // Left by a writer that was killed; anything else is the user's.
+            if !staging.join(STAGING_MARK).is_file() {
+                return Err(Error::invalid(
+                    &staging,
+                    "is in the way of the bundle's staging folder and was not made by \
+                     Relevo; move it away",
+                ));
+            }
             fs::remove_dir_all(&staging).map_err(|e| Error::io(&staging, e))?;
         }
-        fs::create_dir_all(&staging)
+        fs::create_dir(&staging)
+            .and_then(|()| fs::write(staging.join(STAGING_MARK), b""))
             .map_err(|e| Error::invalid(target, format!("cannot write ({e})")))?;
         Ok(BundleWriter {
             target: target.to_path_buf(),
             staging,
             committed: false,
+            _lock: lock,
             tool_version: env!("CARGO_PKG_VERSION").into(),
             description: None,
             color: None,
@@ -130,13 +155,29 @@ impl BundleWriter {
         })
     }
 
-    /// Start rewriting `bundle` in place: the staging directory receives
-    /// every artifact and export whose key passes `keep` (hard-linked where
-    /// the file system allows, copied otherwise), and the manifest keeps
-    /// its description and lists only those. Until
+    /// Start rewriting `bundle` in place under `lock` (taken on
+    /// `bundle.dir`, best before the bundle was opened): the staging
+    /// directory receives every artifact and export whose key passes
+    /// `keep` (hard-linked where the file system allows, copied
+    /// otherwise), and the manifest keeps its description and lists only
+    /// those. Refused when the bundle on disk is no longer the one opened
+    /// (another command rewrote it since). Until
     /// [`commit`](BundleWriter::commit) the bundle is untouched.
-    pub fn rewrite(bundle: &Bundle, keep: impl Fn(&str) -> bool) -> Result<Self> {
-        let mut writer = BundleWriter::create(&bundle.dir, true)?;
+    pub fn rewrite(lock: BundleLock, bundle: &Bundle, keep: impl Fn(&str) -> bool) -> Result<Self> {
+        if !same_place(lock.bundle(), &bundle.dir) {
+            return Err(Error::invalid(
+                &bundle.dir,
+                format!("rewritten under the lock of {}", lock.bundle().display()),
+            ));
+        }
+        let on_disk = Bundle::open(&bundle.dir)?;
+        if on_disk.manifest != bundle.manifest {
+            return Err(Error::invalid(
+                &bundle.dir,
+                "was rewritten by another command since it was opened; open it again",
+            ));
+        }
+        let mut writer = BundleWriter::start(lock, &bundle.dir, true)?;
         let m = &bundle.manifest;
         writer.tool_version.clone_from(&m.tool_version);
         writer.describe(Description {
@@ -229,9 +270,22 @@ impl BundleWriter {
         Ok(())
     }
 
-    /// Write the manifest and move the bundle into place, replacing the
-    /// previous one if any. Returns the bundle's path.
-    pub fn commit(mut self) -> Result<PathBuf> {
+    /// Write the manifest, check the staged bundle as `relevo validate`
+    /// checks its artifacts, and move it into place. Returns the bundle's
+    /// path.
+    pub fn commit(self) -> Result<PathBuf> {
+        self.commit_checked(&|_| Vec::new())
+    }
+
+    /// [`commit`](BundleWriter::commit), refusing also when `check` finds a
+    /// problem in the staged bundle (the clusters' own checks, which live
+    /// above the bundle format).
+    ///
+    /// A new bundle is renamed into place only if nothing appeared at its
+    /// path meanwhile. A replaced one is swapped with the staged one in one
+    /// step; the files of the old one its manifest did not list (the
+    /// user's) are moved into the new one, the rest removed.
+    pub fn commit_checked(mut self, check: &dyn Fn(&Bundle) -> Vec<String>) -> Result<PathBuf> {
         let path = self.staging.join(MANIFEST_FILE);
         let Some(d) = self.description.take() else {
             return Err(Error::invalid(
@@ -260,16 +314,69 @@ impl BundleWriter {
         })?;
         json.push('\n');
         fs::write(&path, json).map_err(|e| Error::io(&path, e))?;
-        if self.target.exists() {
-            let old = unused_path(&self.target, "old");
-            fs::rename(&self.target, &old).map_err(|e| Error::io(&self.target, e))?;
-            fs::rename(&self.staging, &self.target).map_err(|e| Error::io(&self.target, e))?;
-            fs::remove_dir_all(&old).map_err(|e| Error::io(&old, e))?;
+        let staged = Bundle::open(&self.staging)?;
+        let mut problems = validate_artifacts(&staged);
+        problems.extend(check(&staged));
+        if !problems.is_empty() {
+            return Err(Error::invalid(
+                &self.target,
+                format!(
+                    "the bundle written does not pass validation, so it was not kept: {}",
+                    problems.join("; ")
+                ),
+            ));
+        }
+        let mark = self.staging.join(STAGING_MARK);
+        fs::remove_file(&mark).map_err(|e| Error::io(&mark, e))?;
+        if self.target.symlink_metadata().is_ok() {
+            self.replace()?;
         } else {
-            fs::rename(&self.staging, &self.target).map_err(|e| Error::io(&self.target, e))?;
+            atomic::rename_no_replace(&self.staging, &self.target).map_err(|e| {
+                if e.kind() == std::io::ErrorKind::AlreadyExists {
+                    Error::invalid(
+                        &self.target,
+                        "appeared while this command ran; it was not replaced (run again \
+                         with --force to replace it)",
+                    )
+                } else {
+                    Error::io(&self.target, e)
+                }
+            })?;
         }
         self.committed = true;
         Ok(self.target.clone())
+    }
+
+    /// Put the staged bundle in the place of the existing one (a Relevo
+    /// bundle, checked by `create`), keeping the user's files.
+    fn replace(&self) -> Result<()> {
+        let listed = listed_files(&self.target);
+        let old = if atomic::exchange(&self.staging, &self.target)
+            .map_err(|e| Error::io(&self.target, e))?
+        {
+            self.staging.clone()
+        } else {
+            let old = unused_path(&self.target, "old");
+            fs::rename(&self.target, &old).map_err(|e| Error::io(&self.target, e))?;
+            fs::rename(&self.staging, &self.target).map_err(|e| Error::io(&self.target, e))?;
+            old
+        };
+        let mut kept = Vec::new();
+        carry_over(&old, &old, &self.target, &listed, &mut kept);
+        if kept.is_empty() {
+            fs::remove_dir_all(&old).map_err(|e| Error::io(&old, e))?;
+        } else {
+            let aside = unused_path(&self.target, "old");
+            fs::rename(&old, &aside).map_err(|e| Error::io(&old, e))?;
+            tracing::warn!(
+                "{}: the new bundle has files at the paths of {} of yours ({}); yours are in {}",
+                self.target.display(),
+                kept.len(),
+                kept.join(", "),
+                aside.display()
+            );
+        }
+        Ok(())
     }
 
     /// Write an array artifact under `name` (little-endian, row-major).
@@ -343,6 +450,77 @@ impl BundleWriter {
     }
 }
 
+/// The files a bundle's manifest lists (artifacts, exports) and the
+/// manifest itself: what Relevo wrote there.
+fn listed_files(dir: &Path) -> BTreeSet<PathBuf> {
+    let mut listed = BTreeSet::from([PathBuf::from(MANIFEST_FILE)]);
+    let manifest = fs::read_to_string(dir.join(MANIFEST_FILE))
+        .ok()
+        .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok());
+    for table in ["artifacts", "exports"] {
+        let entries = manifest
+            .as_ref()
+            .and_then(|m| m.get(table))
+            .and_then(|t| t.as_object());
+        for entry in entries.into_iter().flat_map(|t| t.values()) {
+            if let Some(file) = entry.get("file").and_then(|f| f.as_str()) {
+                listed.insert(PathBuf::from(file));
+            }
+        }
+    }
+    listed
+}
+
+/// Move every file under `dir` (inside the old bundle `root`) that `listed`
+/// does not name into the same place under `new`; those whose place is
+/// taken stay and are named in `kept`.
+fn carry_over(
+    root: &Path,
+    dir: &Path,
+    new: &Path,
+    listed: &BTreeSet<PathBuf>,
+    kept: &mut Vec<String>,
+) {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let path = entry.path();
+        let Ok(relative) = path.strip_prefix(root) else {
+            continue;
+        };
+        if entry.file_type().is_ok_and(|t| t.is_dir()) {
+            carry_over(root, &path, new, listed, kept);
+            continue;
+        }
+        if listed.contains(relative) {
+            continue;
+        }
+        let to = new.join(relative);
+        let moved = to.symlink_metadata().is_err()
+            && to.parent().is_some_and(|p| fs::create_dir_all(p).is_ok())
+            && fs::rename(&path, &to).is_ok();
+        if !moved {
+            kept.push(relative.display().to_string());
+        }
+    }
+}
+
+/// Do two paths name one place (their folders resolved)?
+fn same_place(a: &Path, b: &Path) -> bool {
+    let resolved = |p: &Path| {
+        let parent = p
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        (
+            parent.canonicalize().ok(),
+            p.file_name().map(|n| n.to_os_string()),
+        )
+    };
+    a == b || resolved(a) == resolved(b)
+}
+
 impl Drop for BundleWriter {
     fn drop(&mut self) {
         if !self.committed {
@@ -385,7 +563,6 @@ pub fn write_terrain_bundle(
     writer.commit()
 }
 
-/// `TARGET.tmp` beside the target.
 /// Is `dir` a Relevo bundle: a folder whose `manifest.json` is JSON of
 /// format `relevo-bundle` (any version)?
 pub fn is_bundle(dir: &Path) -> bool {
@@ -409,6 +586,12 @@ fn unused_path(target: &Path, suffix: &str) -> PathBuf {
     path
 }
 
+/// The empty file that marks a staging folder as Relevo's own, so that only
+/// such a folder is ever cleared; it is removed before the folder becomes
+/// the bundle.
+const STAGING_MARK: &str = ".relevo-staging";
+
+/// `TARGET.tmp` beside the target.
 pub(crate) fn staging_path(target: &Path) -> PathBuf {
     let mut name = target.file_name().unwrap_or_default().to_os_string();
     name.push(".tmp");

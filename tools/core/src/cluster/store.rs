@@ -15,7 +15,7 @@ use super::quadtree::{ClusterObject, Node, Quadtree, NONE};
 use super::{AtlasFrame, BakeReport};
 use super::{ClassImpostor, Clusters};
 use crate::bundle::names;
-use crate::bundle::{Bundle, BundleWriter};
+use crate::bundle::{Bundle, BundleLock, BundleWriter};
 use crate::raster::png;
 use crate::{Error, Result};
 use std::collections::BTreeMap;
@@ -125,9 +125,11 @@ pub struct NewVegetation<'a> {
 /// Re-bake `bundle`'s clusters — from `new.database` when given, else from
 /// its own — with `models` and `options`, and replace them (and the
 /// database and samples) in place, atomically: a failure leaves the bundle
-/// as it was. `progress(done, total)` counts clusters composed. Returns the
-/// bundle's path, the clusters and the objects left off the terrain.
+/// as it was. `lock` is the bundle's, taken before it was opened.
+/// `progress(done, total)` counts clusters composed. Returns the bundle's
+/// path, the clusters and the objects left off the terrain.
 pub fn rewrite_bundle(
+    lock: BundleLock,
     bundle: &Bundle,
     new: &NewVegetation,
     models: &BTreeMap<String, ModelSource>,
@@ -168,7 +170,7 @@ pub fn rewrite_bundle(
                 .contains(&key))
             || (new.samples_csv.is_some() && key == names::VEGETATION_SAMPLES.key)
     };
-    let mut writer = BundleWriter::rewrite(bundle, |key| !replaced(key))?;
+    let mut writer = BundleWriter::rewrite(lock, bundle, |key| !replaced(key))?;
     if let Some(database) = new.database {
         writer.write_vegetation(database)?;
     }
@@ -177,7 +179,7 @@ pub fn rewrite_bundle(
     }
     write(&mut writer, &clusters, options, off_terrain)?;
     drop((heights, mask));
-    let path = writer.commit()?;
+    let path = writer.commit_checked(&validate)?;
     Ok((path, clusters, off_terrain))
 }
 
