@@ -87,6 +87,9 @@ pub struct BundleWriter {
     target: PathBuf,
     staging: PathBuf,
     committed: bool,
+    /// Whether `target` existed when this writer started (and so may be
+    /// replaced at commit).
+    replacing: bool,
     /// Held from start to commit: one writer per bundle at a time.
     _lock: BundleLock,
     /// `relevo` version the manifest names: this build's for a new bundle,
@@ -112,7 +115,8 @@ impl BundleWriter {
 
     /// [`create`](BundleWriter::create) under a lock already held.
     fn start(lock: BundleLock, target: &Path, force: bool) -> Result<Self> {
-        if target.symlink_metadata().is_ok() {
+        let replacing = target.symlink_metadata().is_ok();
+        if replacing {
             if !force {
                 return Err(Error::invalid(
                     target,
@@ -146,6 +150,7 @@ impl BundleWriter {
             target: target.to_path_buf(),
             staging,
             committed: false,
+            replacing,
             _lock: lock,
             tool_version: env!("CARGO_PKG_VERSION").into(),
             description: None,
@@ -328,7 +333,9 @@ impl BundleWriter {
         }
         let mark = self.staging.join(STAGING_MARK);
         fs::remove_file(&mark).map_err(|e| Error::io(&mark, e))?;
-        if self.target.symlink_metadata().is_ok() {
+        // Only a bundle that was there when this writer started (and that it
+        // was allowed to replace) is replaced; one that appeared since is not.
+        if self.replacing && self.target.symlink_metadata().is_ok() {
             self.replace()?;
         } else {
             atomic::rename_no_replace(&self.staging, &self.target).map_err(|e| {
