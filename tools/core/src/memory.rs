@@ -3,9 +3,13 @@
 //! allocated, and refused with the size, the budget and the option to
 //! change when it would not fit — an allocation failure must never reach
 //! the allocator's abort. The budget defaults to the memory the machine has
-//! available; `--max-memory` sets it.
+//! available; `--max-memory` sets it. Either way it never exceeds what the
+//! process may still take under its own limits: the address-space limit
+//! (`ulimit -v`) less what it has mapped, and its cgroup's `memory.max`
+//! (a container's or a batch job's) less what the cgroup uses.
 
 use crate::{Error, Result};
+use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// The budget in bytes; 0 until set or first read.
@@ -14,17 +18,21 @@ static BUDGET: AtomicU64 = AtomicU64::new(0);
 /// Budget used where the machine's available memory cannot be read.
 const FALLBACK_BYTES: u64 = 4 << 30;
 
-/// Set the budget for this process, bytes.
+/// Set the budget for this process, bytes (lowered to the process's limits).
 pub fn set_budget(bytes: u64) {
-    BUDGET.store(bytes.max(1), Ordering::Relaxed);
+    BUDGET.store(bytes.min(process_headroom()).max(1), Ordering::Relaxed);
 }
 
 /// The budget: as set, else the machine's available memory (Linux's
-/// `MemAvailable`), else 4 GiB.
+/// `MemAvailable`), else 4 GiB — in each case at most the process's
+/// headroom under its limits.
 pub fn budget() -> u64 {
     match BUDGET.load(Ordering::Relaxed) {
         0 => {
-            let bytes = available_bytes().unwrap_or(FALLBACK_BYTES);
+            let bytes = available_bytes()
+                .unwrap_or(FALLBACK_BYTES)
+                .min(process_headroom())
+                .max(1);
             BUDGET.store(bytes, Ordering::Relaxed);
             bytes
         }
@@ -35,8 +43,69 @@ pub fn budget() -> u64 {
 /// `MemAvailable` from `/proc/meminfo`, bytes.
 fn available_bytes() -> Option<u64> {
     let text = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    kib_field(&text, "MemAvailable:")
+}
+
+/// What this process may still allocate under its address-space limit and
+/// its cgroup's memory limit, bytes (`u64::MAX` where neither is set).
+fn process_headroom() -> u64 {
+    let address_space = std::fs::read_to_string("/proc/self/limits")
+        .ok()
+        .and_then(|limits| address_space_limit(&limits))
+        .map_or(u64::MAX, |limit| {
+            let mapped = std::fs::read_to_string("/proc/self/status")
+                .ok()
+                .and_then(|status| kib_field(&status, "VmSize:"))
+                .unwrap_or(0);
+            limit.saturating_sub(mapped)
+        });
+    let cgroup = std::fs::read_to_string("/proc/self/cgroup")
+        .ok()
+        .and_then(|text| cgroup_headroom(&text, Path::new("/sys/fs/cgroup")))
+        .unwrap_or(u64::MAX);
+    address_space.min(cgroup)
+}
+
+/// The soft "Max address space" of `/proc/self/limits`, bytes; `None` when
+/// unlimited.
+fn address_space_limit(limits: &str) -> Option<u64> {
+    let line = limits
+        .lines()
+        .find(|l| l.starts_with("Max address space"))?;
+    line["Max address space".len()..]
+        .split_whitespace()
+        .next()?
+        .parse()
+        .ok()
+}
+
+/// The least headroom (`memory.max` − `memory.current`) over the cgroup v2
+/// folder named in `/proc/self/cgroup` (`0::/PATH`) and every folder above
+/// it, under `root`; `None` when no level sets a limit.
+fn cgroup_headroom(proc_cgroup: &str, root: &Path) -> Option<u64> {
+    let relative = proc_cgroup.lines().find_map(|l| l.strip_prefix("0::"))?;
+    let mut dir = root.join(relative.trim_start_matches('/'));
+    let mut least: Option<u64> = None;
+    while dir.starts_with(root) {
+        let read = |name: &str| std::fs::read_to_string(dir.join(name)).ok();
+        let max = read("memory.max").and_then(|t| t.trim().parse::<u64>().ok());
+        if let Some(max) = max {
+            let used = read("memory.current")
+                .and_then(|t| t.trim().parse::<u64>().ok())
+                .unwrap_or(0);
+            least = Some(least.unwrap_or(u64::MAX).min(max.saturating_sub(used)));
+        }
+        if !dir.pop() {
+            break;
+        }
+    }
+    least
+}
+
+/// A `NAME: VALUE kB` field of a /proc file, bytes.
+fn kib_field(text: &str, name: &str) -> Option<u64> {
+    let line = text.lines().find(|l| l.starts_with(name))?;
+    let kib: u64 = line[name.len()..].split_whitespace().next()?.parse().ok()?;
     Some(kib.saturating_mul(1024))
 }
 
@@ -131,5 +200,32 @@ mod tests {
         );
         // Sizes beyond u64 saturate rather than wrap to something small.
         assert!(check("absurd", u64::MAX, 8, "no").is_err());
+    }
+
+    #[test]
+    fn the_process_limits_are_read() {
+        let limits = "Limit                     Soft Limit           Hard Limit           Units\n\
+                      Max stack size            8388608              unlimited            bytes\n\
+                      Max address space         6442450944           unlimited            bytes\n";
+        assert_eq!(address_space_limit(limits), Some(6 << 30));
+        assert_eq!(
+            address_space_limit(&limits.replace("6442450944", "unlimited")),
+            None
+        );
+        assert_eq!(kib_field("VmSize:\t  2048 kB\n", "VmSize:"), Some(2 << 20));
+
+        // A job's cgroup at 3 GiB using 1 GiB, under a parent at 8 GiB.
+        let root = tempfile::tempdir().unwrap();
+        let job = root.path().join("slurm/job_7");
+        std::fs::create_dir_all(&job).unwrap();
+        std::fs::write(root.path().join("slurm/memory.max"), "8589934592\n").unwrap();
+        std::fs::write(job.join("memory.max"), "3221225472\n").unwrap();
+        std::fs::write(job.join("memory.current"), "1073741824\n").unwrap();
+        let at = |text: &str| cgroup_headroom(text, root.path());
+        assert_eq!(at("0::/slurm/job_7\n"), Some(2 << 30));
+        std::fs::write(job.join("memory.max"), "max\n").unwrap();
+        assert_eq!(at("0::/slurm/job_7\n"), Some(8 << 30));
+        assert_eq!(at("1:name=systemd:/\n"), None);
+        assert!(process_headroom() > 0);
     }
 }

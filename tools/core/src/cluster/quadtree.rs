@@ -111,6 +111,72 @@ impl Quadtree {
         Quadtree { nodes, objects }
     }
 
+    /// The problem that makes a tree read from a file unsafe to walk, if
+    /// any: `classes` is the length of the class table. A tree passes when
+    /// the nodes, root first, form one tree in pre-order (every child index
+    /// in range and after its parent, every node but the root the child of
+    /// exactly one node, so no walk can loop), depths grow by one down to
+    /// [`MAX_DEPTH`] (so no recursion goes deeper), each node's members lie
+    /// inside its parent's and inside the object table, and every number is
+    /// finite. Frames are checked by the store, which knows the frame table.
+    pub fn structure_problem(&self, classes: usize) -> Option<String> {
+        let (nodes, objects) = (&self.nodes, self.objects.len() as u64);
+        let Some(root) = nodes.first() else {
+            return (!self.objects.is_empty()).then(|| format!("{objects} objects but no nodes"));
+        };
+        if root.first != 0 || u64::from(root.count) != objects || root.depth != 0 {
+            return Some("the root is not at depth 0 holding every object".into());
+        }
+        let mut parent = vec![NONE; nodes.len()];
+        for (i, n) in nodes.iter().enumerate() {
+            if i > 0 && parent[i] == NONE {
+                return Some(format!("node {i} is nobody's child"));
+            }
+            let finite = n
+                .min
+                .iter()
+                .chain(&n.max)
+                .chain(&n.quad)
+                .all(|v| v.is_finite());
+            if !finite || n.depth > MAX_DEPTH {
+                return Some(format!(
+                    "node {i}: a box that is not finite or depth {}",
+                    n.depth
+                ));
+            }
+            // Inside the object table: the root holds it all and every other
+            // node was checked to nest in its parent before its turn.
+            let end = u64::from(n.first) + u64::from(n.count);
+            for &c in n.children.iter().filter(|&&c| c != NONE) {
+                let Some(child) = nodes.get(c as usize).filter(|_| c as usize > i) else {
+                    return Some(format!("node {i}: child {c} is not a later node"));
+                };
+                if std::mem::replace(&mut parent[c as usize], i as u32) != NONE {
+                    return Some(format!("node {c} is the child of two nodes"));
+                }
+                let child_end = u64::from(child.first) + u64::from(child.count);
+                if child.depth != n.depth + 1 || child.first < n.first || child_end > end {
+                    return Some(format!("node {c}: not nested in its parent {i}"));
+                }
+            }
+        }
+        self.objects.iter().enumerate().find_map(|(i, o)| {
+            let finite = o
+                .foot
+                .iter()
+                .chain([&o.diameter, &o.height])
+                .all(|v| v.is_finite());
+            let sized = o.diameter >= 0.0 && o.height >= 0.0;
+            (!finite || !sized || o.class as usize >= classes).then(|| {
+                format!(
+                    "object {i}: class {} of {classes}, or a position or size that is \
+                     not finite and non-negative",
+                    o.class
+                )
+            })
+        })
+    }
+
     /// Nodes per depth.
     pub fn nodes_per_depth(&self) -> Vec<usize> {
         let mut per = Vec::new();
@@ -258,5 +324,36 @@ mod tests {
         assert!(Quadtree::build(Vec::new(), [0.0; 2], 1.0, 4)
             .nodes
             .is_empty());
+        assert_eq!(tree.structure_problem(1), None);
+        assert_eq!(same.structure_problem(1), None);
+    }
+
+    #[test]
+    fn trees_that_a_walk_could_loop_on_or_run_out_of_are_refused() {
+        let objects: Vec<_> = (0..40)
+            .map(|i| object((i * 37 % 100) as f32, (i * 11 % 100) as f32, i))
+            .collect();
+        let tree = Quadtree::build(objects, [0.0, 0.0], 128.0, MAX_DEPTH);
+        let broken = |edit: &dyn Fn(&mut Quadtree)| {
+            let mut t = tree.clone();
+            edit(&mut t);
+            t.structure_problem(1).unwrap_or_default()
+        };
+        let slot = tree.nodes[0]
+            .children
+            .iter()
+            .position(|&c| c != NONE)
+            .unwrap();
+        assert!(broken(&|t| t.nodes[0].children[slot] = 0).contains("not a later node"));
+        assert!(broken(&|t| t.nodes[0].children[slot] = 9999).contains("not a later node"));
+        assert!(broken(&|t| t.nodes[0].children[slot] = NONE).contains("nobody's child"));
+        assert!(broken(&|t| t.nodes[0].children = [1; 4]).contains("child of two"));
+        assert!(broken(&|t| t.nodes[1].depth = 7).contains("not nested"));
+        assert!(broken(&|t| t.nodes[2].count = u32::MAX).contains("not nested"));
+        assert!(broken(&|t| t.nodes[0].count = 41).contains("every object"));
+        assert!(broken(&|t| t.nodes[3].min[0] = f32::NAN).contains("not finite"));
+        assert!(broken(&|t| t.objects[5].class = 1).contains("class 1 of 1"));
+        assert!(broken(&|t| t.objects[5].diameter = f32::INFINITY).contains("object 5"));
+        assert!(broken(&|t| t.nodes.clear()).contains("no nodes"));
     }
 }

@@ -16,6 +16,7 @@ use super::{AtlasFrame, BakeReport};
 use super::{ClassImpostor, Clusters};
 use crate::bundle::names;
 use crate::bundle::{Bundle, BundleLock, BundleWriter};
+use crate::memory;
 use crate::raster::png;
 use crate::{Error, Result};
 use std::collections::BTreeMap;
@@ -235,14 +236,33 @@ pub fn read(bundle: &Bundle) -> Result<Option<(ClusterIndex, Clusters)>> {
     let nodes = records::<Node>(bundle, names::CLUSTER_NODES.key, index.nodes)?;
     let objects = records::<ClusterObject>(bundle, names::CLUSTER_OBJECTS.key, index.objects)?;
     let frames = records::<AtlasFrame>(bundle, names::CLUSTER_FRAMES.key, index.frames)?;
+    let tree = Quadtree { nodes, objects };
+    if let Some(problem) = structure_problem(&index, &tree, &frames) {
+        let path = bundle.dir.join(names::CLUSTERS_DIR);
+        return Err(Error::invalid(
+            &path,
+            format!("{problem}; the clusters cannot be read"),
+        ));
+    }
+    let texels: u64 = index
+        .pages
+        .iter()
+        .map(|p| (p.width * p.height) as u64)
+        .sum();
+    memory::check(
+        "decoding the cluster atlas pages",
+        texels,
+        8,
+        "bake the clusters again with a smaller --budget-mib",
+    )?;
     let mut pages = Vec::with_capacity(index.pages.len());
     for (i, page) in index.pages.iter().enumerate() {
         let (key, _) = page_name(i);
         let artifact = bundle.artifact(&key)?;
         let path = bundle.dir.join(&artifact.file);
         let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
-        let (rgba, width, height) =
-            png::decode_rgba(&bytes).map_err(|e| Error::invalid(&path, e.to_string()))?;
+        let invalid = |e: Error| Error::invalid(&path, e.to_string());
+        let (width, height) = png::size(&bytes).map_err(invalid)?;
         if (width, height) != (page.width, page.height) {
             return Err(Error::invalid(
                 &path,
@@ -252,6 +272,7 @@ pub fn read(bundle: &Bundle) -> Result<Option<(ClusterIndex, Clusters)>> {
                 ),
             ));
         }
+        let (rgba, _, _) = png::decode_rgba(&bytes).map_err(invalid)?;
         pages.push(PremulImage {
             width,
             height,
@@ -263,12 +284,59 @@ pub fn read(bundle: &Bundle) -> Result<Option<(ClusterIndex, Clusters)>> {
     }
     let clusters = Clusters {
         classes: index.classes.clone(),
-        tree: Quadtree { nodes, objects },
+        tree,
         frames,
         pages,
         report: index.report.clone(),
     };
     Ok(Some((index, clusters)))
+}
+
+/// Largest atlas page side a reader accepts, texels (a GPU's usual 2D
+/// texture limit).
+const MAX_PAGE_PX: usize = 16384;
+
+/// What makes the clusters unsafe to walk or draw, if anything: checked by
+/// [`read`] before any reader (the cut, the viewer, `validate`, `bake`)
+/// sees them. The tree must be a tree ([`Quadtree::structure_problem`]),
+/// every node's five frames inside the frame table, every frame non-empty
+/// and inside a page of a bounded size, and the cut's options sane.
+fn structure_problem(
+    index: &ClusterIndex,
+    tree: &Quadtree,
+    frames: &[AtlasFrame],
+) -> Option<String> {
+    if let Some(p) = tree.structure_problem(index.classes.len()) {
+        return Some(p);
+    }
+    if let Err(p) = index.options.cut.check() {
+        return Some(format!("cut options: {p}"));
+    }
+    if let Some((i, p)) = index.pages.iter().enumerate().find(|(_, p)| {
+        !(1..=MAX_PAGE_PX).contains(&p.width) || !(1..=MAX_PAGE_PX).contains(&p.height)
+    }) {
+        return Some(format!(
+            "page {i} is {}×{} (1–{MAX_PAGE_PX} texels a side)",
+            p.width, p.height
+        ));
+    }
+    if let Some(i) = tree
+        .nodes
+        .iter()
+        .position(|n| n.frames != NONE && u64::from(n.frames) + 5 > frames.len() as u64)
+    {
+        return Some(format!("node {i}: frames beyond the frame table"));
+    }
+    let class_frames = index.classes.iter().flat_map(|c| c.frames.iter());
+    frames.iter().chain(class_frames).find_map(|f| {
+        let inside = index.pages.get(f.page as usize).is_some_and(|p| {
+            f.width > 0
+                && f.height > 0
+                && f.x as usize + f.width as usize <= p.width
+                && f.y as usize + f.height as usize <= p.height
+        });
+        (!inside).then(|| format!("frame {f:?} is empty or lies outside its page"))
+    })
 }
 
 /// Check the clusters against the vegetation database and themselves:
@@ -339,10 +407,6 @@ pub fn validate(bundle: &Bundle) -> Vec<String> {
         report("the root does not hold every object".into());
     }
     for (i, n) in nodes.iter().enumerate() {
-        if n.members().end > clusters.tree.objects.len() {
-            report(format!("node {i}: members beyond the object table"));
-            continue;
-        }
         let children: Vec<&Node> = n
             .children
             .iter()
@@ -362,26 +426,9 @@ pub fn validate(bundle: &Bundle) -> Vec<String> {
                 break;
             }
         }
-        if n.frames != NONE && n.frames as usize + 5 > clusters.frames.len() {
-            report(format!("node {i}: frames beyond the frame table"));
-        }
     }
     for p in super::checks::fringe_problems(&clusters).1 {
         report(format!("atlas {p}"));
-    }
-    let all_frames = clusters
-        .frames
-        .iter()
-        .chain(clusters.classes.iter().flat_map(|c| c.frames.iter()));
-    for f in all_frames {
-        let inside = index.pages.get(f.page as usize).is_some_and(|p| {
-            f.x as usize + f.width as usize <= p.width
-                && f.y as usize + f.height as usize <= p.height
-        });
-        if !inside {
-            report(format!("frame {f:?} lies outside its page"));
-            break;
-        }
     }
     problems
 }

@@ -20,6 +20,15 @@ pub fn encode_rgba(rgba: &[u8], width: usize, height: usize) -> Result<Vec<u8>> 
     Ok(out)
 }
 
+/// The width and height a PNG's header declares, without decoding it.
+pub fn size(bytes: &[u8]) -> Result<(usize, usize)> {
+    let info = png::Decoder::new(std::io::Cursor::new(bytes))
+        .read_info()
+        .map_err(|e| Error::Input(format!("PNG decoding: {e}")))?;
+    let (w, h) = info.info().size();
+    Ok((w as usize, h as usize))
+}
+
 /// A PNG decoded to RGBA8 (grey, grey-alpha and RGB are expanded; 16-bit
 /// samples keep their high byte): pixels, width, height.
 pub fn decode_rgba(bytes: &[u8]) -> Result<(Vec<u8>, usize, usize)> {
@@ -27,6 +36,15 @@ pub fn decode_rgba(bytes: &[u8]) -> Result<(Vec<u8>, usize, usize)> {
     let mut decoder = png::Decoder::new(std::io::Cursor::new(bytes));
     decoder.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
     let mut reader = decoder.read_info().map_err(bad)?;
+    // The header declares the size: check it before allocating, so a small
+    // file that decodes to a huge image is refused, not decoded.
+    let (w, h) = reader.info().size();
+    crate::memory::check(
+        &format!("decoding a {w}×{h} PNG"),
+        u64::from(w) * u64::from(h),
+        8,
+        "use a smaller image",
+    )?;
     let mut buf = vec![0; reader.output_buffer_size()];
     let info = reader.next_frame(&mut buf).map_err(bad)?;
     buf.truncate(info.buffer_size());
