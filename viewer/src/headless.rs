@@ -375,8 +375,7 @@ const TAB_BACKGROUND: [u8; 4] = [27, 27, 27, 255];
 /// a PNG of `--size`.
 fn render_samples_tab(a: &RenderArgs) -> Result<()> {
     let csv = match &a.samples {
-        Some(path) => std::fs::read_to_string(path)
-            .with_context(|| format!("{}: cannot read the samples", path.display()))?,
+        Some(path) => relevo_core::files::read_to_string(path)?,
         None => {
             let bundle = relevo_core::bundle::Bundle::open(&a.bundle)?;
             let name = relevo_core::bundle::names::VEGETATION_SAMPLES;
@@ -386,8 +385,7 @@ fn render_samples_tab(a: &RenderArgs) -> Result<()> {
                     a.bundle.display()
                 )
             })?;
-            std::fs::read_to_string(a.bundle.join(&artifact.file))
-                .with_context(|| format!("{}: cannot read its samples", a.bundle.display()))?
+            relevo_core::files::read_to_string(&a.bundle.join(&artifact.file))?
         }
     };
     let (rgba, [w, h], objects) = crate::samples::render_tab(&a.bundle, &csv)?;

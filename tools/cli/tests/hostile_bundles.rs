@@ -228,3 +228,115 @@ fn atlas_pages_are_decoded_only_within_the_budget_and_the_process_limits() {
         "{stderr}"
     );
 }
+
+/// Make a FIFO at `path`.
+fn mkfifo(path: &Path) {
+    let status = std::process::Command::new("mkfifo")
+        .arg(path)
+        .status()
+        .unwrap();
+    assert!(status.success());
+}
+
+/// Run `relevo ARGS…` under a 60 s timeout, expecting a refusal that says
+/// every needle (a hang fails as exit 124).
+fn refused_in_time(args: &[&str], needles: &[&str]) {
+    let out = std::process::Command::new("timeout")
+        .arg("60")
+        .arg(env!("CARGO_BIN_EXE_relevo"))
+        .args(args)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+    for n in needles {
+        assert!(
+            stderr.contains(n),
+            "{args:?}: stderr lacks {n:?}:\n{stderr}"
+        );
+    }
+}
+
+#[test]
+fn fifos_and_devices_are_refused_by_name_wherever_a_file_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let bundle = sample_bundle(dir.path());
+    let b = bundle.to_str().unwrap();
+    // Heights that are a FIFO: no command may wait on it.
+    let heights = bundle.join("height.f32");
+    let kept = dir.path().join("height.f32.kept");
+    std::fs::rename(&heights, &kept).unwrap();
+    mkfifo(&heights);
+    let png = dir.path().join("x.png");
+    let glb = dir.path().join("x.glb");
+    for args in [
+        vec!["validate", b],
+        vec![
+            "render",
+            b,
+            "--camera",
+            "290000,9112000,400,45,300",
+            "--out",
+            png.to_str().unwrap(),
+        ],
+        vec![
+            "mesh",
+            b,
+            "--max-error",
+            "5",
+            "--out",
+            glb.to_str().unwrap(),
+        ],
+    ] {
+        refused_in_time(
+            &args,
+            &["height.f32", "is a FIFO (named pipe), not a regular file"],
+        );
+    }
+    assert!(!png.exists() && !glb.exists());
+    std::fs::remove_file(&heights).unwrap();
+    std::fs::rename(&kept, &heights).unwrap();
+
+    // A model that is a device, a material library that is a FIFO, and
+    // samples that are a FIFO.
+    let device = dir.path().join("zero.obj");
+    std::os::unix::fs::symlink("/dev/zero", &device).unwrap();
+    refused_in_time(
+        &[
+            "bake",
+            b,
+            "--model",
+            &format!("forest={}", device.display()),
+        ],
+        &["zero.obj", "is a device"],
+    );
+    std::fs::write(
+        dir.path().join("tree.obj"),
+        "mtllib bark.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl bark\nf 1 2 3\n",
+    )
+    .unwrap();
+    mkfifo(&dir.path().join("bark.mtl"));
+    let tree = dir.path().join("tree.obj");
+    refused_in_time(
+        &["bake", b, "--model", &format!("forest={}", tree.display())],
+        &["tree.obj", "bark.mtl", "FIFO"],
+    );
+    let samples = dir.path().join("marks.csv");
+    mkfifo(&samples);
+    let crop = common::shared("trees/SOAP_061.png");
+    refused_in_time(
+        &[
+            "veg",
+            "detect",
+            crop.to_str().unwrap(),
+            "--pixel-size",
+            "0.1",
+            "--samples",
+            samples.to_str().unwrap(),
+            "--out",
+            dir.path().join("trees.csv").to_str().unwrap(),
+        ],
+        &["marks.csv", "FIFO"],
+    );
+    relevo_ok(["validate", b]);
+}

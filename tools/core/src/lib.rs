@@ -31,6 +31,7 @@ pub mod atomic;
 pub mod bundle;
 pub mod camera;
 pub mod cluster;
+pub mod files;
 pub mod geo;
 pub mod grid;
 pub mod horizon;

@@ -131,7 +131,7 @@ pub fn read_placement(
     frame: &TerrainFrame,
     ground: &dyn Fn(f64, f64) -> Option<f64>,
 ) -> Result<ObjectMesh> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let text = crate::files::read_to_string(path)?;
     let folder = path.parent().unwrap_or(Path::new("."));
     parse_placement(&text, folder, frame, ground).map_err(|message| Error::invalid(path, message))
 }

@@ -403,9 +403,7 @@ fn score(
     if let Some(path) = matches_out {
         output::check(&[path], force)?;
     }
-    let read = |p: &Path| {
-        std::fs::read_to_string(p).with_context(|| format!("{}: cannot read", p.display()))
-    };
+    let read = |p: &Path| relevo_core::files::read_to_string(p);
     let objects = db::from_csv(&read(detections)?)
         .map_err(|e| anyhow::anyhow!("{}: {e}", detections.display()))?;
     let text = read(truth)?;

@@ -165,8 +165,7 @@ pub fn parse_nodata(text: &str) -> Result<f64, String> {
 impl RegionSpec {
     /// Read and check a REGION.toml, resolving relative paths against its folder.
     pub fn load(path: &Path) -> Result<RegionSpec> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("{}: cannot read", path.display()))?;
+        let text = relevo_core::files::read_to_string(path)?;
         let base = path.parent().unwrap_or(Path::new("."));
         RegionSpec::parse(&text, base).with_context(|| path.display().to_string())
     }

@@ -10,7 +10,7 @@ pub fn sha256_bytes(bytes: &[u8]) -> String {
 
 /// Size in bytes and lowercase hex SHA-256 of a file, streamed.
 pub fn sha256_file(path: &Path) -> Result<(u64, String)> {
-    let mut file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut file = crate::files::open_regular(path)?;
     let mut hasher = Sha256::new();
     let mut buf = vec![0u8; 1 << 20];
     let mut total = 0u64;

@@ -4,7 +4,7 @@ use crate::geo::TerrainFrame;
 use crate::horizon::ColorSource;
 use crate::lp::Hierarchy;
 use crate::veg::db::{self, VegObject};
-use crate::{Error, Result};
+use crate::{files, Error, Result};
 use memmap2::Mmap;
 use std::marker::PhantomData;
 use std::path::{Path, PathBuf};
@@ -182,7 +182,7 @@ impl Bundle {
     /// bundle (`check_manifest`).
     pub fn open(dir: &Path) -> Result<Bundle> {
         let path = dir.join(MANIFEST_FILE);
-        let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+        let text = files::read_to_string(&path)?;
         let manifest: Manifest = serde_json::from_str(&text).map_err(|e| Error::Manifest {
             path: path.clone(),
             json: e,
@@ -267,7 +267,7 @@ impl Bundle {
             return Ok(None);
         };
         let path = self.dir.join(&artifact.file);
-        let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+        let text = files::read_to_string(&path)?;
         db::from_csv(&text)
             .map(Some)
             .map_err(|e| Error::invalid(&path, e.to_string()))
@@ -316,7 +316,7 @@ impl Bundle {
                 ))
             }
         };
-        let file = std::fs::File::open(&path).map_err(|e| Error::io(&path, e))?;
+        let file = files::open_regular(&path)?;
         let len = file.metadata().map_err(|e| Error::io(&path, e))?.len();
         let expected = artifact
             .shape

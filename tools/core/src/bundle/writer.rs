@@ -461,7 +461,7 @@ impl BundleWriter {
 /// manifest itself: what Relevo wrote there.
 fn listed_files(dir: &Path) -> BTreeSet<PathBuf> {
     let mut listed = BTreeSet::from([PathBuf::from(MANIFEST_FILE)]);
-    let manifest = fs::read_to_string(dir.join(MANIFEST_FILE))
+    let manifest = crate::files::read_to_string(&dir.join(MANIFEST_FILE))
         .ok()
         .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok());
     for table in ["artifacts", "exports"] {
@@ -574,7 +574,7 @@ pub fn write_terrain_bundle(
 /// format `relevo-bundle` (any version)?
 pub fn is_bundle(dir: &Path) -> bool {
     dir.is_dir()
-        && fs::read_to_string(dir.join(MANIFEST_FILE))
+        && crate::files::read_to_string(&dir.join(MANIFEST_FILE))
             .ok()
             .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
             .is_some_and(|m| m.get("format").and_then(|f| f.as_str()) == Some(FORMAT))

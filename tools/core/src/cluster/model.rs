@@ -98,14 +98,27 @@ impl Model {
             single_index: true,
             ..Default::default()
         };
-        if !path.is_file() {
+        if !path.exists() {
             return Err(Error::invalid(path, "no such model file"));
         }
-        let (meshes, materials) = tobj::load_obj(path, &options)
-            .map_err(|e| Error::invalid(path, format!("not a readable OBJ model ({e})")))?;
-        let materials = materials
-            .map_err(|e| Error::invalid(path, format!("its materials cannot be read ({e})")))?;
         let folder = path.parent().unwrap_or(Path::new("."));
+        let mut obj = std::io::BufReader::new(crate::files::open_regular(path)?);
+        // The material library is opened the same way; why it could not be
+        // is kept for the message, as tobj reports only that it failed.
+        let refused = std::cell::RefCell::new(None);
+        let (meshes, materials) = tobj::load_obj_buf(&mut obj, &options, |mtl| {
+            let mtl_path = folder.join(mtl);
+            let file = crate::files::open_regular(&mtl_path).map_err(|e| {
+                *refused.borrow_mut() = Some(e.to_string());
+                tobj::LoadError::OpenFileFailed
+            })?;
+            tobj::load_mtl_buf(&mut std::io::BufReader::new(file))
+        })
+        .map_err(|e| Error::invalid(path, format!("not a readable OBJ model ({e})")))?;
+        let materials = materials.map_err(|e| {
+            let why = refused.borrow_mut().take().unwrap_or_else(|| e.to_string());
+            Error::invalid(path, format!("its materials cannot be read ({why})"))
+        })?;
         let mut model = Model {
             triangles: Vec::new(),
             textures: Vec::new(),
@@ -116,9 +129,8 @@ impl Model {
             let texture = match &material.diffuse_texture {
                 Some(file) if !file.is_empty() => {
                     let texture_path = folder.join(file);
-                    let bytes = std::fs::read(&texture_path).map_err(|e| {
-                        Error::invalid(path, format!("texture {}: {e}", texture_path.display()))
-                    })?;
+                    let bytes = crate::files::read(&texture_path)
+                        .map_err(|e| Error::invalid(path, format!("texture {e}")))?;
                     let (rgba, width, height) =
                         crate::raster::png::decode_rgba(&bytes).map_err(|e| {
                             Error::invalid(path, format!("texture {}: {e}", texture_path.display()))

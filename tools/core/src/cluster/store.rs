@@ -16,8 +16,8 @@ use super::{AtlasFrame, BakeReport};
 use super::{ClassImpostor, Clusters};
 use crate::bundle::names;
 use crate::bundle::{Bundle, BundleLock, BundleWriter};
-use crate::memory;
 use crate::raster::png;
+use crate::{files, memory};
 use crate::{Error, Result};
 use std::collections::BTreeMap;
 
@@ -195,7 +195,7 @@ pub fn read_index(bundle: &Bundle) -> Result<Option<ClusterIndex>> {
         return Ok(None);
     };
     let path = bundle.dir.join(&artifact.file);
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+    let text = files::read_to_string(&path)?;
     let index: ClusterIndex = serde_json::from_str(&text)
         .map_err(|e| Error::invalid(&path, format!("not a cluster index: {e}")))?;
     if index.version != VERSION {
@@ -214,7 +214,7 @@ pub fn read_index(bundle: &Bundle) -> Result<Option<ClusterIndex>> {
 fn records<T: bytemuck::Pod>(bundle: &Bundle, key: &str, count: usize) -> Result<Vec<T>> {
     let artifact = bundle.artifact(key)?;
     let path = bundle.dir.join(&artifact.file);
-    let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+    let bytes = files::read(&path)?;
     if bytes.len() != count * size_of::<T>() {
         return Err(Error::invalid(
             &path,
@@ -260,7 +260,7 @@ pub fn read(bundle: &Bundle) -> Result<Option<(ClusterIndex, Clusters)>> {
         let (key, _) = page_name(i);
         let artifact = bundle.artifact(&key)?;
         let path = bundle.dir.join(&artifact.file);
-        let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+        let bytes = files::read(&path)?;
         let invalid = |e: Error| Error::invalid(&path, e.to_string());
         let (width, height) = png::size(&bytes).map_err(invalid)?;
         if (width, height) != (page.width, page.height) {

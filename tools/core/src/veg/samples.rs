@@ -278,8 +278,7 @@ pub fn read_file(
     w: usize,
     h: usize,
 ) -> Result<Vec<Sample>> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Error::Input(format!("{}: cannot read samples: {e}", path.display())))?;
+    let text = crate::files::read_to_string(path)?;
     let is_json = matches!(
         path.extension().and_then(|e| e.to_str()),
         Some("geojson" | "json")
