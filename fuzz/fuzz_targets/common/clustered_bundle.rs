@@ -1,36 +1,29 @@
-//! A small bundle with vegetation clusters (made once per fuzzing process)
-//! whose cluster files the cluster targets replace, and the walks a reader
+//! The cluster files of a small bundle (made once per fuzzing process),
+//! which the cluster targets replace, and the checks and walks a reader
 //! makes over what it opens.
 
 use relevo_core::bundle::{write_terrain_bundle, Bundle, BundleLock, Crs};
 use relevo_core::camera::Camera;
 use relevo_core::cluster::bake::BakeOptions;
 use relevo_core::cluster::cut::{DrawList, ObjectList, QuadtreeCut, Selection};
+use relevo_core::cluster::image::PremulImage;
+use relevo_core::cluster::quadtree::{ClusterObject, Node, Quadtree};
 use relevo_core::cluster::store::{self, NewVegetation};
-use relevo_core::cluster::Clusters;
+use relevo_core::cluster::{checks, AtlasFrame, Clusters};
 use relevo_core::geo::GeoTransform;
 use relevo_core::grid::HeightGrid;
 use relevo_core::veg::db::VegObject;
-use std::path::PathBuf;
 use std::sync::OnceLock;
 
-/// The bundle, and the bytes of its `clusters/` files by name.
+/// The bundle's cluster files as read from disk, and its decoded pages.
 pub struct Clustered {
-    _dir: tempfile::TempDir,
-    pub path: PathBuf,
-    pub original: Vec<(&'static str, Vec<u8>)>,
+    /// `clusters/index.json`, `nodes.bin`, `objects.bin`, `frames.bin`.
+    pub files: [Vec<u8>; 4],
+    pub pages: Vec<PremulImage>,
 }
 
-/// The cluster files a target may replace.
-pub const FILES: [&str; 4] = [
-    "clusters/index.json",
-    "clusters/nodes.bin",
-    "clusters/objects.bin",
-    "clusters/frames.bin",
-];
-
 /// A 65×65 slope 1.28 km across with 60 trees of two classes, baked into
-/// one small atlas page.
+/// small atlas pages (made once per fuzzing process).
 pub fn clustered_bundle() -> &'static Clustered {
     static BUNDLE: OnceLock<Clustered> = OnceLock::new();
     BUNDLE.get_or_init(|| {
@@ -65,38 +58,63 @@ pub fn clustered_bundle() -> &'static Clustered {
         let lock = BundleLock::acquire(&path).expect("the lock");
         let bundle = Bundle::open(&path).expect("the bundle");
         let new = NewVegetation { database: Some(&database), samples_csv: None };
-        store::rewrite_bundle(lock, &bundle, &new, &Default::default(), &options, &|_, _| {})
-            .expect("clusters");
-        let original = FILES
-            .iter()
-            .map(|&f| (f, std::fs::read(path.join(f)).expect("a cluster file")))
-            .collect();
-        Clustered { _dir: dir, path, original }
+        let (_, clusters, _) =
+            store::rewrite_bundle(lock, &bundle, &new, &Default::default(), &options, &|_, _| {})
+                .expect("clusters");
+        let file = |name: &str| std::fs::read(path.join("clusters").join(name)).expect("a file");
+        Clustered {
+            files: [
+                file("index.json"),
+                file("nodes.bin"),
+                file("objects.bin"),
+                file("frames.bin"),
+            ],
+            pages: clusters.pages,
+        }
     })
 }
 
-/// Put every cluster file back, then write `file` with `bytes`.
-pub fn replace(bundle: &Clustered, file: &str, bytes: &[u8]) -> bool {
-    for (name, original) in &bundle.original {
-        let content = if *name == file { bytes } else { original };
-        if std::fs::write(bundle.path.join(name), content).is_err() {
-            return false;
-        }
+/// Open cluster files as `store::read` does — the index parsed, the
+/// records counted, the structure checked, the pages' sizes compared — but
+/// from memory, with the bundle's decoded pages; then walk what was
+/// accepted. `counts_from_lengths` makes the index's counts match the
+/// records given, so that every input reaches the structure checks.
+pub fn open_and_walk(files: [&[u8]; 4], counts_from_lengths: bool) {
+    let Ok(text) = std::str::from_utf8(files[0]) else {
+        return;
+    };
+    let Ok(mut index) = store::parse_index(text) else {
+        return;
+    };
+    if counts_from_lengths {
+        index.nodes = files[1].len() / size_of::<Node>();
+        index.objects = files[2].len() / size_of::<ClusterObject>();
     }
-    true
-}
-
-/// Read the clusters as every reader does, and walk what was accepted: the
-/// cut and the object list from cameras near, far, above and inside, and
-/// `validate`. None of it may panic, loop or abort.
-pub fn read_and_walk(bundle: &Clustered) {
-    let Ok(opened) = Bundle::open(&bundle.path) else {
+    let (Ok(nodes), Ok(objects), Ok(frames)) = (
+        store::parse_records::<Node>(files[1], index.nodes),
+        store::parse_records::<ClusterObject>(files[2], index.objects),
+        store::parse_records::<AtlasFrame>(files[3], index.frames),
+    ) else {
         return;
     };
-    let _ = store::validate(&opened);
-    let Ok(Some((index, clusters))) = store::read(&opened) else {
+    let tree = Quadtree { nodes, objects };
+    if store::structure_problem(&index, &tree, &frames).is_some() {
         return;
+    }
+    let pages = &clustered_bundle().pages;
+    let sizes_match = index.pages.len() == pages.len()
+        && index.pages.iter().zip(pages).all(|(p, q)| (p.width, p.height) == (q.width, q.height));
+    if !sizes_match {
+        return;
+    }
+    let clusters = Clusters {
+        classes: index.classes.clone(),
+        tree,
+        frames,
+        pages: pages.clone(),
+        report: index.report.clone(),
     };
+    let _ = checks::fringe_problems(&clusters);
     walk(&clusters, &index.options.cut);
 }
 
@@ -122,6 +140,6 @@ fn walk(clusters: &Clusters, options: &relevo_core::cluster::cut::CutOptions) {
         };
         QuadtreeCut(clusters).select(&camera, options, &mut cut);
         ObjectList(clusters).select(&camera, options, &mut list);
-        let _ = relevo_core::cluster::checks::represented_objects(clusters, &cut);
+        let _ = checks::cut_problems(clusters, &cut, &camera, options);
     }
 }

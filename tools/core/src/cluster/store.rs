@@ -196,36 +196,42 @@ pub fn read_index(bundle: &Bundle) -> Result<Option<ClusterIndex>> {
     };
     let path = bundle.dir.join(&artifact.file);
     let text = files::read_to_string(&path)?;
-    let index: ClusterIndex = serde_json::from_str(&text)
-        .map_err(|e| Error::invalid(&path, format!("not a cluster index: {e}")))?;
+    parse_index(&text)
+        .map(Some)
+        .map_err(|e| Error::invalid(&path, e))
+}
+
+/// `clusters/index.json` from its text, of this build's layout version.
+pub fn parse_index(text: &str) -> Result<ClusterIndex, String> {
+    let index: ClusterIndex =
+        serde_json::from_str(text).map_err(|e| format!("not a cluster index: {e}"))?;
     if index.version != VERSION {
-        return Err(Error::invalid(
-            &path,
-            format!(
-                "cluster layout version {}, this build reads {VERSION}",
-                index.version
-            ),
+        return Err(format!(
+            "cluster layout version {}, this build reads {VERSION}",
+            index.version
         ));
     }
-    Ok(Some(index))
+    Ok(index)
 }
 
 /// Records of type `T` from a cluster artifact, `count` of them.
 fn records<T: bytemuck::Pod>(bundle: &Bundle, key: &str, count: usize) -> Result<Vec<T>> {
     let artifact = bundle.artifact(key)?;
     let path = bundle.dir.join(&artifact.file);
-    let bytes = files::read(&path)?;
-    if bytes.len() != count * size_of::<T>() {
-        return Err(Error::invalid(
-            &path,
-            format!(
-                "{} bytes, expected {count} records of {} bytes",
-                bytes.len(),
-                size_of::<T>()
-            ),
+    parse_records(&files::read(&path)?, count).map_err(|e| Error::invalid(&path, e))
+}
+
+/// `count` little-endian records of type `T` from `bytes`, which must hold
+/// exactly that many.
+pub fn parse_records<T: bytemuck::Pod>(bytes: &[u8], count: usize) -> Result<Vec<T>, String> {
+    if count.checked_mul(size_of::<T>()) != Some(bytes.len()) {
+        return Err(format!(
+            "{} bytes, expected {count} records of {} bytes",
+            bytes.len(),
+            size_of::<T>()
         ));
     }
-    Ok(bytemuck::pod_collect_to_vec(&bytes))
+    Ok(bytemuck::pod_collect_to_vec(bytes))
 }
 
 /// The bundle's clusters with their pages decoded, when it has them.
@@ -301,7 +307,7 @@ const MAX_PAGE_PX: usize = 16384;
 /// sees them. The tree must be a tree ([`Quadtree::structure_problem`]),
 /// every node's five frames inside the frame table, every frame non-empty
 /// and inside a page of a bounded size, and the cut's options sane.
-fn structure_problem(
+pub fn structure_problem(
     index: &ClusterIndex,
     tree: &Quadtree,
     frames: &[AtlasFrame],
