@@ -6,7 +6,7 @@
 use relevo_core::horizon::{distance_of_depth, DistanceBand};
 use relevo_tests::{compare_with_reference, prep_region, repo};
 use relevo_view::flight::Flight;
-use relevo_view::headless::{device, render_once};
+use relevo_view::headless::{device, render_once, Shot};
 use relevo_view::scene::Scene;
 use relevo_view::settings::{Settings, TerrainMode};
 use std::path::Path;
@@ -206,8 +206,15 @@ fn headless_frames_of_each_mode_match_their_references() {
         ),
     ];
     for (name, settings, flight) in terrain_only.chain(with_objects).chain(with_vegetation) {
-        let (frame, stats) =
-            render_once(&device, &queue, &mut scene, &flight, &settings, SIZE, false).unwrap();
+        let (frame, stats) = render_once(
+            &device,
+            &queue,
+            &mut scene,
+            &flight,
+            &settings,
+            &Shot::new(SIZE),
+        )
+        .unwrap();
         let reference = repo(&format!("data/golden/viewer/{name}.png"));
         let d = compare_with_reference(&frame.rgba, SIZE, &reference, 24, |d| {
             d.pixels_off * 100 <= (SIZE[0] * SIZE[1]) as usize && d.mean < 1.5
@@ -265,10 +272,24 @@ fn raycast_depth_agrees_with_the_full_resolution_mesh() {
         if let Some(h) = horizon {
             flight.horizon_frac = h;
         }
-        let (mesh_frame, _) =
-            render_once(&device, &queue, &mut scene, &flight, &mesh, SIZE, false).unwrap();
-        let (ray_frame, _) =
-            render_once(&device, &queue, &mut scene, &flight, &raycast, SIZE, false).unwrap();
+        let (mesh_frame, _) = render_once(
+            &device,
+            &queue,
+            &mut scene,
+            &flight,
+            &mesh,
+            &Shot::new(SIZE),
+        )
+        .unwrap();
+        let (ray_frame, _) = render_once(
+            &device,
+            &queue,
+            &mut scene,
+            &flight,
+            &raycast,
+            &Shot::new(SIZE),
+        )
+        .unwrap();
         let camera = flight.camera(&scene, SIZE);
         assert_eq!(camera.pitch_deg, pitch);
         let cell = scene.frame.cell_size_m;
@@ -331,8 +352,15 @@ fn vegetation_is_drawn_from_the_cut_and_composited_through_the_depth() {
             tau_px: 1.0,
             ..Default::default()
         };
-        let (with, stats) =
-            render_once(&device, &queue, &mut scene, &flight, &settings, SIZE, false).unwrap();
+        let (with, stats) = render_once(
+            &device,
+            &queue,
+            &mut scene,
+            &flight,
+            &settings,
+            &Shot::new(SIZE),
+        )
+        .unwrap();
         let list = &scene.vegetation.as_ref().unwrap().list;
         let views: usize = list.instances().map(|i| i.views().len()).sum();
         assert_eq!(
@@ -346,13 +374,20 @@ fn vegetation_is_drawn_from_the_cut_and_composited_through_the_depth() {
             ..settings.clone()
         };
         let (terrain, _) =
-            render_once(&device, &queue, &mut scene, &flight, &off, SIZE, false).unwrap();
+            render_once(&device, &queue, &mut scene, &flight, &off, &Shot::new(SIZE)).unwrap();
         let alone = Settings {
             terrain: false,
             ..settings.clone()
         };
-        let (vegetation, _) =
-            render_once(&device, &queue, &mut scene, &flight, &alone, SIZE, false).unwrap();
+        let (vegetation, _) = render_once(
+            &device,
+            &queue,
+            &mut scene,
+            &flight,
+            &alone,
+            &Shot::new(SIZE),
+        )
+        .unwrap();
         let (mut shown, mut mismatched) = (0usize, 0usize);
         for i in 0..with.depth.len() {
             let differs = with.rgba[4 * i..4 * i + 4] != terrain.rgba[4 * i..4 * i + 4];
@@ -373,8 +408,15 @@ fn vegetation_is_drawn_from_the_cut_and_composited_through_the_depth() {
             vegetation: relevo_view::settings::VegetationSelection::List,
             ..settings.clone()
         };
-        let (each, list_stats) =
-            render_once(&device, &queue, &mut scene, &flight, &list, SIZE, false).unwrap();
+        let (each, list_stats) = render_once(
+            &device,
+            &queue,
+            &mut scene,
+            &flight,
+            &list,
+            &Shot::new(SIZE),
+        )
+        .unwrap();
         let covered = |frame: &relevo_view::gpu::Readback| {
             (0..frame.depth.len())
                 .filter(|&i| frame.rgba[4 * i..4 * i + 4] != terrain.rgba[4 * i..4 * i + 4])
@@ -433,9 +475,15 @@ fn the_hud_counts_the_objects_in_view_and_impostors_stand_on_the_mesh_drawn() {
                     vegetation: selection,
                     ..Default::default()
                 };
-                let (_, stats) =
-                    render_once(&device, &queue, &mut scene, &flight, &settings, SIZE, false)
-                        .unwrap();
+                let (_, stats) = render_once(
+                    &device,
+                    &queue,
+                    &mut scene,
+                    &flight,
+                    &settings,
+                    &Shot::new(SIZE),
+                )
+                .unwrap();
                 let camera = flight.camera(&scene, SIZE);
                 let vegetation = scene.vegetation.as_ref().unwrap();
                 let last = vegetation.cut.last_distance();
@@ -582,7 +630,7 @@ fn composited_objects_are_hidden_exactly_where_the_terrain_covers_them() {
             ..settings.clone()
         };
         let render = |scene: &mut Scene, s: &Settings| {
-            render_once(&device, &queue, scene, &flight, s, SIZE, false)
+            render_once(&device, &queue, scene, &flight, s, &Shot::new(SIZE))
                 .unwrap()
                 .0
         };
@@ -703,8 +751,8 @@ fn the_samples_tab_renders_its_overlay_for_inspection() {
         &repo("data/olinda/REGION.toml"),
         &d.path().join("olinda.relevo"),
     );
-    let csv = std::fs::read_to_string(repo("data/olinda/samples.csv")).unwrap();
-    let (rgba, [w, h], objects) = relevo_view::samples::render_tab(&bundle, &csv).unwrap();
+    let samples = repo("data/olinda/samples.csv");
+    let (rgba, [w, h], objects) = relevo_view::samples::render_tab(&bundle, &samples).unwrap();
     let color = relevo_core::bundle::Bundle::open(&bundle)
         .unwrap()
         .manifest
@@ -724,7 +772,12 @@ fn the_samples_tab_renders_its_overlay_for_inspection() {
     // Landsat image's), find about what prep found.
     let stored = 11_769;
     assert!(objects.abs_diff(stored) * 10 < stored, "{objects} objects");
-    let err = relevo_view::samples::render_tab(&bundle, "class;xmin;ymin;xmax;ymax\nforest;1;1\n")
-        .unwrap_err();
-    assert!(format!("{err:#}").contains("line 2"), "{err:#}");
+    let broken = d.path().join("broken.csv");
+    std::fs::write(&broken, "class;xmin;ymin;xmax;ymax\nforest;1;1\n").unwrap();
+    let err = relevo_view::samples::render_tab(&bundle, &broken).unwrap_err();
+    let message = format!("{err:#}");
+    assert!(
+        message.contains("broken.csv") && message.contains("line 2"),
+        "{message}"
+    );
 }

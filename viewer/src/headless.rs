@@ -3,7 +3,9 @@
 //! buffer), at any size the GPU allows.
 
 use crate::flight::Flight;
-use crate::gpu::{FrameStats, Readback, Renderer, Targets, COLOUR_FORMAT, DEPTH_FORMAT};
+use crate::gpu::{
+    frame_bytes_per_pixel, FrameStats, Readback, Renderer, Targets, COLOUR_FORMAT, DEPTH_FORMAT,
+};
 use crate::hud;
 use crate::scene::Scene;
 use crate::settings::{Settings, TerrainMode, VegetationSelection};
@@ -217,23 +219,43 @@ pub fn wait_for_gpu(device: &wgpu::Device) -> Result<()> {
     Ok(())
 }
 
-/// Render `scene` once for `flight` and read the targets back; with
-/// `hud`, the window's HUD is painted over the frame.
+/// What one headless frame is: its size, whether the window's HUD is
+/// painted over it, and whether its depth is read back.
+#[derive(Debug, Clone, Copy)]
+pub struct Shot {
+    pub size: [u32; 2],
+    pub hud: bool,
+    pub depth: bool,
+}
+
+impl Shot {
+    /// A frame of `size` without the HUD, its depth read back.
+    pub fn new(size: [u32; 2]) -> Shot {
+        Shot {
+            size,
+            hud: false,
+            depth: true,
+        }
+    }
+}
+
+/// Render `scene` once for `flight` and read the targets back as `shot`
+/// asks (without its depth, [`Readback::depth`] is empty).
 pub fn render_once(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
     scene: &mut Scene,
     flight: &Flight,
     settings: &Settings,
-    size: [u32; 2],
-    hud: bool,
+    shot: &Shot,
 ) -> Result<(Readback, FrameStats)> {
+    let size = shot.size;
     let camera = flight.camera(scene, size);
     let mut renderer = Renderer::new(device, queue, scene, size);
     let start = Instant::now();
     let stats = renderer.render(device, queue, scene, &camera, settings)?;
     wait_for_gpu(device)?;
-    if hud {
+    if shot.hud {
         let frame_s = start.elapsed().as_secs_f64();
         let readings = hud::Readings {
             fps: 1.0 / frame_s,
@@ -252,10 +274,12 @@ pub fn render_once(
             frame_s,
         )?;
     }
-    let mut readback = renderer.targets.read(device, queue)?;
+    let mut readback = renderer.targets.read(device, queue, shot.depth)?;
     // A terrain-only raycast's depth is the CPU buffer itself (not uploaded).
-    if let Some(depth) = renderer.raycast_depth(scene, settings) {
-        readback.depth.copy_from_slice(&depth);
+    if shot.depth {
+        if let Some(depth) = renderer.raycast_depth(scene, settings) {
+            readback.depth = depth;
+        }
     }
     Ok((readback, stats))
 }
@@ -274,6 +298,12 @@ pub fn run(a: RenderArgs) -> Result<()> {
             a.tau
         );
     }
+    relevo_core::memory::check(
+        &format!("a {}×{} frame", a.size[0], a.size[1]),
+        u64::from(a.size[0]) * u64::from(a.size[1]),
+        frame_bytes_per_pixel(a.mode == TerrainMode::Raycast, a.depth.is_some()),
+        "choose a smaller --size",
+    )?;
     if a.tab == "samples" {
         return render_samples_tab(&a);
     }
@@ -338,24 +368,30 @@ pub fn run(a: RenderArgs) -> Result<()> {
             a.size[1]
         );
     }
-    let (readback, stats) = render_once(
-        &device, &queue, &mut scene, &flight, &settings, a.size, a.hud,
-    )?;
+    let shot = Shot {
+        size: a.size,
+        hud: a.hud,
+        depth: a.depth.is_some(),
+    };
+    let (readback, stats) = render_once(&device, &queue, &mut scene, &flight, &settings, &shot)?;
     let png = encode_rgba(&readback.rgba, a.size[0] as usize, a.size[1] as usize)?;
-    relevo_core::atomic::write_file(&a.out, &png)?;
-    if let Some(path) = &a.depth {
-        relevo_core::atomic::write_file(path, bytemuck::cast_slice(&readback.depth))?;
-    }
     let camera = flight.pose(&scene, a.size[1]).to_string();
-    if let Some(path) = &a.stats {
-        let report = Report {
-            adapter: &adapter,
-            mode: a.mode,
-            camera: camera.clone(),
-            frame: stats,
-        };
-        relevo_core::atomic::write_file(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
+    let report = Report {
+        adapter: &adapter,
+        mode: a.mode,
+        camera: camera.clone(),
+        frame: stats,
+    };
+    let report = serde_json::to_string_pretty(&report)?;
+    // The image, its depth and its figures are written together or not at all.
+    let mut files: Vec<(&Path, &[u8])> = vec![(&a.out, &png)];
+    if let Some(path) = &a.depth {
+        files.push((path, bytemuck::cast_slice(&readback.depth)));
     }
+    if let Some(path) = &a.stats {
+        files.push((path, report.as_bytes()));
+    }
+    relevo_core::atomic::write_files(&files)?;
     eprintln!(
         "{}: {}×{} {} on {adapter}, {} terrain and {} object triangles, camera {camera}",
         a.out.display(),
@@ -374,8 +410,8 @@ const TAB_BACKGROUND: [u8; 4] = [27, 27, 27, 255];
 /// `relevo-view render --tab samples`: the samples tab's image written as
 /// a PNG of `--size`.
 fn render_samples_tab(a: &RenderArgs) -> Result<()> {
-    let csv = match &a.samples {
-        Some(path) => relevo_core::files::read_to_string(path)?,
+    let samples = match &a.samples {
+        Some(path) => path.clone(),
         None => {
             let bundle = relevo_core::bundle::Bundle::open(&a.bundle)?;
             let name = relevo_core::bundle::names::VEGETATION_SAMPLES;
@@ -385,10 +421,10 @@ fn render_samples_tab(a: &RenderArgs) -> Result<()> {
                     a.bundle.display()
                 )
             })?;
-            relevo_core::files::read_to_string(&a.bundle.join(&artifact.file))?
+            a.bundle.join(&artifact.file)
         }
     };
-    let (rgba, [w, h], objects) = crate::samples::render_tab(&a.bundle, &csv)?;
+    let (rgba, [w, h], objects) = crate::samples::render_tab(&a.bundle, &samples)?;
     // The drape fitted into --size, as the tab shows it in the window.
     let [out_w, out_h] = a.size.map(|side| side as usize);
     let framed = relevo_core::raster::fit::fit_rgba(&rgba, w, h, out_w, out_h, TAB_BACKGROUND)?;

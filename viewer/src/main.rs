@@ -19,7 +19,8 @@ use std::process::ExitCode;
   relevo-view olinda.relevo --tour 90 --screenshot window.png   # scripted flight, screenshot, exit
   relevo-view render olinda.relevo --mode raycast --size 1920x1080 --out shot.png
   relevo-view render olinda.relevo --mode mesh --tau 1 --wireframe --camera 289000,9111000,400,40,420 --out mesh.png
-  relevo-view render alps.relevo --size 7680x4320 --depth depth.f32 --stats stats.json --out big.png"
+  relevo-view render alps.relevo --size 7680x4320 --depth depth.f32 --stats stats.json --out big.png
+  relevo-view render alps.relevo --max-memory 2G --size 3840x2160 --out shot.png   # refuse what needs more"
 )]
 struct Cli {
     /// The bundle to open in the window.
@@ -37,6 +38,11 @@ struct Cli {
     /// Where the tour's screenshot goes (PNG).
     #[arg(long, requires = "tour")]
     screenshot: Option<PathBuf>,
+    /// Most memory the viewer may plan to use, e.g. 512M or 8G (default:
+    /// the memory the machine has available, within the process's limits).
+    /// A bundle or frame estimated larger is refused before it is loaded.
+    #[arg(long, global = true, value_parser = relevo_core::memory::parse_size)]
+    max_memory: Option<u64>,
     #[command(subcommand)]
     command: Option<Command>,
 }
@@ -56,6 +62,9 @@ fn main() -> ExitCode {
         )
         .with_writer(std::io::stderr)
         .try_init();
+    if let Some(bytes) = cli.max_memory {
+        relevo_core::memory::set_budget(bytes);
+    }
     let result = match cli.command {
         Some(Command::Render(args)) => relevo_view::headless::run(args),
         None => {

@@ -6,6 +6,7 @@
 //! database into the bundle and re-bakes its clusters, atomically, and the
 //! 3D view reloads them.
 
+use anyhow::Context;
 use eframe::egui;
 use relevo_core::bundle::{Bundle, BundleLock};
 use relevo_core::cluster::model::ModelSource;
@@ -178,7 +179,10 @@ impl SamplesTab {
                 self.fresh = true;
             }
             Ok(Err(e)) => self.status = e,
-            Err(_) => self.status = "the detection failed".into(),
+            Err(_) => {
+                self.status =
+                    "the detection stopped on an internal error (please report it)".into();
+            }
         }
     }
 
@@ -425,11 +429,12 @@ fn drape_image(bundle: &Path) -> anyhow::Result<Option<DrapeImage>> {
 fn read_samples(bundle: &Path, path: &Path) -> anyhow::Result<Vec<(String, [f32; 4])>> {
     let bundle = Bundle::open(bundle)?;
     // The drape's size and georeferencing, from the manifest.
-    let info = bundle
-        .manifest
-        .color
-        .as_ref()
-        .ok_or_else(|| anyhow::anyhow!("the bundle has no drape image to mark samples on"))?;
+    let info = bundle.manifest.color.as_ref().ok_or_else(|| {
+        anyhow::anyhow!(
+            "{}: the bundle has no drape image to mark samples on",
+            bundle.dir.display()
+        )
+    })?;
     let samples = relevo_core::veg::samples::read_file(
         path,
         Some(info.geotransform),
@@ -462,17 +467,17 @@ pub fn detect(
     options: &VegOptions,
     watch: &Watch,
 ) -> anyhow::Result<Detection> {
-    let bundle = Bundle::open(bundle)?;
-    let drape = bundle
+    let opened = Bundle::open(bundle)?;
+    let drape = opened
         .drape()?
-        .ok_or_else(|| anyhow::anyhow!("the bundle has no drape image"))?;
+        .ok_or_else(|| anyhow::anyhow!("{}: the bundle has no drape image", bundle.display()))?;
     let (w, h) = (drape.info.width, drape.info.height);
     let image = VegImage::from_drape(
         &drape.rgba,
         w,
         h,
         drape.info.geotransform,
-        &bundle.manifest.crs.wkt,
+        &opened.manifest.crs.wkt,
     )?;
     let samples: Vec<Sample> = relevo_core::veg::samples::parse_csv(samples_csv, w, h)?;
     let extraction =
@@ -497,13 +502,10 @@ pub fn bundle_options(bundle: &Bundle) -> VegOptions {
 }
 
 /// The samples tab as an image for inspection (`relevo-view render --tab
-/// samples`): detection with `samples_csv` on the drape, relevo-core's
-/// overlay, and the sample rectangles outlined in white. RGBA8, its size
-/// and the objects found.
-pub fn render_tab(
-    bundle: &Path,
-    samples_csv: &str,
-) -> anyhow::Result<(Vec<u8>, [usize; 2], usize)> {
+/// samples`): detection with the samples CSV at `samples` (drape pixels)
+/// on the drape, relevo-core's overlay, and the sample rectangles outlined
+/// in white. RGBA8, its size and the objects found. Errors name the file.
+pub fn render_tab(bundle: &Path, samples: &Path) -> anyhow::Result<(Vec<u8>, [usize; 2], usize)> {
     let opened = Bundle::open(bundle)?;
     let options = bundle_options(&opened);
     let drape =
@@ -511,9 +513,12 @@ pub fn render_tab(
             anyhow::anyhow!("{}: the bundle has no drape image", bundle.display())
         })?;
     let [w, h] = [drape.width, drape.height];
-    let found = detect(bundle, samples_csv, &options, &Watch::default())?;
+    let samples_csv = relevo_core::files::read_to_string(samples)?;
+    let rectangles = relevo_core::veg::samples::parse_csv(&samples_csv, w, h)
+        .with_context(|| samples.display().to_string())?;
+    let found = detect(bundle, &samples_csv, &options, &Watch::default())?;
     let mut rgba = found.overlay;
-    for sample in relevo_core::veg::samples::parse_csv(samples_csv, w, h)? {
+    for sample in rectangles {
         let [x0, y0, x1, y1] = sample.bounds();
         let (x0, x1) = (x0.max(0.0) as usize, (x1 as usize).min(w - 1));
         let (y0, y1) = (y0.max(0.0) as usize, (y1 as usize).min(h - 1));

@@ -109,6 +109,15 @@ impl Scene {
     pub fn open(path: &Path) -> Result<Scene> {
         let bundle = Bundle::open(path)?;
         let frame = bundle.frame();
+        // The raycaster's copy, and the mesh mode's mip-mapped drape
+        // (4/3 × 4 bytes a pixel, counted once more).
+        let drape_pixels = bundle
+            .manifest
+            .color
+            .as_ref()
+            .map_or(0, |c| c.width as u64 * c.height as u64);
+        Terrain::check_size(frame.side, drape_pixels.saturating_mul(2))
+            .with_context(|| path.display().to_string())?;
         let lp = bundle.lp()?;
         let drape = bundle.drape()?;
         let vegetation = store::read(&bundle)?.map(|(index, clusters)| Vegetation {

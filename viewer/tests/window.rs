@@ -263,3 +263,51 @@ fn the_samples_tab_renders_at_the_size_asked() {
         "the drape in the middle"
     );
 }
+
+/// The viewer plans its memory as the CLI does: a frame or a bundle
+/// estimated beyond `--max-memory`, or beyond what the process's own
+/// address-space limit leaves, is refused before anything is drawn (a
+/// 16384² render used to take 7.5 GB and abort under a 6 GB limit).
+#[test]
+fn frames_and_bundles_beyond_the_memory_budget_are_refused_before_drawing() {
+    let dir = tempfile::tempdir().unwrap();
+    let bundle = grenoble_bundle(dir.path());
+    let out_png = dir.path().join("x.png");
+    let binary = env!("CARGO_BIN_EXE_relevo-view");
+    let cases: [(&[&str], &str); 3] = [
+        (
+            &["--max-memory", "256M", "--size", "4096x4096"],
+            "a 4096×4096 frame needs about",
+        ),
+        (
+            &["--max-memory", "1M", "--size", "64x64"],
+            "the raycaster's copy of the 257×257 grid",
+        ),
+        (
+            &["--size", "16384x16384", "--depth", "x.f32"],
+            "a 16384×16384 frame needs about",
+        ),
+    ];
+    for (args, needle) in cases {
+        let line = format!(
+            "ulimit -v 4000000; exec '{binary}' render '{}' --out '{}' {}",
+            bundle.display(),
+            out_png.display(),
+            args.join(" ")
+        );
+        let out = Command::new("bash")
+            .args(["-c", &line])
+            .current_dir(dir.path())
+            .env("VK_ICD_FILENAMES", relevo_view::LAVAPIPE_ICD)
+            .env("XDG_RUNTIME_DIR", dir.path())
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains(needle) && stderr.contains("memory budget"),
+            "{args:?}: {stderr}"
+        );
+        assert!(!out_png.exists() && !dir.path().join("x.f32").exists());
+    }
+}

@@ -187,6 +187,7 @@ fn read_byte_strip(
     mut valid: Option<&mut [bool]>,
 ) -> Result<()> {
     let mut band_values = vec![0u8; source.width * rows];
+    gdalio::clear_errors();
     for (k, &b) in bands.iter().enumerate() {
         source
             .dataset

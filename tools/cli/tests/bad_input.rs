@@ -797,3 +797,141 @@ fn ungeoreferenced_dems_need_a_cell_size() {
         out.to_str().unwrap(),
     ]);
 }
+
+/// Exit 0 means the result is valid: a scaling that pushes heights out of
+/// range is refused after the scaling (it used to write `null` into the
+/// manifest and exit 0), two outputs on one path are refused, and a render
+/// whose depth cannot be written leaves neither file (a full disk, made
+/// here by a file-size limit).
+#[test]
+fn results_that_would_be_unusable_are_refused_and_leave_nothing() {
+    let d = tempfile::tempdir().unwrap();
+    write_f32_tif(&d.path().join("dem.tif"), 8, 8, &[10.0f32; 64], None);
+    for scale in ["1e308", "1e5"] {
+        fails(
+            d.path(),
+            &[
+                "prep",
+                "--dem",
+                "dem.tif",
+                "--z-scale",
+                scale,
+                "--out",
+                "o.relevo",
+            ],
+            &["dem.tif", "z_scale", "beyond ±100000 m"],
+            &["dem.tif"],
+        );
+    }
+
+    let (_d, bundle, work) = sample_bundle_and_workspace();
+    let bundle = bundle.to_str().unwrap();
+    fails(
+        &work,
+        &[
+            "render",
+            bundle,
+            "--camera",
+            "290000,9112000,400,45,300",
+            "--out",
+            "x.png",
+            "--depth",
+            "x.png",
+        ],
+        &["x.png", "named twice"],
+        &[],
+    );
+    // The PNG fits under the limit, the depth (320×200×4 bytes) does not.
+    let out = std::process::Command::new("bash")
+        .arg("-c")
+        .arg(format!(
+            "trap '' XFSZ; ulimit -f 200; exec '{}' render '{bundle}' --size 320x200 \
+             --camera 290000,9112000,400,45,300 --out x.png --depth x.f32",
+            env!("CARGO_BIN_EXE_relevo")
+        ))
+        .current_dir(&work)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("x.f32") && stderr.contains("cannot write"),
+        "{stderr}"
+    );
+    assert_eq!(listing(&work), Vec::<String>::new(), "{stderr}");
+}
+
+/// What GDAL reads beside a file is named when it is the problem: a VRT
+/// whose source is gone (the read used to fail with "read failed"), and a
+/// world file that cannot be read (the image was taken as not
+/// georeferenced).
+#[test]
+fn vrt_sources_and_world_files_are_named() {
+    let d = tempfile::tempdir().unwrap();
+    let dem = repo("data/grenoble/Copernicus_DSM_10_N45_00_E005_00_DEM.tif");
+    let tile = d.path().join("tile.tif");
+    gdal_tool(
+        "gdal_translate",
+        &[
+            "-q",
+            "-srcwin",
+            "0",
+            "0",
+            "64",
+            "64",
+            dem.to_str().unwrap(),
+            tile.to_str().unwrap(),
+        ],
+    );
+    let vrt = d.path().join("mosaic.vrt");
+    gdal_tool(
+        "gdalbuildvrt",
+        &["-q", vrt.to_str().unwrap(), tile.to_str().unwrap()],
+    );
+    std::fs::remove_file(&tile).unwrap();
+    for args in [
+        vec!["stitch", "mosaic.vrt", "--out", "s.tif"],
+        vec!["fill", "mosaic.vrt", "--out", "f.tif"],
+        vec!["prep", "--dem", "mosaic.vrt", "--out", "o.relevo"],
+    ] {
+        fails(
+            d.path(),
+            &args,
+            &["mosaic.vrt", "tile.tif", "No such file"],
+            &["mosaic.vrt"],
+        );
+    }
+    std::fs::remove_file(&vrt).unwrap();
+
+    let png = d.path().join("heights.png");
+    gdal_tool(
+        "gdal_translate",
+        &[
+            "-q",
+            "-of",
+            "PNG",
+            "-ot",
+            "UInt16",
+            "-srcwin",
+            "0",
+            "0",
+            "64",
+            "64",
+            dem.to_str().unwrap(),
+            png.to_str().unwrap(),
+        ],
+    );
+    let _ = std::fs::remove_file(d.path().join("heights.png.aux.xml"));
+    std::fs::write(d.path().join("heights.pgw"), "10\n0\n0\n-10\n500000\n").unwrap();
+    for args in [
+        vec!["stitch", "heights.png", "--out", "s.tif"],
+        vec!["prep", "--dem", "heights.png", "--out", "o.relevo"],
+    ] {
+        fails(
+            d.path(),
+            &args,
+            &["heights.pgw", "heights.png", "world file", "six numbers"],
+            &["heights.pgw", "heights.png"],
+        );
+    }
+}

@@ -340,3 +340,43 @@ fn fifos_and_devices_are_refused_by_name_wherever_a_file_is_read() {
     );
     relevo_ok(["validate", b]);
 }
+
+/// A NaN height at a vertex with data (a bundle edited after prep, hashes
+/// fixed up) is refused by every reader, naming the file and the vertex:
+/// `mesh` used to exit 0 with a NaN position in the glTF, and `validate`
+/// to accept it only when the range check happened to catch it.
+#[test]
+fn a_nan_height_at_a_data_vertex_is_refused_by_every_reader() {
+    let dir = tempfile::tempdir().unwrap();
+    let bundle = sample_bundle(dir.path());
+    let mask = std::fs::read(bundle.join("mask.u8")).unwrap();
+    let vertex = mask.iter().position(|&m| m == 1).unwrap();
+    let broken = forged(&bundle, "nan.relevo", "height.f32", &|bytes| {
+        bytes[vertex * 4..vertex * 4 + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    });
+    let b = broken.to_str().unwrap();
+    let glb = dir.path().join("m.glb");
+    let png = dir.path().join("r.png");
+    for args in [
+        vec!["validate", b],
+        vec![
+            "mesh",
+            b,
+            "--max-error",
+            "5",
+            "--out",
+            glb.to_str().unwrap(),
+        ],
+        vec![
+            "render",
+            b,
+            "--camera",
+            "290000,9112000,400,45,300",
+            "--out",
+            png.to_str().unwrap(),
+        ],
+    ] {
+        refused(&args, &["height.f32", "is not a finite number"]);
+    }
+    assert!(!glb.exists() && !png.exists());
+}

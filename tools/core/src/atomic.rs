@@ -151,26 +151,62 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
 }
 
 /// Write several files that belong together (a mesh, its material and
-/// its texture): all partial files first, then all renamed; when one
-/// cannot be written, none of them is left, partial or whole.
+/// its texture; an image and its depth): all first, then all renamed;
+/// when one cannot be written, none of them is left, partial or whole.
 pub fn write_files(files: &[(&Path, &[u8])]) -> Result<()> {
-    let mut written = Vec::new();
+    let mut outputs = Outputs::default();
     for &(path, bytes) in files {
-        let partial = partial_path(path);
-        if let Err(e) = std::fs::write(&partial, bytes) {
-            let _ = std::fs::remove_file(&partial);
-            for p in &written {
-                let _ = std::fs::remove_file(p);
-            }
-            return Err(Error::invalid(path, format!("cannot write ({e})")));
-        }
-        written.push(partial);
-    }
-    for (&(path, _), partial) in files.iter().zip(&written) {
-        std::fs::rename(partial, path)
+        let pending = outputs.pending(path);
+        std::fs::write(&pending, bytes)
             .map_err(|e| Error::invalid(path, format!("cannot write ({e})")))?;
     }
-    Ok(())
+    outputs.commit()
+}
+
+/// The outputs of one command, made whole before any appears: each is
+/// written at a hidden pending path beside it (keeping its extension, for
+/// writers that choose a format by it) and all are renamed into place by
+/// [`Outputs::commit`]. Dropped before that — an error on the way — it
+/// removes every pending file, so a command leaves all its outputs or
+/// none.
+#[derive(Debug, Default)]
+pub struct Outputs {
+    /// (pending path, final path), in the order asked for.
+    pending: Vec<(PathBuf, PathBuf)>,
+}
+
+impl Outputs {
+    /// Where to write `path` until commit: `DIR/.STEM.pending.EXT`.
+    pub fn pending(&mut self, path: &Path) -> PathBuf {
+        let stem = path
+            .file_stem()
+            .map(|n| n.to_string_lossy().to_string())
+            .unwrap_or_default();
+        let name = match path.extension() {
+            Some(ext) => format!(".{stem}.pending.{}", ext.to_string_lossy()),
+            None => format!(".{stem}.pending"),
+        };
+        let pending = path.with_file_name(name);
+        self.pending.push((pending.clone(), path.to_path_buf()));
+        pending
+    }
+
+    /// Rename every pending file onto its path.
+    pub fn commit(mut self) -> Result<()> {
+        for (pending, path) in std::mem::take(&mut self.pending) {
+            std::fs::rename(&pending, &path)
+                .map_err(|e| Error::invalid(&path, format!("cannot write ({e})")))?;
+        }
+        Ok(())
+    }
+}
+
+impl Drop for Outputs {
+    fn drop(&mut self) {
+        for (pending, _) in &self.pending {
+            let _ = std::fs::remove_file(pending);
+        }
+    }
 }
 
 #[cfg(test)]

@@ -258,6 +258,12 @@ pub fn render_bundle(
     hillshade: Option<[f64; 2]>,
 ) -> Result<RaycastFrame> {
     let frame = bundle.frame();
+    let drape_pixels = bundle
+        .manifest
+        .color
+        .as_ref()
+        .map_or(0, |c| c.width as u64 * c.height as u64);
+    Terrain::check_size(frame.side, drape_pixels)?;
     let heights = bundle.heights()?;
     let mask = bundle.mask()?;
     let color = match bundle.drape()? {

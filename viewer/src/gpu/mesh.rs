@@ -7,6 +7,7 @@ use super::shared::{self, eye_relative_view_projection, FrameStats, SUN};
 use super::targets::{Targets, COLOUR_FORMAT};
 use crate::scene::Scene;
 use crate::settings::Settings;
+use anyhow::Context;
 use bytemuck::{Pod, Zeroable};
 use eframe::egui_wgpu::wgpu;
 use glam::DVec3;
@@ -97,7 +98,7 @@ impl MeshPass {
             pipeline,
             bind_group,
             uniforms,
-            vertex_buffer: shared::vertex_buffer(device, "mesh vertices", 1 << 16),
+            vertex_buffer: shared::empty_vertex_buffer(device, "mesh vertices"),
             vertices: Vec::new(),
             vertex_count: 0,
             has_drape,
@@ -113,7 +114,7 @@ impl MeshPass {
         camera: &Camera,
         settings: &Settings,
         stats: &mut FrameStats,
-    ) {
+    ) -> anyhow::Result<()> {
         let start = Instant::now();
         let params = settings.refine_params(camera);
         let hierarchy = scene.lp.hierarchy();
@@ -163,8 +164,14 @@ impl MeshPass {
         }
         let bytes: &[u8] = bytemuck::cast_slice(&self.vertices);
         if bytes.len() as u64 > self.vertex_buffer.size() {
-            let grown = (bytes.len() as u64).next_power_of_two();
-            self.vertex_buffer = shared::vertex_buffer(device, "mesh vertices", grown);
+            let needed = bytes.len() as u64;
+            self.vertex_buffer = shared::vertex_buffer(
+                device,
+                "mesh vertices",
+                needed,
+                needed.next_power_of_two() - needed,
+            )
+            .with_context(|| format!("at τ = {} px (raise it to draw fewer)", settings.tau_px))?;
         }
         queue.write_buffer(&self.vertex_buffer, 0, bytes);
         self.vertex_count = self.vertices.len() as u32;
@@ -183,6 +190,7 @@ impl MeshPass {
         };
         queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&uniforms));
         stats.mesh_upload_ms = start.elapsed().as_secs_f64() * 1e3;
+        Ok(())
     }
 
     /// Clear to the sky and draw the prepared triangles.
@@ -196,7 +204,9 @@ impl MeshPass {
 }
 
 /// An RGBA8 texture with its full mip chain, each level the 2×2 mean of
-/// the one above (sizes halve rounding down, as wgpu's levels do).
+/// the one above (sizes halve rounding down, as wgpu's levels do). Levels
+/// larger than the device's textures are made but not uploaded: the
+/// texture starts at the first level that fits (its UVs are the same).
 fn upload_mipmapped(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
@@ -204,12 +214,18 @@ fn upload_mipmapped(
     height: u32,
     rgba: &[u8],
 ) -> wgpu::TextureView {
-    let levels = 32 - width.max(height).leading_zeros();
+    let largest = device.limits().max_texture_dimension_2d;
+    let mut level = rgba.to_vec();
+    let (mut w, mut h) = (width, height);
+    while w.max(h) > largest {
+        (level, w, h) = halved(&level, w, h);
+    }
+    let levels = 32 - w.max(h).leading_zeros();
     let texture = device.create_texture(&wgpu::TextureDescriptor {
         label: Some("drape"),
         size: wgpu::Extent3d {
-            width,
-            height,
+            width: w,
+            height: h,
             depth_or_array_layers: 1,
         },
         mip_level_count: levels,
@@ -219,8 +235,6 @@ fn upload_mipmapped(
         usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
         view_formats: &[],
     });
-    let mut level = rgba.to_vec();
-    let (mut w, mut h) = (width, height);
     for mip in 0..levels {
         queue.write_texture(
             wgpu::TexelCopyTextureInfo {
@@ -241,28 +255,33 @@ fn upload_mipmapped(
                 depth_or_array_layers: 1,
             },
         );
-        let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
-        let texel = |x: u32, y: u32| {
-            let i = ((y.min(h - 1) * w + x.min(w - 1)) * 4) as usize;
-            [level[i], level[i + 1], level[i + 2], level[i + 3]]
-        };
-        let mut next = Vec::with_capacity((nw * nh * 4) as usize);
-        for y in 0..nh {
-            for x in 0..nw {
-                let quad = [
-                    texel(2 * x, 2 * y),
-                    texel(2 * x + 1, 2 * y),
-                    texel(2 * x, 2 * y + 1),
-                    texel(2 * x + 1, 2 * y + 1),
-                ];
-                for c in 0..4 {
-                    let sum: u32 = quad.iter().map(|t| t[c] as u32).sum();
-                    next.push(((sum + 2) / 4) as u8);
-                }
-            }
-        }
-        level = next;
-        (w, h) = (nw, nh);
+        (level, w, h) = halved(&level, w, h);
     }
     texture.create_view(&wgpu::TextureViewDescriptor::default())
+}
+
+/// The next mip level of a `w`×`h` RGBA8 image: each texel the rounded
+/// mean of the 2×2 above it (edges repeat), sides halved rounding down.
+fn halved(level: &[u8], w: u32, h: u32) -> (Vec<u8>, u32, u32) {
+    let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
+    let texel = |x: u32, y: u32| {
+        let i = ((y.min(h - 1) * w + x.min(w - 1)) * 4) as usize;
+        [level[i], level[i + 1], level[i + 2], level[i + 3]]
+    };
+    let mut next = Vec::with_capacity((nw * nh * 4) as usize);
+    for y in 0..nh {
+        for x in 0..nw {
+            let quad = [
+                texel(2 * x, 2 * y),
+                texel(2 * x + 1, 2 * y),
+                texel(2 * x, 2 * y + 1),
+                texel(2 * x + 1, 2 * y + 1),
+            ];
+            for c in 0..4 {
+                let sum: u32 = quad.iter().map(|t| u32::from(t[c])).sum();
+                next.push(((sum + 2) / 4) as u8);
+            }
+        }
+    }
+    (next, nw, nh)
 }

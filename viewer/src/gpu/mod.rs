@@ -12,7 +12,7 @@ mod vegetation;
 mod zbuffer;
 
 pub use shared::FrameStats;
-pub use targets::{Readback, Targets, COLOUR_FORMAT, DEPTH_FORMAT};
+pub use targets::{frame_bytes_per_pixel, Readback, Targets, COLOUR_FORMAT, DEPTH_FORMAT};
 
 use crate::scene::Scene;
 use crate::settings::{Settings, TerrainMode};
@@ -88,6 +88,14 @@ impl Renderer {
         }
         let size = [camera.width, camera.height];
         if self.targets.size != size {
+            let largest = device.limits().max_texture_dimension_2d;
+            if size.iter().any(|&side| side > largest) {
+                anyhow::bail!(
+                    "a {}×{} frame: this GPU draws at most {largest} pixels a side",
+                    size[0],
+                    size[1]
+                );
+            }
             self.targets = Targets::new(device, size);
         }
         let mut stats = FrameStats {
@@ -112,7 +120,7 @@ impl Renderer {
             }
             TerrainMode::Mesh => {
                 self.mesh
-                    .prepare(device, queue, scene, camera, settings, &mut stats);
+                    .prepare(device, queue, scene, camera, settings, &mut stats)?;
                 self.mesh
                     .draw(&mut encoder, &self.targets, sky_colour(&settings.raycast));
             }
@@ -133,7 +141,7 @@ impl Renderer {
             let pass = self
                 .objects
                 .get_or_insert_with(|| objects::ObjectPass::new(device, objects));
-            pass.prepare(device, queue, objects, camera);
+            pass.prepare(device, queue, objects, camera)?;
             pass.draw(&mut encoder, &self.targets);
             stats.object_triangles = objects.triangles();
         }
@@ -144,10 +152,15 @@ impl Renderer {
                 vegetation.stand_on_mesh(&scene.lp, &scene.terrain, camera, settings);
             }
             stats.cut_ms = start.elapsed().as_secs_f64() * 1e3;
-            let pass = self.vegetation.get_or_insert_with(|| {
-                vegetation::VegetationPass::new(device, queue, &vegetation.clusters)
-            });
-            pass.prepare(device, queue, vegetation, camera, settings);
+            let pass = match &mut self.vegetation {
+                Some(pass) => pass,
+                empty => empty.insert(vegetation::VegetationPass::new(
+                    device,
+                    queue,
+                    &vegetation.clusters,
+                )?),
+            };
+            pass.prepare(device, queue, vegetation, camera, settings)?;
             pass.draw(&mut encoder, &self.targets);
             stats.vegetation_represented = vegetation.list.represented;
             stats.impostors = vegetation.list.len();

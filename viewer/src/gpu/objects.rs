@@ -37,7 +37,7 @@ pub struct ObjectPass {
 
 impl ObjectPass {
     pub fn new(device: &wgpu::Device, objects: &ObjectMesh) -> Self {
-        // Sized for `objects`; `prepare` grows it for a larger placement.
+        // `prepare` grows the vertex buffer to the placement's size.
         let (uniforms, layout, bind_group) =
             shared::uniforms(device, "object uniforms", size_of::<Uniforms>() as u64);
         let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -59,12 +59,11 @@ impl ObjectPass {
             "fs_main",
             (true, wgpu::CompareFunction::Less),
         );
-        let bytes = (objects.positions.len() * size_of::<Vertex>()) as u64;
         ObjectPass {
             pipeline,
             bind_group,
             uniforms,
-            vertex_buffer: shared::vertex_buffer(device, "object vertices", bytes),
+            vertex_buffer: shared::empty_vertex_buffer(device, "object vertices"),
             vertices: Vec::with_capacity(objects.positions.len()),
             count: objects.positions.len() as u32,
         }
@@ -78,7 +77,7 @@ impl ObjectPass {
         queue: &wgpu::Queue,
         objects: &ObjectMesh,
         camera: &Camera,
-    ) {
+    ) -> anyhow::Result<()> {
         let eye = camera.position;
         self.vertices.clear();
         self.vertices.extend(
@@ -96,7 +95,7 @@ impl ObjectPass {
         let bytes: &[u8] = bytemuck::cast_slice(&self.vertices);
         if bytes.len() as u64 > self.vertex_buffer.size() {
             self.vertex_buffer =
-                shared::vertex_buffer(device, "object vertices", bytes.len() as u64);
+                shared::vertex_buffer(device, "object vertices", bytes.len() as u64, 0)?;
         }
         queue.write_buffer(&self.vertex_buffer, 0, bytes);
         self.count = self.vertices.len() as u32;
@@ -105,6 +104,7 @@ impl ObjectPass {
             sun: SUN,
         };
         queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&uniforms));
+        Ok(())
     }
 
     /// Draw over the terrain already in the targets.

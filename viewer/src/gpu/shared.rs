@@ -186,8 +186,38 @@ pub(super) fn uniform_entry() -> wgpu::BindGroupLayoutEntry {
     }
 }
 
-/// A vertex buffer of at least `bytes` (grown by the caller, never per frame).
-pub(super) fn vertex_buffer(device: &Device, label: &str, bytes: u64) -> wgpu::Buffer {
+/// A vertex buffer of at least `bytes`, `spare` more when the device
+/// allows (callers grow it to the next power of two so that it is not
+/// remade every frame). Refused, naming `label`, when `bytes` exceed the
+/// device's largest buffer.
+pub(super) fn vertex_buffer(
+    device: &Device,
+    label: &str,
+    bytes: u64,
+    spare: u64,
+) -> anyhow::Result<wgpu::Buffer> {
+    let largest = device.limits().max_buffer_size;
+    if bytes > largest {
+        anyhow::bail!(
+            "the {label} need {} but this GPU's largest buffer is {}",
+            relevo_core::memory::human(bytes),
+            relevo_core::memory::human(largest)
+        );
+    }
+    Ok(buffer_of(
+        device,
+        label,
+        bytes.saturating_add(spare).min(largest),
+    ))
+}
+
+/// A vertex buffer of a few bytes, for a pass to grow with
+/// [`vertex_buffer`] when it has something to draw.
+pub(super) fn empty_vertex_buffer(device: &Device, label: &str) -> wgpu::Buffer {
+    buffer_of(device, label, 4)
+}
+
+fn buffer_of(device: &Device, label: &str, bytes: u64) -> wgpu::Buffer {
     device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size: bytes.max(4),

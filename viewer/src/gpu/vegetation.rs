@@ -58,8 +58,14 @@ pub struct VegetationPass {
 }
 
 impl VegetationPass {
-    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, clusters: &Clusters) -> Self {
-        let (atlas, atlas_size) = upload_atlas(device, queue, clusters);
+    /// The pipeline and the atlas uploaded; refused when the atlas does not
+    /// fit the device's texture limits.
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        clusters: &Clusters,
+    ) -> anyhow::Result<Self> {
+        let (atlas, atlas_size) = upload_atlas(device, queue, clusters)?;
         let sampler = shared::mipmap_sampler(device, "impostor sampler");
         let sharp_sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("impostor sampler, nearest"),
@@ -110,16 +116,16 @@ impl VegetationPass {
             "fs_main",
             (true, wgpu::CompareFunction::Less),
         );
-        VegetationPass {
+        Ok(VegetationPass {
             pipeline,
             bind_group,
             sharp_bind_group,
             uniforms,
-            instance_buffer: shared::vertex_buffer(device, "impostors", 4),
+            instance_buffer: shared::empty_vertex_buffer(device, "impostors"),
             instances: Vec::new(),
             blur: true,
             atlas_size,
-        }
+        })
     }
 
     /// Upload one GPU instance per view of every instance the selection
@@ -133,7 +139,7 @@ impl VegetationPass {
         vegetation: &Vegetation,
         camera: &Camera,
         settings: &Settings,
-    ) {
+    ) -> anyhow::Result<()> {
         let eye = camera.position;
         let [tw, th] = self.atlas_size;
         let clusters = &vegetation.clusters;
@@ -189,11 +195,13 @@ impl VegetationPass {
         }
         let bytes: &[u8] = bytemuck::cast_slice(&self.instances);
         if bytes.len() as u64 > self.instance_buffer.size() {
+            let needed = bytes.len() as u64;
             self.instance_buffer = shared::vertex_buffer(
                 device,
                 "impostors",
-                (bytes.len() as u64).next_power_of_two(),
-            );
+                needed,
+                needed.next_power_of_two() - needed,
+            )?;
         }
         queue.write_buffer(&self.instance_buffer, 0, bytes);
         let uniforms = Uniforms {
@@ -202,6 +210,7 @@ impl VegetationPass {
         };
         queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&uniforms));
         self.blur = settings.blur;
+        Ok(())
     }
 
     /// GPU instances of the last frame (views, not objects).
@@ -228,12 +237,13 @@ impl VegetationPass {
 }
 
 /// The atlas pages as one texture array (pages padded to the largest),
-/// each layer with relevo-core's premultiplied mip chain.
+/// each layer with relevo-core's premultiplied mip chain; refused when
+/// the pages are larger, or more, than the device's textures hold.
 fn upload_atlas(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
     clusters: &Clusters,
-) -> (wgpu::TextureView, [f32; 2]) {
+) -> anyhow::Result<(wgpu::TextureView, [f32; 2])> {
     let width = clusters
         .pages
         .iter()
@@ -249,6 +259,18 @@ fn upload_atlas(
         .unwrap_or(1)
         .max(1) as u32;
     let layers = clusters.pages.len().max(1) as u32;
+    let limits = device.limits();
+    if width.max(height) > limits.max_texture_dimension_2d
+        || layers > limits.max_texture_array_layers
+    {
+        anyhow::bail!(
+            "the vegetation atlas has {layers} page(s) of up to {width}×{height} texels, \
+             but this GPU's texture arrays hold at most {} layers of {} texels a side \
+             (bake with a smaller --budget-mib)",
+            limits.max_texture_array_layers,
+            limits.max_texture_dimension_2d
+        );
+    }
     let levels = (MIP_LEVELS as u32).min(32 - width.min(height).leading_zeros());
     let texture = device.create_texture(&wgpu::TextureDescriptor {
         label: Some("impostor atlas"),
@@ -295,5 +317,5 @@ fn upload_atlas(
         dimension: Some(wgpu::TextureViewDimension::D2Array),
         ..Default::default()
     });
-    (view, [width as f32, height as f32])
+    Ok((view, [width as f32, height as f32]))
 }

@@ -112,7 +112,7 @@ impl ZBufferPass {
                 .map(|(&position, &colour)| Vertex { position, colour })
                 .collect();
             let bytes = (vertices.len() * size_of::<Vertex>()) as u64;
-            let vertex_buffer = shared::vertex_buffer(device, "z-buffer vertices", bytes);
+            let vertex_buffer = shared::vertex_buffer(device, "z-buffer vertices", bytes, 0)?;
             queue.write_buffer(&vertex_buffer, 0, bytemuck::cast_slice(&vertices));
             self.uploaded = Some(Uploaded {
                 representation,

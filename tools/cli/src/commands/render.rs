@@ -5,7 +5,7 @@ use crate::output;
 use anyhow::{bail, Result};
 use clap::Args;
 use relevo_core::bundle::Bundle;
-use relevo_core::horizon::{Arithmetic, DistanceBand, RaycastMode, RenderOptions};
+use relevo_core::horizon::{Arithmetic, DistanceBand, RaycastFrame, RaycastMode, RenderOptions};
 use relevo_core::raster::png::encode_rgba;
 use relevo_core::scene::{self, CameraPose, View};
 use std::path::{Path, PathBuf};
@@ -92,7 +92,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     relevo_core::memory::check(
         &format!("a {}×{} frame", a.size[0], a.size[1]),
         a.size[0] as u64 * a.size[1] as u64,
-        24,
+        RaycastFrame::BYTES_PER_PIXEL,
         "choose a smaller --size",
     )?;
     let bundle = Bundle::open(&a.bundle)?;
@@ -126,10 +126,12 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let frame = scene::render_bundle(&bundle, &view, &options, hillshade)?;
     let rows = frame.to_rows();
     let png = encode_rgba(rows.rgba_bytes(), rows.width, rows.height)?;
-    output::write_atomic(&a.out, &png)?;
+    // The image and its depth are written together or not at all.
+    let mut files: Vec<(&Path, &[u8])> = vec![(&a.out, &png)];
     if let Some(d) = &a.depth {
-        output::write_atomic(d, bytemuck::cast_slice(&rows.depth))?;
+        files.push((d, bytemuck::cast_slice(&rows.depth)));
     }
+    relevo_core::atomic::write_files(&files)?;
     let s = frame.steps;
     eprintln!(
         "{}: {}×{} in {:.1} ms (setup {:.1}, march {:.1}, output {:.1})",

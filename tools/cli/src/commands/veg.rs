@@ -246,18 +246,22 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
     };
     let extraction = extract_with_progress(&image, &samples, &options, region_map)
         .with_context(|| format!("{}", a.image.display()))?;
-    output::write_atomic(&a.out, db::to_csv(&extraction.objects).as_bytes())?;
+    // All outputs are made whole first, then moved into place together.
+    let mut outputs = relevo_core::atomic::Outputs::default();
+    let csv = db::to_csv(&extraction.objects);
+    output::write_atomic(&outputs.pending(&a.out), csv.as_bytes())?;
     if let Some(path) = &a.gpkg {
-        veg_io::write_gpkg(path, &extraction.objects, &image.crs_wkt)?;
+        veg_io::write_gpkg(&outputs.pending(path), &extraction.objects, &image.crs_wkt)?;
     }
     if let Some(path) = &a.labels {
-        veg_io::write_labels(path, &image, &extraction)?;
+        veg_io::write_labels(&outputs.pending(path), &image, &extraction)?;
     }
     if let Some(path) = &a.overlay {
         let rgba = pipeline::overlay(&image, &extraction, &options.negative_class)?;
         let png = encode_rgba(&rgba, image.image.width, image.image.height)?;
-        output::write_atomic(path, &png)?;
+        output::write_atomic(&outputs.pending(path), &png)?;
     }
+    outputs.commit()?;
     // The classified pixels against the labels, and the excess-green
     // baseline's (R, G, B bands) beside them.
     let land_cover = match &land_cover_labels {

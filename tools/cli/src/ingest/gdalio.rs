@@ -3,6 +3,7 @@
 
 use crate::output;
 use anyhow::{anyhow, bail, Context, Result};
+use gdal::errors::CplErrType;
 use gdal::raster::{Buffer, GdalDataType, GdalType, RasterCreationOptions};
 use gdal::spatial_ref::SpatialRef;
 use gdal::{Dataset, DriverManager};
@@ -22,15 +23,44 @@ pub struct GridSpec {
 }
 
 /// Route GDAL's own messages into our log instead of stderr; failures are
-/// reported through return values with the file named.
+/// reported through return values with the file named. GDAL's failures
+/// are also kept (per thread, the first few since [`clear_errors`]), since
+/// the message that names the cause — a VRT's missing source, say — often
+/// comes before the one a failed call leaves last.
 pub fn init() {
     gdal::config::set_error_handler(|class, number, message| {
         tracing::debug!(target: "gdal", "{class:?} {number}: {message}");
+        if matches!(class, CplErrType::Failure | CplErrType::Fatal) {
+            FAILURES.with_borrow_mut(|kept| {
+                if kept.len() < KEPT_FAILURES && !kept.iter().any(|m| m == message) {
+                    kept.push(message.trim().to_string());
+                }
+            });
+        }
     });
 }
 
-/// GDAL's last error message, or `fallback`.
+/// GDAL failures kept per call (the cause and what it led to).
+const KEPT_FAILURES: usize = 3;
+
+thread_local! {
+    /// GDAL's failure messages on this thread since [`clear_errors`].
+    static FAILURES: std::cell::RefCell<Vec<String>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// Forget GDAL's failures so far on this thread (before a call whose
+/// failure [`last_error`] will explain).
+pub(crate) fn clear_errors() {
+    FAILURES.with_borrow_mut(Vec::clear);
+}
+
+/// GDAL's failure messages on this thread since [`clear_errors`], first
+/// (the cause) to last; else GDAL's last message; else `fallback`.
 pub(crate) fn last_error(fallback: &str) -> String {
+    let kept = FAILURES.with_borrow_mut(std::mem::take);
+    if !kept.is_empty() {
+        return kept.join("; ");
+    }
     // SAFETY: CPLGetLastErrorMsg returns a pointer to a thread-local string.
     let message = unsafe { std::ffi::CStr::from_ptr(gdal_sys::CPLGetLastErrorMsg()) }
         .to_string_lossy()
@@ -67,6 +97,7 @@ pub fn open(path: &Path) -> Result<Source> {
         // GDAL opens some directories; as an input here one is a user mistake.
         bail!("{}: is a directory, not a raster", path.display());
     }
+    clear_errors();
     let dataset = Dataset::open(path).map_err(|_| {
         anyhow!(
             "{}: not a raster GDAL can read ({})",
@@ -87,6 +118,17 @@ pub fn open(path: &Path) -> Result<Source> {
         .ok()
         .map(GeoTransform)
         .filter(|g| *g != GeoTransform::IDENTITY);
+    if geotransform.is_none() {
+        if let Some(world) = world_files(path).into_iter().find(|w| w.is_file()) {
+            bail!(
+                "{}: the world file beside {} cannot be read (a world file holds six numbers, \
+                 one a line: pixel width, two rotations, pixel height, then the easting and \
+                 northing of the first pixel's centre)",
+                world.display(),
+                path.display()
+            );
+        }
+    }
     let srs = dataset.spatial_ref().ok().map(|mut s| {
         s.set_axis_mapping_strategy(gdal::spatial_ref::AxisMappingStrategy::TraditionalGisOrder);
         s
@@ -102,6 +144,24 @@ pub fn open(path: &Path) -> Result<Source> {
         geotransform,
         srs,
     })
+}
+
+/// The world files GDAL looks for beside `path`: the extension's first
+/// and last letters and a `w` (`.pgw`), the extension and a `w` (`.pngw`),
+/// and `.wld`, each in lower and upper case.
+fn world_files(path: &Path) -> Vec<PathBuf> {
+    let Some(ext) = path.extension().and_then(|e| e.to_str()) else {
+        return Vec::new();
+    };
+    let mut names = vec![format!("{ext}w"), "wld".to_string()];
+    if let (Some(first), Some(last)) = (ext.chars().next(), ext.chars().last()) {
+        names.insert(0, format!("{first}{last}w"));
+    }
+    names
+        .iter()
+        .flat_map(|n| [n.to_lowercase(), n.to_uppercase()])
+        .map(|n| path.with_extension(n))
+        .collect()
 }
 
 impl Source {
@@ -153,6 +213,7 @@ impl Source {
             "crop the raster first (gdal_translate -srcwin)",
         )?;
         let mut data = Vec::with_capacity(out_w * out_h * bands.len());
+        clear_errors();
         for &b in bands {
             let band = self.dataset.rasterband(b)?;
             let buffer: Buffer<f64> = band
@@ -337,6 +398,7 @@ fn gdal_warp(source: &Dataset, args: &[String]) -> Result<Dataset> {
         .chain(std::iter::once(null_mut()))
         .collect();
     let empty = CString::default();
+    clear_errors();
     // SAFETY: the argument strings outlive the options object, which is freed
     // before returning; the source handle stays valid for the call.
     unsafe {
@@ -493,6 +555,7 @@ fn write_typed<T: FromF64>(
     ] {
         options.set_name_value(k, v)?;
     }
+    clear_errors();
     let mut ds = driver
         .create_with_band_type_with_options::<T, _>(
             path,

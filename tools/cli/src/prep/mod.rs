@@ -200,7 +200,15 @@ fn stage_dem(b: &mut Build) -> Result<()> {
         .iter()
         .map(|f| f.display().to_string())
         .collect();
-    gdalio::check_heights(&dem.raster, &names.join(", "))?;
+    // Scaled first, so that the range check sees the heights written.
+    if r.z_scale != 1.0 {
+        dem.raster.data.iter_mut().for_each(|v| *v *= r.z_scale);
+    }
+    let source = match r.z_scale {
+        1.0 => names.join(", "),
+        z => format!("{} (with z_scale {z})", names.join(", ")),
+    };
+    gdalio::check_heights(&dem.raster, &source)?;
     if !georeferenced {
         let cell = r.cell_size_m.unwrap_or(1.0);
         dem.grid.geotransform = GeoTransform::north_up(0.0, 0.0, cell, cell);
@@ -214,9 +222,6 @@ fn stage_dem(b: &mut Build) -> Result<()> {
     }
     let metres_per_unit = target.as_ref().map_or(1.0, |t| t.linear_units());
     b.cell_size_m = dem.grid.geotransform.cell_size().0 * metres_per_unit;
-    if r.z_scale != 1.0 {
-        dem.raster.data.iter_mut().for_each(|v| *v *= r.z_scale);
-    }
     b.dem = Some(dem);
     Ok(())
 }

@@ -222,10 +222,23 @@ impl Bundle {
         }
     }
 
-    /// Heights in metres, row-major, `side`×`side`.
+    /// Heights in metres, row-major, `side`×`side`. Every one must be
+    /// finite (a writer fills voids), so no reader meets a NaN.
     pub fn heights(&self) -> Result<Array<f32>> {
         let side = self.manifest.grid.side;
-        self.grid_array(names::HEIGHT, &[side, side])
+        let heights = self.grid_array(names::HEIGHT, &[side, side])?;
+        if let Some(bad) = heights.iter().position(|h: &f32| !h.is_finite()) {
+            return Err(Error::invalid(
+                self.dir.join(names::HEIGHT.file),
+                format!(
+                    "height {} at row {}, column {} is not a finite number",
+                    heights[bad],
+                    bad / side,
+                    bad % side
+                ),
+            ));
+        }
+        Ok(heights)
     }
 
     /// The data mask (1 data, 0 padding or void), row-major, `side`×`side`.

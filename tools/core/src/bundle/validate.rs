@@ -50,11 +50,11 @@ pub fn validate_artifacts(bundle: &Bundle) -> Vec<String> {
     if side < 3 || pow2_plus_1_at_least(side) != side {
         problems.push(format!("grid side {side} is not 2^n+1"));
     }
-    for name in [names::HEIGHT.key, names::MASK.key] {
+    for name in [names::HEIGHT.key, names::MASK.key, names::LP.key] {
         match m.artifacts.get(name) {
             None => problems.push(format!("missing artifact {name:?}")),
-            Some(a) if a.shape != [side, side] => problems.push(format!(
-                "{name}: shape {:?}, expected [{side}, {side}]",
+            Some(a) if !a.shape.starts_with(&[side, side]) => problems.push(format!(
+                "{name}: shape {:?}, expected [{side}, {side}, …]",
                 a.shape
             )),
             Some(_) => {}
@@ -79,9 +79,6 @@ pub fn validate_artifacts(bundle: &Bundle) -> Vec<String> {
             "mask: {valid} valid vertices, manifest says {}",
             m.grid.valid_vertices
         ));
-    }
-    if let Some(bad) = heights.iter().position(|h| !h.is_finite()) {
-        problems.push(format!("height: non-finite value at vertex {bad}"));
     }
     let [lo, hi] = m.grid.height_range_m;
     if let Some(bad) = heights
@@ -162,7 +159,9 @@ fn vegetation_problems(bundle: &Bundle) -> Vec<String> {
             Some(format!("id {} where {} was due", o.id, k + 1))
         } else if outside {
             Some(format!("({}, {}) lies outside the colour image", o.x, o.y))
-        } else if !(o.size > 0.0 && (0.0..=1.0).contains(&o.score)) {
+        } else if !(o.x.is_finite() && o.y.is_finite()) {
+            Some(format!("position ({}, {}) is not finite", o.x, o.y))
+        } else if !(o.size.is_finite() && o.size > 0.0 && (0.0..=1.0).contains(&o.score)) {
             Some(format!("size {} or score {} out of range", o.size, o.score))
         } else {
             None

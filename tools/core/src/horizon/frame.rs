@@ -41,6 +41,13 @@ pub struct RaycastFrame {
     pub steps: Steps,
 }
 
+impl RaycastFrame {
+    /// Host bytes a frame costs per pixel at its peak: colour and depth in
+    /// column tiles and again as [`Rows`], and the encoded image (a budget
+    /// estimate for callers checking a `--size` before rendering).
+    pub const BYTES_PER_PIXEL: u64 = 24;
+}
+
 /// A frame in row-major order, top row first: what image files and depth
 /// files hold.
 #[derive(Debug, Clone, Default, PartialEq)]

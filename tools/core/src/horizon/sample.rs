@@ -320,9 +320,44 @@ pub struct Terrain<'a> {
     last: f64,
 }
 
+impl Terrain<'_> {
+    /// Bytes a terrain holds per grid vertex at most: the heights and the
+    /// surface's edge copy, the tiled march copy, vertex colours, the
+    /// hillshade and fixed-point heights (4 bytes each) and the mask.
+    const BYTES_PER_VERTEX: u64 = 25;
+    /// Bytes the drape's colour levels hold per drape pixel (the image and
+    /// its halving levels, 4/3 × 4 bytes, rounded up).
+    const BYTES_PER_DRAPE_PIXEL: u64 = 6;
+
+    /// Refuse, before anything is allocated, a terrain of `side`² vertices
+    /// with a drape of `drape_pixels` that the memory budget cannot hold or
+    /// the march's 32-bit indices cannot address. Every caller building a
+    /// [`Terrain`] from a bundle checks here first.
+    pub fn check_size(side: usize, drape_pixels: u64) -> crate::Result<()> {
+        let tiles_across = side.div_ceil(TILE) as u64;
+        if tiles_across * tiles_across * (TILE * TILE) as u64 >= u64::from(u32::MAX) {
+            return Err(crate::Error::Input(format!(
+                "the raycaster addresses at most {}² vertices; this grid has {side}²",
+                (u32::MAX as f64).sqrt() as u64 / TILE as u64 * TILE as u64
+            )));
+        }
+        let vertices = (side as u64).saturating_mul(side as u64);
+        crate::memory::check(
+            &format!("the raycaster's copy of the {side}×{side} grid and its drape"),
+            1,
+            vertices
+                .saturating_mul(Self::BYTES_PER_VERTEX)
+                .saturating_add(drape_pixels.saturating_mul(Self::BYTES_PER_DRAPE_PIXEL)),
+            "open a smaller region",
+        )
+    }
+}
+
 impl<'a> Terrain<'a> {
     /// A terrain over `heights` (metres) and `mask`, borrowed (e.g. from a
     /// mapped bundle) or owned (a viewer keeping one for its session).
+    /// Grids from user data are checked with [`Terrain::check_size`] first;
+    /// this panics on a grid the march cannot address.
     pub fn new(
         side: usize,
         cell_m: f64,
