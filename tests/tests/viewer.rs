@@ -9,7 +9,7 @@ use relevo_view::flight::Flight;
 use relevo_view::headless::{device, render_once, Shot};
 use relevo_view::scene::Scene;
 use relevo_view::settings::{Settings, TerrainMode};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 const SIZE: [u32; 2] = [480, 270];
 
@@ -780,4 +780,92 @@ fn the_samples_tab_renders_its_overlay_for_inspection() {
         message.contains("broken.csv") && message.contains("line 2"),
         "{message}"
     );
+}
+
+/// A copy of `bundle` named `name` with `edit` applied to `file`, its size
+/// and hash fixed up in the manifest as a careful forger would.
+fn forged(bundle: &Path, name: &str, file: &str, edit: &dyn Fn(&mut Vec<u8>)) -> PathBuf {
+    let copy = bundle.with_file_name(name);
+    let status = std::process::Command::new("cp")
+        .args(["-a".as_ref(), bundle.as_os_str(), copy.as_os_str()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let mut bytes = std::fs::read(copy.join(file)).unwrap();
+    edit(&mut bytes);
+    std::fs::write(copy.join(file), &bytes).unwrap();
+    let path = copy.join("manifest.json");
+    let mut manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let sha = relevo_core::bundle::sha256_file(&copy.join(file))
+        .unwrap()
+        .1;
+    for artifact in manifest["artifacts"].as_object_mut().unwrap().values_mut() {
+        if artifact["file"] == file {
+            artifact["bytes"] = bytes.len().into();
+            artifact["sha256"] = sha.clone().into();
+        }
+    }
+    std::fs::write(&path, serde_json::to_string_pretty(&manifest).unwrap()).unwrap();
+    copy
+}
+
+/// The viewer opens hostile bundles through relevo-core's checks, as the
+/// CLI does: a quadtree whose child points back at the root (the viewer
+/// used to overflow its stack), an atlas page that decodes to 40000² (it
+/// used to allocate 6.4 GB and abort), heights that are a FIFO (it used to
+/// wait for ever) and a NaN height at a data vertex are each refused when
+/// the scene opens, naming the file.
+#[test]
+fn the_viewer_refuses_hostile_bundles_by_name_when_it_opens_them() {
+    let d = tempfile::tempdir().unwrap();
+    let bundle = prep_region(
+        &repo("data/olinda/REGION.toml"),
+        &d.path().join("olinda.relevo"),
+    );
+    let cycle = forged(&bundle, "cycle.relevo", "clusters/nodes.bin", &|b| {
+        // Node 0's first child slot (children at byte 48 of 68) → node 0.
+        let slot = (0..4)
+            .map(|k| 48 + 4 * k)
+            .find(|&o| b[o..o + 4] != [0xff; 4])
+            .unwrap();
+        b[slot..slot + 4].copy_from_slice(&0u32.to_le_bytes());
+    });
+    let bomb = forged(&bundle, "bomb.relevo", "clusters/atlas_000.png", &|b| {
+        let mut out = Vec::new();
+        let mut encoder = png::Encoder::new(&mut out, 40000, 40000);
+        encoder.set_color(png::ColorType::Rgba);
+        let mut writer = encoder.write_header().unwrap();
+        writer
+            .write_chunk(png::chunk::IDAT, &[0x78, 0x9c, 0, 0, 0, 0])
+            .unwrap();
+        drop(writer);
+        *b = out;
+    });
+    let mask = std::fs::read(bundle.join("mask.u8")).unwrap();
+    let vertex = mask.iter().position(|&m| m == 1).unwrap();
+    let nan = forged(&bundle, "nan.relevo", "height.f32", &|b| {
+        b[vertex * 4..vertex * 4 + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    });
+    let fifo = forged(&bundle, "fifo.relevo", "height.f32", &|_| {});
+    std::fs::remove_file(fifo.join("height.f32")).unwrap();
+    let made = std::process::Command::new("mkfifo")
+        .arg(fifo.join("height.f32"))
+        .status()
+        .unwrap();
+    assert!(made.success());
+    for (forgery, needles) in [
+        (&cycle, ["clusters", "not a later node"]),
+        (&bomb, ["atlas_000.png", "40000×40000"]),
+        (&nan, ["height.f32", "is not a finite number"]),
+        (&fifo, ["height.f32", "FIFO"]),
+    ] {
+        let message = match Scene::open(forgery) {
+            Ok(_) => panic!("{} opened", forgery.display()),
+            Err(e) => format!("{e:#}"),
+        };
+        for needle in needles {
+            assert!(message.contains(needle), "{}: {message}", forgery.display());
+        }
+    }
 }

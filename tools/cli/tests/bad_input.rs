@@ -824,6 +824,15 @@ fn results_that_would_be_unusable_are_refused_and_leave_nothing() {
         );
     }
 
+    // A negative scale used to reach the writer's own check, which named
+    // the staging folder.
+    fails(
+        d.path(),
+        &["prep", "--dem", "dem.tif", "--z-scale=-1", "--out", "o.relevo"],
+        &["z_scale must be a finite, positive number, got -1"],
+        &["dem.tif"],
+    );
+
     let (_d, bundle, work) = sample_bundle_and_workspace();
     let bundle = bundle.to_str().unwrap();
     fails(

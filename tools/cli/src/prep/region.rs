@@ -204,9 +204,11 @@ impl RegionSpec {
         if self.dem.files.is_empty() {
             bail!("dem.files is empty: give at least one elevation raster");
         }
-        if !(self.z_scale.is_finite() && self.z_scale != 0.0) {
+        // A bundle's heights are metres up (its manifest refuses any other
+        // scale); a negative scale would turn the terrain upside down.
+        if !(self.z_scale.is_finite() && self.z_scale > 0.0) {
             bail!(
-                "z_scale must be a finite, non-zero number, got {}",
+                "z_scale must be a finite, positive number, got {}",
                 self.z_scale
             );
         }
