@@ -41,14 +41,7 @@ pub fn decode_png(path: &Path) -> (Vec<u8>, [u32; 2]) {
     (rgba, [w as u32, h as u32])
 }
 
-/// How far an image is from its reference.
-#[derive(Debug, Clone, Copy)]
-pub struct ImageDifference {
-    /// Pixels with any channel more than `threshold` levels off.
-    pub pixels_off: usize,
-    /// Mean absolute difference over all channels, in levels.
-    pub mean: f64,
-}
+pub use relevo_core::raster::compare::ImageDifference;
 
 /// Compare RGBA8 `actual` (`size`) with the reference PNG `reference`
 /// (rewritten when blessing). On a size change or when `accept` refuses the
@@ -74,22 +67,7 @@ pub fn compare_with_reference(
         reference.with_file_name(format!("{stem}-{suffix}.png"))
     };
     let difference = if want_size == size {
-        let pixels_off = actual
-            .chunks(4)
-            .zip(want.chunks(4))
-            .filter(|(a, b)| {
-                a.iter()
-                    .zip(b.iter())
-                    .any(|(x, y)| x.abs_diff(*y) > threshold)
-            })
-            .count();
-        let mean = actual
-            .iter()
-            .zip(&want)
-            .map(|(a, b)| a.abs_diff(*b) as f64)
-            .sum::<f64>()
-            / actual.len() as f64;
-        Some(ImageDifference { pixels_off, mean })
+        relevo_core::raster::compare::difference(actual, &want, threshold)
     } else {
         None
     };
@@ -98,14 +76,7 @@ pub fn compare_with_reference(
         _ => {
             std::fs::write(beside("actual"), encode(actual)).unwrap();
             if want_size == size {
-                let diff: Vec<u8> = actual
-                    .chunks(4)
-                    .zip(want.chunks(4))
-                    .flat_map(|(a, b)| {
-                        let d = (0..3).map(|k| a[k].abs_diff(b[k])).max().unwrap_or(0);
-                        [d.saturating_mul(8), 0, 0, 255]
-                    })
-                    .collect();
+                let diff = relevo_core::raster::compare::difference_image(actual, &want);
                 std::fs::write(beside("difference"), encode(&diff)).unwrap();
             }
             panic!(

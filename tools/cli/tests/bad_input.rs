@@ -828,7 +828,14 @@ fn results_that_would_be_unusable_are_refused_and_leave_nothing() {
     // the staging folder.
     fails(
         d.path(),
-        &["prep", "--dem", "dem.tif", "--z-scale=-1", "--out", "o.relevo"],
+        &[
+            "prep",
+            "--dem",
+            "dem.tif",
+            "--z-scale=-1",
+            "--out",
+            "o.relevo",
+        ],
         &["z_scale must be a finite, positive number, got -1"],
         &["dem.tif"],
     );

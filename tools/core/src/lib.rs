@@ -25,6 +25,8 @@
 //!   representations the floating horizon is compared with.
 //! - [`bundle`]: the `NAME.relevo/` directory: manifest, artifacts, their checks.
 //! - [`validation`]: a whole bundle checked, clusters included.
+//! - [`golden`]: a bundle against a golden record, and two bundles
+//!   compared (regression tests of a region's outputs).
 //! - [`memory`]: the memory budget every large allocation is checked against.
 
 pub mod atomic;
@@ -33,6 +35,7 @@ pub mod camera;
 pub mod cluster;
 pub mod files;
 pub mod geo;
+pub mod golden;
 pub mod grid;
 pub mod horizon;
 pub mod lp;

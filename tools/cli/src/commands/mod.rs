@@ -3,6 +3,8 @@
 
 mod args;
 pub mod bake;
+mod check;
+mod diff;
 mod fill;
 mod hierarchy;
 mod info;
@@ -10,6 +12,7 @@ mod mesh;
 mod pad;
 mod prep;
 mod render;
+mod report;
 mod stitch;
 mod validate;
 mod veg;
@@ -113,7 +116,45 @@ number) shifts the projection plane instead, as before pitches existed.")]
     #[command(after_help = "Examples:
   relevo validate olinda.relevo")]
     Validate(validate::ValidateArgs),
+    /// Check a bundle against a golden record (exit 0 within tolerance, 1 changed, 2 unusable); --bless writes the record.
+    #[command(after_help = "Examples:
+  relevo check olinda.relevo --golden golden/olinda.json --bless      # write the record (and golden/olinda.home.png)
+  relevo check olinda.relevo --golden golden/olinda.json --junit check.xml --markdown check.md
+  relevo check olinda.relevo --golden golden/olinda.json --height-m 0.01 --render-pixels-off 0.01
+  relevo check olinda.relevo --golden golden/olinda.json --bless --camera harbour=290963,9112753,300,35,-20deg
+
+Exact by default for everything but renders (see docs/guide.md, \"Testing your region in CI\").")]
+    Check(check::CheckArgs),
+    /// Compare two bundles: what changed, where and by how much (exit 0 identical, 1 different, 2 unusable).
+    #[command(after_help = "Examples:
+  relevo diff before.relevo after.relevo
+  relevo diff before.relevo after.relevo --threshold-m 1 --images diff/
+  relevo diff before.relevo after.relevo --json --camera home=290000,9112000,400,45,300")]
+    Diff(diff::DiffArgs),
 }
+
+/// A command's own exit status besides 0 and 1 (`relevo check` and `relevo
+/// diff`: 1 a difference, 2 inputs that cannot be compared), with its
+/// message.
+#[derive(Debug)]
+pub struct Exit {
+    pub code: u8,
+    pub message: String,
+}
+
+impl Exit {
+    pub fn with(code: u8, message: String) -> Exit {
+        Exit { code, message }
+    }
+}
+
+impl std::fmt::Display for Exit {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+impl std::error::Error for Exit {}
 
 /// Run the parsed command.
 pub fn run(cli: Cli) -> Result<()> {
@@ -132,6 +173,8 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Bake(a) => bake::run(a),
         Command::Info(a) => info::run(a),
         Command::Validate(a) => validate::run(a),
+        Command::Check(a) => check::run(a),
+        Command::Diff(a) => diff::run(a),
     }
 }
 

@@ -4,6 +4,7 @@
 //! and fitting into a frame for what people look at; a drape derived from
 //! the terrain.
 
+pub mod compare;
 pub mod distance;
 pub mod encoding;
 pub mod fill;

@@ -8,7 +8,7 @@ use crate::{Error, Result};
 
 pub const HEADER: &str = "id;x;y;class;size;score";
 
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct VegObject {
     pub id: u64,
     pub x: f64,
