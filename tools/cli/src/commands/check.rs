@@ -41,6 +41,10 @@ pub struct CheckArgs {
     pub no_renders: bool,
     #[command(flatten)]
     pub tolerances: ToleranceArgs,
+    /// Do not compare this artifact (a manifest key, a prefix ending in
+    /// `*` such as `clusters*`, or `render:NAME`); repeatable.
+    #[arg(long, value_name = "KEY")]
+    pub skip: Vec<String>,
     /// Also write the result as JUnit XML (one test case per artifact).
     #[arg(long, value_name = "FILE")]
     pub junit: Option<PathBuf>,
@@ -128,7 +132,11 @@ pub fn run(a: CheckArgs) -> Result<()> {
         .check()
         .map_err(|p| unusable(anyhow::anyhow!(p)))?;
     let dir = a.golden.parent().unwrap_or(Path::new("."));
-    let result = golden::check(&bundle, &record, dir, &tolerances)
+    let options = golden::CheckOptions {
+        tolerances,
+        skip: a.skip.clone(),
+    };
+    let result = golden::check(&bundle, &record, dir, &options)
         .with_context(|| format!("{} against {}", a.bundle.display(), a.golden.display()))
         .map_err(unusable)?;
     let name = a.bundle.display().to_string();
@@ -186,11 +194,15 @@ fn bless(a: &CheckArgs, bundle: &Bundle) -> Result<()> {
         .map_or_else(Tolerances::default, |r| r.tolerances);
     let tolerances = a.tolerances.over(base);
     tolerances.check().map_err(|p| anyhow::anyhow!(p))?;
-    let mut record = record::record_bundle(bundle, tolerances)?;
     let stem = a
         .golden
         .file_stem()
         .map_or_else(|| "golden".into(), |s| s.to_string_lossy().to_string());
+    let (mut record, references) = record::record_bundle(bundle, tolerances, &stem)?;
+    let mut pngs: Vec<(PathBuf, Vec<u8>)> = references
+        .into_iter()
+        .map(|(name, png)| (a.golden.with_file_name(name), png))
+        .collect();
     let cameras: Vec<(String, String, [u32; 2])> = if a.no_renders {
         Vec::new()
     } else if !a.cameras.is_empty() {
@@ -214,7 +226,6 @@ fn bless(a: &CheckArgs, bundle: &Bundle) -> Result<()> {
         let home = View::home(&bundle.manifest.grid, a.render_size);
         vec![("home".into(), home.pose().to_string(), a.render_size)]
     };
-    let mut pngs = Vec::new();
     for (name, camera, size) in cameras {
         let render = RenderRecord {
             file: format!("{stem}.{name}.png"),

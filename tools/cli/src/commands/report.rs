@@ -9,6 +9,14 @@ use std::fmt::Write;
 pub fn place_words(p: &Place) -> String {
     let [c0, r0, c1, r1] = p.cells;
     let [w, s, e, n] = p.bounds;
+    if c1 == c0 + 1 && r1 == r0 + 1 {
+        return format!(
+            "column {c0}, row {r0} (E {:.1}, N {:.1}): {}",
+            (w + e) / 2.0,
+            (s + n) / 2.0,
+            p.what
+        );
+    }
     format!(
         "block ({}, {}): columns {c0}–{}, rows {r0}–{}, E {w:.1}–{e:.1}, N {s:.1}–{n:.1}: {}",
         p.block[0],
@@ -24,6 +32,7 @@ fn verdict(f: &Finding) -> &'static str {
         Outcome::Unchanged => "unchanged",
         Outcome::WithinTolerance => "within tolerance",
         Outcome::Changed => "CHANGED",
+        Outcome::Skipped => "skipped",
     }
 }
 
@@ -78,6 +87,11 @@ pub fn junit(report: &CheckReport, bundle: &str) -> String {
         .filter(|f| f.outcome == Outcome::Changed)
         .count();
     let tests = report.findings.len();
+    let skipped = report
+        .findings
+        .iter()
+        .filter(|f| f.outcome == Outcome::Skipped)
+        .count();
     let suite = format!("relevo check {}", report.region);
     let mut out = String::new();
     let _ = writeln!(out, r#"<?xml version="1.0" encoding="UTF-8"?>"#);
@@ -87,7 +101,7 @@ pub fn junit(report: &CheckReport, bundle: &str) -> String {
     );
     let _ = writeln!(
         out,
-        r#"  <testsuite name="{}" tests="{tests}" failures="{failures}" errors="0" skipped="0">"#,
+        r#"  <testsuite name="{}" tests="{tests}" failures="{failures}" errors="0" skipped="{skipped}">"#,
         xml(&suite)
     );
     let _ = writeln!(
@@ -117,6 +131,10 @@ pub fn junit(report: &CheckReport, bundle: &str) -> String {
                 )),
                 xml(&body)
             );
+            let _ = writeln!(out, "    </testcase>");
+        } else if f.outcome == Outcome::Skipped {
+            let _ = writeln!(out, ">");
+            let _ = writeln!(out, r#"      <skipped message="--skip"/>"#);
             let _ = writeln!(out, "    </testcase>");
         } else {
             let _ = writeln!(out, ">");

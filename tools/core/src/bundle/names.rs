@@ -51,6 +51,8 @@ pub const VEGETATION_SAMPLES: ArtifactName = ArtifactName {
 /// of their manifest keys (atlas pages are `clusters_atlas_NNN`).
 pub const CLUSTERS_DIR: &str = "clusters";
 pub const CLUSTERS_PREFIX: &str = "clusters";
+/// Manifest keys of the atlas pages: this prefix and the page, `NNN`.
+pub const CLUSTER_PAGE_PREFIX: &str = "clusters_atlas_";
 /// The cluster index: options, classes, pages, bake report (JSON).
 pub const CLUSTER_INDEX: ArtifactName = ArtifactName {
     key: "clusters_index",

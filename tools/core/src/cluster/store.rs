@@ -54,7 +54,7 @@ pub struct Page {
 /// File and manifest key of atlas page `i`.
 fn page_name(i: usize) -> (String, String) {
     (
-        format!("{}_atlas_{i:03}", names::CLUSTERS_PREFIX),
+        format!("{}{i:03}", names::CLUSTER_PAGE_PREFIX),
         format!("{}/atlas_{i:03}.png", names::CLUSTERS_DIR),
     )
 }

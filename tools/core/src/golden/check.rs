@@ -5,7 +5,7 @@
 use super::blocks::{Block, BlockDigest, BlockLayout, BlockStatistics};
 use super::record::{self, GoldenRecord, RenderRecord, Tolerances};
 use super::vegetation::{ClassBlock, ClassDigest, VegetationDigest};
-use crate::bundle::Bundle;
+use crate::bundle::{names, Bundle};
 use crate::geo::GeoTransform;
 use crate::raster::compare::{difference, ImageDifference};
 use crate::scene::{self, CameraPose, View};
@@ -24,6 +24,8 @@ pub enum Outcome {
     WithinTolerance,
     /// Changed beyond a tolerance, or an artifact the record lacks.
     Changed,
+    /// Not compared: the user asked to skip it.
+    Skipped,
 }
 
 /// Where a change is: a block of the grid (or the drape) and its extent in
@@ -75,16 +77,35 @@ impl CheckReport {
     }
 }
 
+/// What a check compares, and how strictly.
+#[derive(Debug, Clone, Default)]
+pub struct CheckOptions {
+    pub tolerances: Tolerances,
+    /// Artifacts not compared: manifest keys, or prefixes of them ending in
+    /// `*` (`clusters*`), and `render:NAME`.
+    pub skip: Vec<String>,
+}
+
+impl CheckOptions {
+    fn skips(&self, key: &str) -> bool {
+        self.skip.iter().any(|s| match s.strip_suffix('*') {
+            Some(prefix) => key.starts_with(prefix),
+            None => key == s,
+        })
+    }
+}
+
 /// Check `bundle` against `record` (read from the folder `record_dir`,
-/// where its renders lie) with `tolerances`. An error means the inputs
-/// cannot be compared: a record of another region, an artifact the record
-/// lists that the bundle lacks, a missing reference render.
+/// where its renders lie). An error means the inputs cannot be compared: a
+/// record of another region, an artifact the record lists that the bundle
+/// lacks, a missing reference render.
 pub fn check(
     bundle: &Bundle,
     record: &GoldenRecord,
     record_dir: &Path,
-    tolerances: &Tolerances,
+    options: &CheckOptions,
 ) -> Result<CheckReport> {
+    let tolerances = &options.tolerances;
     let m = &bundle.manifest;
     if record.region != m.region {
         return Err(Error::Input(format!(
@@ -97,8 +118,23 @@ pub fn check(
     let mut findings = Vec::new();
     let in_bundle: BTreeMap<&String, &crate::bundle::Artifact> =
         m.artifacts.iter().chain(&m.exports).collect();
-    for key in record.artifacts.keys() {
-        if !in_bundle.contains_key(key) {
+    // An atlas page can go when the clusters are baked into fewer pages:
+    // a change. Any other artifact the record lists must be there.
+    let has_clusters = in_bundle.contains_key(&names::CLUSTER_INDEX.key.to_string());
+    for (key, recorded) in &record.artifacts {
+        if in_bundle.contains_key(key) {
+            continue;
+        }
+        if has_clusters && key.starts_with(names::CLUSTER_PAGE_PREFIX) {
+            findings.push(changed(
+                key,
+                format!(
+                    "{} is gone: the clusters were baked into fewer pages",
+                    recorded.file
+                ),
+                "the record's artifacts",
+            ));
+        } else {
             return Err(Error::invalid(
                 &bundle.dir,
                 format!("has no artifact {key:?}, which the golden record lists"),
@@ -108,6 +144,10 @@ pub fn check(
     let same_grid =
         record.grid.side == m.grid.side && record.grid.geotransform == m.grid.geotransform;
     for (key, artifact) in &in_bundle {
+        if options.skips(key) {
+            findings.push(skipped(key));
+            continue;
+        }
         let Some(recorded) = record.artifacts.get(*key) else {
             findings.push(Finding {
                 artifact: (*key).clone(),
@@ -126,6 +166,23 @@ pub fn check(
                 tolerance: "exact".into(),
                 places: Vec::new(),
             });
+            continue;
+        }
+        if let (Some(r), true) = (&recorded.reference, same_grid) {
+            let statistics = recorded
+                .blocks
+                .as_ref()
+                .map_or(BlockStatistics::Max, |b| b.statistics);
+            let tolerance = move |v: f64| allowed(statistics, tolerances, v);
+            let judge = super::reference::Judge {
+                tolerance: &tolerance,
+                words: tolerance_words(statistics, tolerances),
+                unit: unit(statistics),
+                exact: is_exact(statistics, tolerances),
+            };
+            findings.push(super::reference::compare(
+                bundle, key, r, record_dir, &judge,
+            )?);
             continue;
         }
         let (blocks, classes) = record::current_summary(bundle, key)?;
@@ -149,7 +206,11 @@ pub fn check(
         findings.push(finding);
     }
     for render in &record.renders {
-        findings.push(check_render(bundle, render, record_dir, tolerances)?);
+        let key = format!("render:{}", render.name);
+        findings.push(match options.skips(&key) {
+            true => skipped(&key),
+            false => check_render(bundle, render, record_dir, tolerances)?,
+        });
     }
     Ok(CheckReport {
         region: record.region.clone(),
@@ -163,6 +224,16 @@ fn block_geo(bundle: &Bundle, digest: &BlockDigest) -> GeoTransform {
     match (&bundle.manifest.color, digest.statistics) {
         (Some(c), BlockStatistics::MeanColour) => c.geotransform,
         _ => bundle.manifest.grid.geotransform,
+    }
+}
+
+fn skipped(key: &str) -> Finding {
+    Finding {
+        artifact: key.to_string(),
+        outcome: Outcome::Skipped,
+        figure: "not compared (--skip)".into(),
+        tolerance: "skipped".into(),
+        places: Vec::new(),
     }
 }
 
@@ -206,6 +277,16 @@ fn allowed(statistics: BlockStatistics, t: &Tolerances, recorded: f64) -> f64 {
     }
 }
 
+/// Whether the tolerance of values of this kind is zero (any change fails).
+fn is_exact(statistics: BlockStatistics, t: &Tolerances) -> bool {
+    match statistics {
+        BlockStatistics::MinMeanMax => t.height_m == 0.0 && t.height_relative == 0.0,
+        BlockStatistics::Max => t.lp_error_m == 0.0,
+        BlockStatistics::Count => true,
+        BlockStatistics::MeanColour => t.drape_levels == 0.0,
+    }
+}
+
 fn tolerance_words(statistics: BlockStatistics, t: &Tolerances) -> String {
     let exact = |v: f64| v == 0.0;
     match statistics {
@@ -213,17 +294,14 @@ fn tolerance_words(statistics: BlockStatistics, t: &Tolerances) -> String {
             "exact heights".into()
         }
         BlockStatistics::MinMeanMax => format!(
-            "each block's lowest, mean and highest height within {} m + {} × height",
+            "heights within {} m + {} × height",
             t.height_m, t.height_relative
         ),
         BlockStatistics::Max if exact(t.lp_error_m) => "exact LP errors".into(),
-        BlockStatistics::Max => format!("each block's largest LP error within {} m", t.lp_error_m),
+        BlockStatistics::Max => format!("LP errors within {} m", t.lp_error_m),
         BlockStatistics::Count => "exact data cells per block".into(),
         BlockStatistics::MeanColour if exact(t.drape_levels) => "exact drape colour".into(),
-        BlockStatistics::MeanColour => format!(
-            "each block's mean red, green and blue within {} levels",
-            t.drape_levels
-        ),
+        BlockStatistics::MeanColour => format!("drape colour within {} levels", t.drape_levels),
     }
 }
 
@@ -245,7 +323,16 @@ fn compare_blocks(
     geo: &GeoTransform,
     t: &Tolerances,
 ) -> Finding {
-    let tolerance = tolerance_words(before.statistics, t);
+    let tolerance = format!(
+        "{}, judged by each block's {} (no reference grid beside the record)",
+        tolerance_words(before.statistics, t),
+        match before.statistics {
+            BlockStatistics::MinMeanMax => "lowest, mean and highest value",
+            BlockStatistics::Max => "largest value",
+            BlockStatistics::Count => "count",
+            BlockStatistics::MeanColour => "mean red, green and blue",
+        }
+    );
     if before.width != after.width || before.height != after.height {
         return changed(
             key,
@@ -258,12 +345,7 @@ fn compare_blocks(
     }
     let (old, new) = (before.blocks(), after.blocks());
     let layout = before.layout();
-    let exact = match before.statistics {
-        BlockStatistics::MinMeanMax => t.height_m == 0.0 && t.height_relative == 0.0,
-        BlockStatistics::Max => t.lp_error_m == 0.0,
-        BlockStatistics::Count => true,
-        BlockStatistics::MeanColour => t.drape_levels == 0.0,
-    };
+    let exact = is_exact(before.statistics, t);
     let (mut beyond, mut within, mut largest) = (Vec::new(), Vec::new(), 0.0f64);
     for (by, (old_row, new_row)) in old.iter().zip(&new).enumerate() {
         for (bx, (o, n)) in old_row.iter().zip(new_row).enumerate() {

@@ -4,6 +4,8 @@
 //!
 //! - [`record`]: the golden record — per artifact its hash and summaries,
 //!   the tolerances, reference renders — and reading and writing it.
+//! - [`reference`]: grids kept beside the record as PNGs, compared vertex
+//!   by vertex.
 //! - [`blocks`]: grids summarised by blocks (hash and statistics), one text
 //!   line per row of blocks.
 //! - [`vegetation`]: the database summarised by class and block, and two
@@ -16,7 +18,8 @@ pub mod blocks;
 pub mod check;
 pub mod diff;
 pub mod record;
+pub mod reference;
 pub mod vegetation;
 
-pub use check::{check, CheckReport, Finding, Outcome, Place};
+pub use check::{check, CheckOptions, CheckReport, Finding, Outcome, Place};
 pub use record::{GoldenRecord, RenderRecord, Tolerances};

@@ -2,10 +2,13 @@
 //! enough to commit and review. Per artifact its SHA-256, and for grids and
 //! the vegetation a summary by blocks (see [`super::blocks`],
 //! [`super::vegetation`]) that lets a check judge a change against a
-//! tolerance and say where it is; reference renders at named cameras are
-//! PNGs beside the record.
+//! tolerance and say where it is. Beside the record lie PNGs: reference
+//! renders at named cameras, and for grids up to [`MOST_REFERENCE_CELLS`](super::reference::MOST_REFERENCE_CELLS)
+//! the heights, LP errors and drape themselves, so that a check judges
+//! every vertex against its tolerance.
 
 use super::blocks::{self, BlockDigest, BlockLayout, BlockStatistics, CellValues, Cells};
+use super::reference::{self, Reference};
 use super::vegetation::{self, VegetationDigest};
 use crate::bundle::{names, Bundle};
 use crate::geo::GeoTransform;
@@ -55,6 +58,10 @@ pub struct ArtifactRecord {
     pub blocks: Option<BlockDigest>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub classes: Option<VegetationDigest>,
+    /// Heights, LP errors and the drape: the values themselves, as a PNG
+    /// beside the record (grids up to [`MOST_REFERENCE_CELLS`](super::reference::MOST_REFERENCE_CELLS)).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference: Option<Reference>,
 }
 
 /// A render at a named camera, with relevo-core's raycaster.
@@ -210,13 +217,30 @@ fn summary_of(
     })
 }
 
+/// A file to write beside the record: its name and bytes.
+pub type Beside = (String, Vec<u8>);
+
 /// The record of `bundle`: every artifact and export with its hash, grids
-/// and vegetation summarised; `renders` are added by the caller.
-pub fn record_bundle(bundle: &Bundle, tolerances: Tolerances) -> Result<GoldenRecord> {
+/// and vegetation summarised, and the reference grids to write beside the
+/// record as `STEM.KEY.png` (file name, PNG); `renders` are added by the
+/// caller.
+pub fn record_bundle(
+    bundle: &Bundle,
+    tolerances: Tolerances,
+    stem: &str,
+) -> Result<(GoldenRecord, Vec<Beside>)> {
     let m = &bundle.manifest;
     let mut artifacts = BTreeMap::new();
+    let mut files = Vec::new();
     for (key, a) in m.artifacts.iter().chain(&m.exports) {
         let (blocks, classes) = summary_of(bundle, key)?;
+        let reference = match reference::make(bundle, key, format!("{stem}.{key}.png"))? {
+            Some((r, png)) => {
+                files.push((r.file.clone(), png));
+                Some(r)
+            }
+            None => None,
+        };
         artifacts.insert(
             key.clone(),
             ArtifactRecord {
@@ -225,10 +249,11 @@ pub fn record_bundle(bundle: &Bundle, tolerances: Tolerances) -> Result<GoldenRe
                 sha256: a.sha256.clone(),
                 blocks,
                 classes,
+                reference,
             },
         );
     }
-    Ok(GoldenRecord {
+    let record = GoldenRecord {
         format: FORMAT.into(),
         format_version: FORMAT_VERSION,
         region: m.region.clone(),
@@ -240,7 +265,8 @@ pub fn record_bundle(bundle: &Bundle, tolerances: Tolerances) -> Result<GoldenRe
         tolerances,
         artifacts,
         renders: Vec::new(),
-    })
+    };
+    Ok((record, files))
 }
 
 /// The summary `bundle` has now of artifact `key` (for a check).
@@ -287,17 +313,23 @@ pub fn read(path: &Path) -> Result<GoldenRecord> {
                 .map_err(|p| Error::invalid(path, format!("artifact {key}, class {class}: {p}")))?;
         }
     }
-    for r in &record.renders {
-        let inside = Path::new(&r.file)
+    let beside = record
+        .renders
+        .iter()
+        .map(|r| (format!("render {}", r.name), &r.file))
+        .chain(record.artifacts.iter().filter_map(|(k, a)| {
+            a.reference
+                .as_ref()
+                .map(|r| (format!("artifact {k}"), &r.file))
+        }));
+    for (what, file) in beside {
+        let inside = Path::new(file)
             .components()
             .all(|c| matches!(c, std::path::Component::Normal(_)));
-        if !inside || r.file.is_empty() {
+        if !inside || file.is_empty() {
             return Err(Error::invalid(
                 path,
-                format!(
-                    "render {}: {:?} is not a file beside the record",
-                    r.name, r.file
-                ),
+                format!("{what}: {file:?} is not a file beside the record"),
             ));
         }
     }

@@ -1,4 +1,5 @@
-//! PNG encoding of RGBA8 images (drape textures, renders, overlays).
+//! PNG encoding of RGBA8 images (drape textures, renders, overlays) and of
+//! 16-bit grey values (golden records' reference grids).
 
 use crate::{Error, Result};
 
@@ -62,6 +63,55 @@ pub fn decode_rgba(bytes: &[u8]) -> Result<(Vec<u8>, usize, usize)> {
         _ => buf.iter().flat_map(|&g| [g, g, g, 255]).collect(),
     };
     Ok((rgba, w, h))
+}
+
+/// 16-bit greyscale values (row-major, `width`×`height`) encoded as PNG.
+pub fn encode_grey16(values: &[u16], width: usize, height: usize) -> Result<Vec<u8>> {
+    let too_large = || Error::Input(format!("{width}×{height} is too large for a PNG"));
+    let (w, h) = (
+        u32::try_from(width).map_err(|_| too_large())?,
+        u32::try_from(height).map_err(|_| too_large())?,
+    );
+    let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_be_bytes()).collect();
+    let mut out = Vec::new();
+    let mut encoder = png::Encoder::new(&mut out, w, h);
+    encoder.set_color(png::ColorType::Grayscale);
+    encoder.set_depth(png::BitDepth::Sixteen);
+    encoder
+        .write_header()
+        .and_then(|mut writer| writer.write_image_data(&bytes))
+        .map_err(|e| Error::Input(format!("PNG encoding: {e}")))?;
+    Ok(out)
+}
+
+/// A 16-bit greyscale PNG decoded: values, width, height. Any other kind
+/// of PNG is refused; the declared size is checked against the memory
+/// budget before anything is decoded.
+pub fn decode_grey16(bytes: &[u8]) -> Result<(Vec<u16>, usize, usize)> {
+    let bad = |e: png::DecodingError| Error::Input(format!("PNG decoding: {e}"));
+    let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+    let mut reader = decoder.read_info().map_err(bad)?;
+    let (w, h) = reader.info().size();
+    let (colour, depth) = (reader.info().color_type, reader.info().bit_depth);
+    if (colour, depth) != (png::ColorType::Grayscale, png::BitDepth::Sixteen) {
+        return Err(Error::Input(format!(
+            "a {colour:?} PNG of {depth:?} bits, expected 16-bit greyscale"
+        )));
+    }
+    crate::memory::check(
+        &format!("decoding a {w}×{h} PNG"),
+        u64::from(w) * u64::from(h),
+        4,
+        "use a smaller image",
+    )?;
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buf).map_err(bad)?;
+    buf.truncate(info.buffer_size());
+    let values = buf
+        .chunks_exact(2)
+        .map(|b| u16::from_be_bytes([b[0], b[1]]))
+        .collect();
+    Ok((values, info.width as usize, info.height as usize))
 }
 
 #[cfg(test)]
