@@ -5,6 +5,7 @@
 //! `relevo` binary.
 
 mod bench;
+mod check;
 mod clusters;
 mod measure;
 mod render;
@@ -28,7 +29,8 @@ use std::process::ExitCode;
   cargo run --release -p relevo-bench -- veg --json --runs 3 --max-side 10000
   cargo run --release -p relevo-bench -- veg-protocol --json
   cargo run --release -p relevo-bench -- view --json --runs 3
-  cargo run --release -p relevo-bench -- clusters --json --runs 5"
+  cargo run --release -p relevo-bench -- clusters --json --runs 5
+  cargo run --release -p relevo-bench -- check --json --runs 5"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -136,6 +138,13 @@ enum BenchCommand {
         #[arg(long, value_name = "DIR")]
         pictures: Option<PathBuf>,
     },
+    /// Regression checks on the sample region and Grenoble: bless, check
+    /// (unchanged; every grid compared with its reference), diff, beside
+    /// `relevo validate` on the same bundle.
+    #[command(after_help = "Examples:
+  relevo-bench check
+  relevo-bench check --json --runs 5")]
+    Check(BenchArgs),
     /// The viewer's renderer: frame time of every mode at 1280×720 and
     /// 1920×1080 on the GPU found (lavapipe without one).
     #[command(after_help = "Examples:
@@ -204,6 +213,7 @@ fn main() -> ExitCode {
             None => clusters::clusters(&a.repo, a.runs.max(1), max_objects, budget_mib, a.json),
         },
         BenchCommand::Ingest(a) => bench::ingest(&a.repo, &a.data, a.runs.max(1), a.json),
+        BenchCommand::Check(a) => check::run(&a.repo, a.runs.max(1), a.json),
         BenchCommand::Render {
             common: a,
             grid,

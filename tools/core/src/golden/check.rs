@@ -97,8 +97,8 @@ impl CheckOptions {
 
 /// Check `bundle` against `record` (read from the folder `record_dir`,
 /// where its renders lie). An error means the inputs cannot be compared: a
-/// record of another region, an artifact the record lists that the bundle
-/// lacks, a missing reference render.
+/// bundle that fails validation, a record of another region, an artifact
+/// the record lists that the bundle lacks, a missing reference file.
 pub fn check(
     bundle: &Bundle,
     record: &GoldenRecord,
@@ -114,6 +114,15 @@ pub fn check(
             bundle.dir.display(),
             m.region
         )));
+    }
+    // The bundle's files must be the ones its manifest describes, since the
+    // comparison starts from the manifest's hashes.
+    let problems = crate::validation::validate(bundle);
+    if !problems.is_empty() {
+        return Err(Error::invalid(
+            &bundle.dir,
+            format!("fails validation: {}", problems.join("; ")),
+        ));
     }
     let mut findings = Vec::new();
     let in_bundle: BTreeMap<&String, &crate::bundle::Artifact> =
