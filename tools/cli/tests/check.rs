@@ -104,6 +104,26 @@ fn burn(raster: &Path, epsg: u32, [c, r, w, h]: [usize; 4], metres: f64, band: O
     std::fs::remove_file(polygon).unwrap();
 }
 
+/// `picture` has the pixels of the reviewed one the guide shows (`docs`,
+/// relative to the repository); `RELEVO_BLESS=1` replaces the reviewed one.
+fn same_picture(picture: &Path, docs: &str) {
+    let reference = repo(docs);
+    if std::env::var_os("RELEVO_BLESS").is_some() {
+        std::fs::copy(picture, &reference).unwrap();
+    }
+    let decode =
+        |p: &Path| relevo_core::raster::png::decode_rgba(&std::fs::read(p).unwrap()).unwrap();
+    let ((a, aw, ah), (b, bw, bh)) = (decode(picture), decode(&reference));
+    assert_eq!((aw, ah), (bw, bh), "{docs}: size");
+    let d = relevo_core::raster::compare::difference(&a, &b, 0).unwrap();
+    assert_eq!(
+        d.pixels_off,
+        0,
+        "{docs} differs from {} ({d:?})",
+        picture.display()
+    );
+}
+
 /// The sample region copied into a temporary folder, its bundle, and the
 /// golden record blessed from it (checked to pass on a second prep).
 struct Fixture {
@@ -193,7 +213,10 @@ fn a_dem_edited_by_5_m_is_found_to_the_vertex_and_passes_a_6_m_tolerance() {
             && text.contains("(column 60, row 40): 30.000 → 35.000 m"),
         "{text}"
     );
-    assert!(d.join("pictures/height_change.png").is_file());
+    same_picture(
+        &d.join("pictures/height_change.png"),
+        "docs/images/diff_height_change.png",
+    );
     // Within a 6 m tolerance (and the files derived from the heights skipped).
     let o = check(
         &raised,
@@ -298,7 +321,13 @@ fn a_moved_sample_rectangle_changes_the_vegetation_and_is_placed() {
         "diff".as_ref(),
         base.as_os_str(),
         moved.as_os_str(),
+        "--images".as_ref(),
+        d.join("pictures").as_os_str(),
     ]));
+    same_picture(
+        &d.join("pictures/vegetation_change.png"),
+        "docs/images/diff_vegetation_change.png",
+    );
     assert!(
         diff.contains("vegetation forest: 11769 →") && diff.contains("clusters: baked again"),
         "{diff}"
