@@ -5,6 +5,7 @@
 // Test support: a failed unwrap is a failed test.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+pub mod forge;
 mod paths;
 
 pub use paths::{repo, repo_root, shared};

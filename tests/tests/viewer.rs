@@ -4,12 +4,13 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use relevo_core::horizon::{distance_of_depth, DistanceBand};
+use relevo_tests::forge::forged;
 use relevo_tests::{compare_with_reference, prep_region, repo};
 use relevo_view::flight::Flight;
 use relevo_view::headless::{device, render_once, Shot};
 use relevo_view::scene::Scene;
 use relevo_view::settings::{Settings, TerrainMode};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 const SIZE: [u32; 2] = [480, 270];
 
@@ -780,34 +781,6 @@ fn the_samples_tab_renders_its_overlay_for_inspection() {
         message.contains("broken.csv") && message.contains("line 2"),
         "{message}"
     );
-}
-
-/// A copy of `bundle` named `name` with `edit` applied to `file`, its size
-/// and hash fixed up in the manifest as a careful forger would.
-fn forged(bundle: &Path, name: &str, file: &str, edit: &dyn Fn(&mut Vec<u8>)) -> PathBuf {
-    let copy = bundle.with_file_name(name);
-    let status = std::process::Command::new("cp")
-        .args(["-a".as_ref(), bundle.as_os_str(), copy.as_os_str()])
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let mut bytes = std::fs::read(copy.join(file)).unwrap();
-    edit(&mut bytes);
-    std::fs::write(copy.join(file), &bytes).unwrap();
-    let path = copy.join("manifest.json");
-    let mut manifest: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
-    let sha = relevo_core::bundle::sha256_file(&copy.join(file))
-        .unwrap()
-        .1;
-    for artifact in manifest["artifacts"].as_object_mut().unwrap().values_mut() {
-        if artifact["file"] == file {
-            artifact["bytes"] = bytes.len().into();
-            artifact["sha256"] = sha.clone().into();
-        }
-    }
-    std::fs::write(&path, serde_json::to_string_pretty(&manifest).unwrap()).unwrap();
-    copy
 }
 
 /// The viewer opens hostile bundles through relevo-core's checks, as the

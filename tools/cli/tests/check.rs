@@ -8,20 +8,9 @@
 
 mod common;
 
-use common::{gdal_tool, relevo, relevo_ok, repo};
+use common::{burn, region_copy, relevo, relevo_ok, repo};
 use std::path::{Path, PathBuf};
 use std::process::Output;
-
-/// The sample region copied into `dir/region` (so its inputs can be edited).
-fn region_copy(dir: &Path) -> PathBuf {
-    let region = dir.join("region");
-    std::fs::create_dir_all(&region).unwrap();
-    for entry in std::fs::read_dir(repo("data/olinda")).unwrap() {
-        let entry = entry.unwrap();
-        std::fs::copy(entry.path(), region.join(entry.file_name())).unwrap();
-    }
-    region
-}
 
 fn prep(region: &Path, out: &Path) {
     relevo_ok([
@@ -63,45 +52,6 @@ fn finding(o: &Output, artifact: &str) -> String {
         .chain(lines.take_while(|l| l.starts_with("        at ")))
         .collect::<Vec<_>>()
         .join("\n")
-}
-
-/// Add `metres` to `raster` inside the rectangle of `cells` (column, row,
-/// columns, rows) of its grid, with GDAL's own tools.
-fn burn(raster: &Path, epsg: u32, [c, r, w, h]: [usize; 4], metres: f64, band: Option<u32>) {
-    let info = gdal::Dataset::open(raster)
-        .unwrap()
-        .geo_transform()
-        .unwrap();
-    let at = |col: usize, row: usize| {
-        [
-            info[0] + col as f64 * info[1],
-            info[3] + row as f64 * info[5],
-        ]
-    };
-    let (p0, p1) = (at(c, r), at(c + w, r + h));
-    let polygon = raster.with_extension("burn.geojson");
-    std::fs::write(
-        &polygon,
-        format!(
-            r#"{{"type":"FeatureCollection","crs":{{"type":"name","properties":{{"name":"EPSG:{epsg}"}}}},
-            "features":[{{"type":"Feature","properties":{{}},"geometry":{{"type":"Polygon",
-            "coordinates":[[[{x0},{y0}],[{x1},{y0}],[{x1},{y1}],[{x0},{y1}],[{x0},{y0}]]]}}}}]}}"#,
-            x0 = p0[0],
-            y0 = p0[1],
-            x1 = p1[0],
-            y1 = p1[1]
-        ),
-    )
-    .unwrap();
-    let burn = metres.to_string();
-    let band_arg = band.map(|b| b.to_string());
-    let mut args = vec!["-q", "-add", "-burn", &burn];
-    if let Some(b) = &band_arg {
-        args.extend(["-b", b]);
-    }
-    args.extend([polygon.to_str().unwrap(), raster.to_str().unwrap()]);
-    gdal_tool("gdal_rasterize", &args);
-    std::fs::remove_file(polygon).unwrap();
 }
 
 /// `picture` has the pixels of the reviewed one the guide shows (`docs`,

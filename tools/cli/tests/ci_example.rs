@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::{gdal_tool, repo};
+use common::repo;
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -78,12 +78,7 @@ fn the_guides_ci_example_passes_unchanged_inputs_and_names_an_edit() {
 
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let region = d.join("region");
-    std::fs::create_dir(&region).unwrap();
-    for entry in std::fs::read_dir(repo("data/olinda")).unwrap() {
-        let entry = entry.unwrap();
-        std::fs::copy(entry.path(), region.join(entry.file_name())).unwrap();
-    }
+    common::region_copy(d);
     for line in &bless {
         let o = run(d, line);
         assert!(
@@ -102,30 +97,9 @@ fn the_guides_ci_example_passes_unchanged_inputs_and_names_an_edit() {
     assert!(d.join("relevo-check.xml").is_file() && d.join("relevo-check.md").is_file());
 
     // A DEM edited by +5 m over the 2×2 cells from column 60, row 40.
-    let dem = region.join("olinda_dem_utm25s.tif");
+    let dem = d.join("region/olinda_dem_utm25s.tif");
     let original = std::fs::read(&dem).unwrap();
-    let [x0, y0, x1, y1] = [294175.894, 9117160.987, 294355.882, 9116980.999];
-    let polygon = d.join("edit.geojson");
-    std::fs::write(
-        &polygon,
-        format!(
-            r#"{{"type":"FeatureCollection","crs":{{"type":"name","properties":{{"name":"EPSG:32725"}}}},
-            "features":[{{"type":"Feature","properties":{{}},"geometry":{{"type":"Polygon",
-            "coordinates":[[[{x0},{y0}],[{x1},{y0}],[{x1},{y1}],[{x0},{y1}],[{x0},{y0}]]]}}}}]}}"#
-        ),
-    )
-    .unwrap();
-    gdal_tool(
-        "gdal_rasterize",
-        &[
-            "-q",
-            "-add",
-            "-burn",
-            "5",
-            polygon.to_str().unwrap(),
-            dem.to_str().unwrap(),
-        ],
-    );
+    common::burn(&dem, 32725, [60, 40, 2, 2], 5.0, None);
     let o = ci_job(d, &github);
     let report = String::from_utf8_lossy(&o.stdout);
     assert_eq!(o.status.code(), Some(1), "{report}");

@@ -5,43 +5,12 @@
 
 mod common;
 
-use common::{relevo, relevo_ok, sample_bundle, sha256};
+use common::{forged, rehash, relevo, relevo_ok, sample_bundle};
 use std::path::{Path, PathBuf};
 
 /// Size of one `clusters/nodes.bin` record and where its children sit.
 const NODE_BYTES: usize = 68;
 const CHILDREN_AT: usize = 48;
-
-/// Record a file's new size and hash in the manifest, as a careful forger
-/// would, so that only the structure checks stand between it and a reader.
-fn rehash(bundle: &Path, file: &str) {
-    let path = bundle.join("manifest.json");
-    let mut manifest: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
-    for artifact in manifest["artifacts"].as_object_mut().unwrap().values_mut() {
-        if artifact["file"] == file {
-            let bytes = std::fs::metadata(bundle.join(file)).unwrap().len();
-            artifact["bytes"] = bytes.into();
-            artifact["sha256"] = sha256(&bundle.join(file)).into();
-        }
-    }
-    std::fs::write(&path, serde_json::to_string_pretty(&manifest).unwrap()).unwrap();
-}
-
-/// A copy of `bundle` named `name` with `edit` applied to `file`'s bytes.
-fn forged(bundle: &Path, name: &str, file: &str, edit: &dyn Fn(&mut Vec<u8>)) -> PathBuf {
-    let copy = bundle.with_file_name(name);
-    let status = std::process::Command::new("cp")
-        .args(["-a".as_ref(), bundle.as_os_str(), copy.as_os_str()])
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let mut bytes = std::fs::read(copy.join(file)).unwrap();
-    edit(&mut bytes);
-    std::fs::write(copy.join(file), bytes).unwrap();
-    rehash(&copy, file);
-    copy
-}
 
 /// Edit `clusters/index.json` as JSON.
 fn index_edit(edit: impl Fn(&mut serde_json::Value)) -> impl Fn(&mut Vec<u8>) {

@@ -163,16 +163,13 @@ impl MeshPass {
             }
         }
         let bytes: &[u8] = bytemuck::cast_slice(&self.vertices);
-        if bytes.len() as u64 > self.vertex_buffer.size() {
-            let needed = bytes.len() as u64;
-            self.vertex_buffer = shared::vertex_buffer(
-                device,
-                "mesh vertices",
-                needed,
-                needed.next_power_of_two() - needed,
-            )
-            .with_context(|| format!("at τ = {} px (raise it to draw fewer)", settings.tau_px))?;
-        }
+        shared::grow(
+            device,
+            &mut self.vertex_buffer,
+            "mesh vertices",
+            bytes.len() as u64,
+        )
+        .with_context(|| format!("at τ = {} px (raise it to draw fewer)", settings.tau_px))?;
         queue.write_buffer(&self.vertex_buffer, 0, bytes);
         self.vertex_count = self.vertices.len() as u32;
         stats.triangles = self.vertices.len() / 3;

@@ -93,10 +93,12 @@ impl ObjectPass {
                 }),
         );
         let bytes: &[u8] = bytemuck::cast_slice(&self.vertices);
-        if bytes.len() as u64 > self.vertex_buffer.size() {
-            self.vertex_buffer =
-                shared::vertex_buffer(device, "object vertices", bytes.len() as u64, 0)?;
-        }
+        shared::grow(
+            device,
+            &mut self.vertex_buffer,
+            "object vertices",
+            bytes.len() as u64,
+        )?;
         queue.write_buffer(&self.vertex_buffer, 0, bytes);
         self.count = self.vertices.len() as u32;
         let uniforms = Uniforms {

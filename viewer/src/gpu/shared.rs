@@ -211,8 +211,23 @@ pub(super) fn vertex_buffer(
     ))
 }
 
-/// A vertex buffer of a few bytes, for a pass to grow with
-/// [`vertex_buffer`] when it has something to draw.
+/// Make room for `needed` bytes in `buffer`: when they do not fit, it is
+/// replaced by one grown to the next power of two (within the device's
+/// limit), so that a pass's buffer is not remade every frame.
+pub(super) fn grow(
+    device: &Device,
+    buffer: &mut wgpu::Buffer,
+    label: &str,
+    needed: u64,
+) -> anyhow::Result<()> {
+    if needed > buffer.size() {
+        *buffer = vertex_buffer(device, label, needed, needed.next_power_of_two() - needed)?;
+    }
+    Ok(())
+}
+
+/// A vertex buffer of a few bytes, for a pass to grow with [`grow`] when
+/// it has something to draw.
 pub(super) fn empty_vertex_buffer(device: &Device, label: &str) -> wgpu::Buffer {
     buffer_of(device, label, 4)
 }

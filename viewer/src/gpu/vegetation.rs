@@ -194,15 +194,12 @@ impl VegetationPass {
             }
         }
         let bytes: &[u8] = bytemuck::cast_slice(&self.instances);
-        if bytes.len() as u64 > self.instance_buffer.size() {
-            let needed = bytes.len() as u64;
-            self.instance_buffer = shared::vertex_buffer(
-                device,
-                "impostors",
-                needed,
-                needed.next_power_of_two() - needed,
-            )?;
-        }
+        shared::grow(
+            device,
+            &mut self.instance_buffer,
+            "impostors",
+            bytes.len() as u64,
+        )?;
         queue.write_buffer(&self.instance_buffer, 0, bytes);
         let uniforms = Uniforms {
             view_proj: eye_relative_view_projection(camera),

@@ -54,3 +54,33 @@ pub(crate) fn parse_percentiles(text: &str) -> Result<[f64; 2], String> {
         _ => Err("--stretch takes LOW,HIGH percentiles with 0 <= LOW < HIGH <= 100".into()),
     }
 }
+
+/// A `--camera NAME=X,Y,Z,HEADING[,PITCHdeg][,INCL]` of `relevo check` and
+/// `relevo diff`: a render of relevo-core's raycaster at `size` (its file
+/// left for the caller to name).
+pub fn named_camera(
+    spec: &str,
+    size: [u32; 2],
+) -> anyhow::Result<relevo_core::golden::RenderRecord> {
+    let (name, camera) = spec
+        .split_once('=')
+        .filter(|(n, _)| {
+            !n.is_empty()
+                && n
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+        })
+        .ok_or_else(|| {
+            anyhow::anyhow!(
+                "--camera {spec:?}: expected NAME=X,Y,Z,HEADING with NAME of letters, digits, _ or -"
+            )
+        })?;
+    relevo_core::scene::CameraPose::parse(camera)
+        .map_err(|e| anyhow::anyhow!("--camera {name}: {e}"))?;
+    Ok(relevo_core::golden::RenderRecord {
+        name: name.to_string(),
+        camera: camera.to_string(),
+        size,
+        file: String::new(),
+    })
+}

@@ -11,7 +11,7 @@ use clap::Args;
 use relevo_core::bundle::Bundle;
 use relevo_core::golden::{self, record, GoldenRecord, RenderRecord, Tolerances};
 use relevo_core::raster::png::encode_rgba;
-use relevo_core::scene::{CameraPose, View};
+use relevo_core::scene::View;
 use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
@@ -203,35 +203,29 @@ fn bless(a: &CheckArgs, bundle: &Bundle) -> Result<()> {
         .into_iter()
         .map(|(name, png)| (a.golden.with_file_name(name), png))
         .collect();
-    let cameras: Vec<(String, String, [u32; 2])> = if a.no_renders {
+    let cameras: Vec<RenderRecord> = if a.no_renders {
         Vec::new()
     } else if !a.cameras.is_empty() {
         a.cameras
             .iter()
-            .map(|spec| {
-                let (name, camera) = spec
-                    .split_once('=')
-                    .filter(|(n, _)| !n.is_empty() && n.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-'))
-                    .with_context(|| format!("--camera {spec:?}: expected NAME=X,Y,Z,HEADING with NAME of letters, digits, _ or -"))?;
-                CameraPose::parse(camera).map_err(|e| anyhow::anyhow!("--camera {name}: {e}"))?;
-                Ok((name.to_string(), camera.to_string(), a.render_size))
-            })
+            .map(|spec| super::args::named_camera(spec, a.render_size))
             .collect::<Result<_>>()?
     } else if let Some(old) = old.as_ref().filter(|r| !r.renders.is_empty()) {
-        old.renders
-            .iter()
-            .map(|r| (r.name.clone(), r.camera.clone(), r.size))
-            .collect()
+        old.renders.clone()
     } else {
         let home = View::home(&bundle.manifest.grid, a.render_size);
-        vec![("home".into(), home.pose().to_string(), a.render_size)]
+        vec![RenderRecord {
+            name: "home".into(),
+            camera: home.pose().to_string(),
+            size: a.render_size,
+            file: String::new(),
+        }]
     };
-    for (name, camera, size) in cameras {
+    for camera in cameras {
+        let size = camera.size;
         let render = RenderRecord {
-            file: format!("{stem}.{name}.png"),
-            name,
-            camera,
-            size,
+            file: format!("{stem}.{}.png", camera.name),
+            ..camera
         };
         let rgba = golden::check::render_reference(bundle, &render)?;
         let png = encode_rgba(&rgba, size[0] as usize, size[1] as usize)?;

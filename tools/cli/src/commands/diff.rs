@@ -10,8 +10,6 @@ use anyhow::{Context, Result};
 use clap::Args;
 use relevo_core::bundle::Bundle;
 use relevo_core::golden::diff::{diff, diff_images, DiffOptions, DiffReport, GridChange, Location};
-use relevo_core::golden::RenderRecord;
-use relevo_core::scene::CameraPose;
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
 
@@ -61,7 +59,7 @@ pub fn run(a: DiffArgs) -> Result<()> {
     let renders = a
         .cameras
         .iter()
-        .map(|spec| render_of(spec, a.render_size))
+        .map(|spec| super::args::named_camera(spec, a.render_size))
         .collect::<Result<Vec<_>>>()
         .map_err(trouble)?;
     let (before, after) = (
@@ -91,21 +89,6 @@ pub fn run(a: DiffArgs) -> Result<()> {
         )
         .into())
     }
-}
-
-/// A `--camera NAME=CAMERA` as a render to make of both bundles.
-fn render_of(spec: &str, size: [u32; 2]) -> Result<RenderRecord> {
-    let (name, camera) = spec
-        .split_once('=')
-        .filter(|(n, _)| !n.is_empty())
-        .with_context(|| format!("--camera {spec:?}: expected NAME=X,Y,Z,HEADING"))?;
-    CameraPose::parse(camera).map_err(|e| anyhow::anyhow!("--camera {name}: {e}"))?;
-    Ok(RenderRecord {
-        name: name.to_string(),
-        camera: camera.to_string(),
-        size,
-        file: String::new(),
-    })
 }
 
 fn write_images(

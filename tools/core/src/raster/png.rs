@@ -5,6 +5,23 @@ use crate::{Error, Result};
 
 /// An RGBA8 image (row-major, `width`×`height`) encoded as PNG.
 pub fn encode_rgba(rgba: &[u8], width: usize, height: usize) -> Result<Vec<u8>> {
+    encode(
+        rgba,
+        width,
+        height,
+        png::ColorType::Rgba,
+        png::BitDepth::Eight,
+    )
+}
+
+/// Samples (big-endian where 16-bit) encoded as a PNG of one kind.
+fn encode(
+    samples: &[u8],
+    width: usize,
+    height: usize,
+    colour: png::ColorType,
+    depth: png::BitDepth,
+) -> Result<Vec<u8>> {
     let too_large = || Error::Input(format!("{width}×{height} is too large for a PNG"));
     let (w, h) = (
         u32::try_from(width).map_err(|_| too_large())?,
@@ -12,11 +29,11 @@ pub fn encode_rgba(rgba: &[u8], width: usize, height: usize) -> Result<Vec<u8>> 
     );
     let mut out = Vec::new();
     let mut encoder = png::Encoder::new(&mut out, w, h);
-    encoder.set_color(png::ColorType::Rgba);
-    encoder.set_depth(png::BitDepth::Eight);
+    encoder.set_color(colour);
+    encoder.set_depth(depth);
     encoder
         .write_header()
-        .and_then(|mut writer| writer.write_image_data(rgba))
+        .and_then(|mut writer| writer.write_image_data(samples))
         .map_err(|e| Error::Input(format!("PNG encoding: {e}")))?;
     Ok(out)
 }
@@ -67,21 +84,14 @@ pub fn decode_rgba(bytes: &[u8]) -> Result<(Vec<u8>, usize, usize)> {
 
 /// 16-bit greyscale values (row-major, `width`×`height`) encoded as PNG.
 pub fn encode_grey16(values: &[u16], width: usize, height: usize) -> Result<Vec<u8>> {
-    let too_large = || Error::Input(format!("{width}×{height} is too large for a PNG"));
-    let (w, h) = (
-        u32::try_from(width).map_err(|_| too_large())?,
-        u32::try_from(height).map_err(|_| too_large())?,
-    );
     let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_be_bytes()).collect();
-    let mut out = Vec::new();
-    let mut encoder = png::Encoder::new(&mut out, w, h);
-    encoder.set_color(png::ColorType::Grayscale);
-    encoder.set_depth(png::BitDepth::Sixteen);
-    encoder
-        .write_header()
-        .and_then(|mut writer| writer.write_image_data(&bytes))
-        .map_err(|e| Error::Input(format!("PNG encoding: {e}")))?;
-    Ok(out)
+    encode(
+        &bytes,
+        width,
+        height,
+        png::ColorType::Grayscale,
+        png::BitDepth::Sixteen,
+    )
 }
 
 /// A 16-bit greyscale PNG decoded: values, width, height. Any other kind
