@@ -55,13 +55,34 @@ pub(crate) fn parse_percentiles(text: &str) -> Result<[f64; 2], String> {
     }
 }
 
-/// A `--camera NAME=X,Y,Z,HEADING[,PITCHdeg][,INCL]` of `relevo check` and
-/// `relevo diff`: a render of relevo-core's raycaster at `size` (its file
-/// left for the caller to name).
-pub fn named_camera(
-    spec: &str,
-    size: [u32; 2],
-) -> anyhow::Result<relevo_core::golden::RenderRecord> {
+/// Renders at named cameras (`relevo check --bless`, `relevo diff`).
+#[derive(clap::Args, Debug)]
+pub struct NamedCameras {
+    /// A render of relevo-core's raycaster at NAME=X,Y,Z,HEADING[,PITCHdeg][,INCL]
+    /// (repeatable).
+    #[arg(
+        long = "camera",
+        value_name = "NAME=CAMERA",
+        allow_hyphen_values = true
+    )]
+    pub cameras: Vec<String>,
+    /// Size of those renders, WIDTHxHEIGHT.
+    #[arg(long, default_value = "480x270", value_parser = relevo_core::scene::parse_size)]
+    pub render_size: [u32; 2],
+}
+
+impl NamedCameras {
+    /// The renders asked for (their files left for the caller to name).
+    pub fn renders(&self) -> anyhow::Result<Vec<relevo_core::golden::RenderRecord>> {
+        self.cameras
+            .iter()
+            .map(|spec| named_camera(spec, self.render_size))
+            .collect()
+    }
+}
+
+/// One `--camera NAME=CAMERA`.
+fn named_camera(spec: &str, size: [u32; 2]) -> anyhow::Result<relevo_core::golden::RenderRecord> {
     let (name, camera) = spec
         .split_once('=')
         .filter(|(n, _)| {

@@ -25,17 +25,10 @@ pub struct CheckArgs {
     /// the tolerances given here (else the old record's), its cameras.
     #[arg(long)]
     pub bless: bool,
-    /// With --bless: a reference render, NAME=X,Y,Z,HEADING[,PITCHdeg][,INCL]
-    /// (repeatable; default: the old record's cameras, else the home view).
-    #[arg(
-        long = "camera",
-        value_name = "NAME=CAMERA",
-        allow_hyphen_values = true
-    )]
-    pub cameras: Vec<String>,
-    /// With --bless: size of the reference renders, WIDTHxHEIGHT.
-    #[arg(long, default_value = "480x270", value_parser = relevo_core::scene::parse_size)]
-    pub render_size: [u32; 2],
+    /// With --bless: reference renders (default: the old record's
+    /// cameras, else the home view).
+    #[command(flatten)]
+    pub renders: super::args::NamedCameras,
     /// With --bless: no reference renders.
     #[arg(long)]
     pub no_renders: bool,
@@ -205,19 +198,16 @@ fn bless(a: &CheckArgs, bundle: &Bundle) -> Result<()> {
         .collect();
     let cameras: Vec<RenderRecord> = if a.no_renders {
         Vec::new()
-    } else if !a.cameras.is_empty() {
-        a.cameras
-            .iter()
-            .map(|spec| super::args::named_camera(spec, a.render_size))
-            .collect::<Result<_>>()?
+    } else if !a.renders.cameras.is_empty() {
+        a.renders.renders()?
     } else if let Some(old) = old.as_ref().filter(|r| !r.renders.is_empty()) {
         old.renders.clone()
     } else {
-        let home = View::home(&bundle.manifest.grid, a.render_size);
+        let home = View::home(&bundle.manifest.grid, a.renders.render_size);
         vec![RenderRecord {
             name: "home".into(),
             camera: home.pose().to_string(),
-            size: a.render_size,
+            size: a.renders.render_size,
             file: String::new(),
         }]
     };

@@ -25,16 +25,9 @@ pub struct DiffArgs {
     /// Objects of one class closer than this are one object moved, metres.
     #[arg(long, default_value_t = 30.0, value_name = "M")]
     pub match_radius_m: f64,
-    /// Render both at NAME=X,Y,Z,HEADING[,PITCHdeg][,INCL] and compare (repeatable).
-    #[arg(
-        long = "camera",
-        value_name = "NAME=CAMERA",
-        allow_hyphen_values = true
-    )]
-    pub cameras: Vec<String>,
-    /// Size of those renders, WIDTHxHEIGHT.
-    #[arg(long, default_value = "480x270", value_parser = relevo_core::scene::parse_size)]
-    pub render_size: [u32; 2],
+    /// Renders of both bundles to compare.
+    #[command(flatten)]
+    pub renders: super::args::NamedCameras,
     /// Write pictures of the changes into this folder (created if missing):
     /// height_change.png, vegetation_change.png, render_NAME_{before,after,difference}.png.
     #[arg(long, value_name = "DIR")]
@@ -56,12 +49,7 @@ pub fn run(a: DiffArgs) -> Result<()> {
             "--match-radius-m must be a non-negative number of metres"
         )));
     }
-    let renders = a
-        .cameras
-        .iter()
-        .map(|spec| super::args::named_camera(spec, a.render_size))
-        .collect::<Result<Vec<_>>>()
-        .map_err(trouble)?;
+    let renders = a.renders.renders().map_err(trouble)?;
     let (before, after) = (
         Bundle::open(&a.before).map_err(|e| trouble(e.into()))?,
         Bundle::open(&a.after).map_err(|e| trouble(e.into()))?,

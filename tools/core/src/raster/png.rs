@@ -63,9 +63,7 @@ pub fn decode_rgba(bytes: &[u8]) -> Result<(Vec<u8>, usize, usize)> {
         8,
         "use a smaller image",
     )?;
-    let mut buf = vec![0; reader.output_buffer_size()];
-    let info = reader.next_frame(&mut buf).map_err(bad)?;
-    buf.truncate(info.buffer_size());
+    let (buf, info) = next_frame(&mut reader)?;
     let (w, h) = (info.width as usize, info.height as usize);
     let rgba = match info.color_type.samples() {
         4 => buf,
@@ -80,6 +78,18 @@ pub fn decode_rgba(bytes: &[u8]) -> Result<(Vec<u8>, usize, usize)> {
         _ => buf.iter().flat_map(|&g| [g, g, g, 255]).collect(),
     };
     Ok((rgba, w, h))
+}
+
+/// The image's samples, once its declared size has passed the budget.
+fn next_frame<R: std::io::BufRead + std::io::Seek>(
+    reader: &mut png::Reader<R>,
+) -> Result<(Vec<u8>, png::OutputInfo)> {
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader
+        .next_frame(&mut buf)
+        .map_err(|e| Error::Input(format!("PNG decoding: {e}")))?;
+    buf.truncate(info.buffer_size());
+    Ok((buf, info))
 }
 
 /// 16-bit greyscale values (row-major, `width`×`height`) encoded as PNG.
@@ -114,9 +124,7 @@ pub fn decode_grey16(bytes: &[u8]) -> Result<(Vec<u16>, usize, usize)> {
         4,
         "use a smaller image",
     )?;
-    let mut buf = vec![0; reader.output_buffer_size()];
-    let info = reader.next_frame(&mut buf).map_err(bad)?;
-    buf.truncate(info.buffer_size());
+    let (buf, info) = next_frame(&mut reader)?;
     let values = buf
         .chunks_exact(2)
         .map(|b| u16::from_be_bytes([b[0], b[1]]))
