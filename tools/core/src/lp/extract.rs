@@ -6,8 +6,8 @@
 //! vertex and triangle arrays are the same — the conformance tests compare
 //! their digests.
 
-use super::hierarchy::triangle_deviation;
 use super::hierarchy::Hierarchy;
+use super::metric::triangle_deviation;
 use rayon::prelude::*;
 
 /// An indexed triangle mesh on grid vertices.
@@ -32,7 +32,9 @@ impl GridMesh {
                     let [c, r] = self.vertices[i as usize];
                     (c as i64, r as i64)
                 };
-                triangle_deviation(heights, side, t.map(corner))
+                let corners = t.map(corner);
+                let z = corners.map(|(c, r)| heights[r as usize * side + c as usize]);
+                triangle_deviation(heights, side, corners, z, None)
             })
             .reduce(|| 0.0, f64::max)
     }
@@ -116,7 +118,7 @@ impl Walk {
 /// is nested: a flagged vertex's parents are flagged too.
 pub fn mask_boundaries(mask: &[u8], side: usize) -> Vec<bool> {
     let mut flag = vec![false; side * side];
-    super::hierarchy::visit_bottom_up(side, |d| {
+    super::diamond::visit_bottom_up(side, |d| {
         let m = mask[d.vertex];
         let corners = d.hypotenuse.iter().chain(d.parents.iter().flatten());
         let own = corners.into_iter().any(|&k| mask[k] != m);
@@ -252,7 +254,8 @@ mod tests {
             [(32, 0), (0, 32), (0, 0)],
             [(100, 100), (108, 108), (100, 108)],
         ] {
-            let fast = triangle_deviation(&dem.heights, dem.side, t);
+            let z = t.map(|(c, r)| dem.heights[(r * side + c) as usize]);
+            let fast = triangle_deviation(&dem.heights, dem.side, t, z, None);
             assert!(
                 (fast - brute(t)).abs() < 1e-9,
                 "{t:?}: {fast} vs {}",

@@ -478,8 +478,8 @@ mod tests {
     //! vertex, culling keeping what is visible, geomorphing continuity.
     use super::*;
     use crate::camera::Camera;
-    use crate::lp::hierarchy::visit_bottom_up;
     use crate::lp::terrain_position;
+    use crate::lp::visit_bottom_up;
     use crate::lp::ErrorMetric;
     use crate::testdata::{self, Lcg};
     use glam::DVec3;
