@@ -201,7 +201,19 @@ pub fn neighbours4(i: usize, width: usize, height: usize) -> impl Iterator<Item 
 /// vertex (c, r) of a `side`² grid of `heights` with `cell`-metre spacing:
 /// central differences, one-sided at the border.
 pub fn vertex_normal(heights: &[f32], side: usize, cell: f64, c: usize, r: usize) -> [f64; 3] {
-    let z = |c: usize, r: usize| heights[r * side + c] as f64;
+    vertex_normal_of(&|c, r| heights[r * side + c], side, cell, c, r)
+}
+
+/// [`vertex_normal`] with the heights of the `side`² grid given by `z`
+/// (global column, row) — for a caller holding only a window of it.
+pub fn vertex_normal_of(
+    z: &dyn Fn(usize, usize) -> f32,
+    side: usize,
+    cell: f64,
+    c: usize,
+    r: usize,
+) -> [f64; 3] {
+    let z = |c: usize, r: usize| z(c, r) as f64;
     let (c0, c1) = (c.saturating_sub(1), (c + 1).min(side - 1));
     let (r0, r1) = (r.saturating_sub(1), (r + 1).min(side - 1));
     let dz_east = (z(c1, r) - z(c0, r)) / ((c1 - c0) as f64 * cell);

@@ -125,7 +125,7 @@ impl Targets {
 
     /// Copy the colour, and the depth when asked, back to the CPU (waits
     /// for the GPU). Colour comes in bands of rows whose staging buffer
-    /// stays within [`READBACK_BAND_BYTES`] and the device's buffer limit,
+    /// stays within `READBACK_BAND_BYTES` and the device's buffer limit,
     /// so a frame of any size the GPU can draw is read back at a bounded
     /// staging cost; depth can only be copied whole (a depth texture is
     /// copied as one), and is refused where that exceeds the buffer limit.

@@ -24,7 +24,7 @@ pub struct GridSpec {
 
 /// Route GDAL's own messages into our log instead of stderr; failures are
 /// reported through return values with the file named. GDAL's failures
-/// are also kept (per thread, the first few since [`clear_errors`]), since
+/// are also kept (per thread, the first few since `clear_errors`), since
 /// the message that names the cause — a VRT's missing source, say — often
 /// comes before the one a failed call leaves last.
 pub fn init() {

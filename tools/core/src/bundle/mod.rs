@@ -12,6 +12,7 @@ mod lock;
 mod manifest;
 pub mod names;
 mod reader;
+mod staging;
 mod validate;
 mod writer;
 
@@ -23,5 +24,6 @@ pub use manifest::{
 };
 pub use names::MANIFEST_FILE;
 pub use reader::{Array, Bundle, Drape, LpArray, MAX_IMAGE_SIDE, MAX_SIDE};
+pub use staging::{is_bundle, Leftover, Staging, PYRAMID_FORMAT};
 pub use validate::validate_artifacts;
 pub use writer::{write_terrain_bundle, BundleWriter, Description};

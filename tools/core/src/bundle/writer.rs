@@ -6,14 +6,14 @@ use super::manifest::{
 };
 use super::names::{self, MANIFEST_FILE};
 use super::reader::Bundle;
+use super::staging::{Leftover, Staging};
 use super::validate::validate_artifacts;
-use crate::atomic;
 use crate::grid::HeightGrid;
 use crate::lp::{ErrorMetric, Hierarchy};
 use crate::veg::db::{self, VegObject};
 use crate::{Error, Result};
 use names::ArtifactName;
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 use std::fs;
 use std::path::{Path, PathBuf};
 
@@ -84,14 +84,9 @@ pub struct Description {
 /// [`export_path`]: BundleWriter::export_path
 /// [`record_export`]: BundleWriter::record_export
 pub struct BundleWriter {
-    target: PathBuf,
+    /// The staging folder, the target and the lock.
+    place: Staging,
     staging: PathBuf,
-    committed: bool,
-    /// Whether `target` existed when this writer started (and so may be
-    /// replaced at commit).
-    replacing: bool,
-    /// Held from start to commit: one writer per bundle at a time.
-    _lock: BundleLock,
     /// `relevo` version the manifest names: this build's for a new bundle,
     /// the original's for a rewrite.
     tool_version: String,
@@ -115,43 +110,10 @@ impl BundleWriter {
 
     /// [`create`](BundleWriter::create) under a lock already held.
     fn start(lock: BundleLock, target: &Path, force: bool) -> Result<Self> {
-        let replacing = target.symlink_metadata().is_ok();
-        if replacing {
-            if !force {
-                return Err(Error::invalid(
-                    target,
-                    "already exists (pass --force to replace it)",
-                ));
-            }
-            if !is_bundle(target) {
-                return Err(Error::invalid(
-                    target,
-                    "exists and is not a Relevo bundle (no manifest.json of format \
-                     relevo-bundle); refusing to replace it, even with --force",
-                ));
-            }
-        }
-        let staging = staging_path(target);
-        if staging.symlink_metadata().is_ok() {
-            // Left by a writer that was killed; anything else is the user's.
-            if !staging.join(STAGING_MARK).is_file() {
-                return Err(Error::invalid(
-                    &staging,
-                    "is in the way of the bundle's staging folder and was not made by \
-                     Relevo; move it away",
-                ));
-            }
-            fs::remove_dir_all(&staging).map_err(|e| Error::io(&staging, e))?;
-        }
-        fs::create_dir(&staging)
-            .and_then(|()| fs::write(staging.join(STAGING_MARK), b""))
-            .map_err(|e| Error::invalid(target, format!("cannot write ({e})")))?;
+        let place = Staging::start(lock, target, force, Leftover::Clear)?;
         Ok(BundleWriter {
-            target: target.to_path_buf(),
-            staging,
-            committed: false,
-            replacing,
-            _lock: lock,
+            staging: place.dir().to_path_buf(),
+            place,
             tool_version: env!("CARGO_PKG_VERSION").into(),
             description: None,
             color: None,
@@ -294,7 +256,7 @@ impl BundleWriter {
         let path = self.staging.join(MANIFEST_FILE);
         let Some(d) = self.description.take() else {
             return Err(Error::invalid(
-                &self.target,
+                self.place.target(),
                 "the bundle was never described (region, CRS, grid)",
             ));
         };
@@ -324,66 +286,14 @@ impl BundleWriter {
         problems.extend(check(&staged));
         if !problems.is_empty() {
             return Err(Error::invalid(
-                &self.target,
+                self.place.target(),
                 format!(
                     "the bundle written does not pass validation, so it was not kept: {}",
                     problems.join("; ")
                 ),
             ));
         }
-        let mark = self.staging.join(STAGING_MARK);
-        fs::remove_file(&mark).map_err(|e| Error::io(&mark, e))?;
-        // Only a bundle that was there when this writer started (and that it
-        // was allowed to replace) is replaced; one that appeared since is not.
-        if self.replacing && self.target.symlink_metadata().is_ok() {
-            self.replace()?;
-        } else {
-            atomic::rename_no_replace(&self.staging, &self.target).map_err(|e| {
-                if e.kind() == std::io::ErrorKind::AlreadyExists {
-                    Error::invalid(
-                        &self.target,
-                        "appeared while this command ran; it was not replaced (run again \
-                         with --force to replace it)",
-                    )
-                } else {
-                    Error::io(&self.target, e)
-                }
-            })?;
-        }
-        self.committed = true;
-        Ok(self.target.clone())
-    }
-
-    /// Put the staged bundle in the place of the existing one (a Relevo
-    /// bundle, checked by `create`), keeping the user's files.
-    fn replace(&self) -> Result<()> {
-        let listed = listed_files(&self.target);
-        let old = if atomic::exchange(&self.staging, &self.target)
-            .map_err(|e| Error::io(&self.target, e))?
-        {
-            self.staging.clone()
-        } else {
-            let old = unused_path(&self.target, "old");
-            fs::rename(&self.target, &old).map_err(|e| Error::io(&self.target, e))?;
-            fs::rename(&self.staging, &self.target).map_err(|e| Error::io(&self.target, e))?;
-            old
-        };
-        let mut kept = Vec::new();
-        carry_over(&old, &old, &self.target, &listed, &mut kept);
-        if kept.is_empty() {
-            fs::remove_dir_all(&old).map_err(|e| Error::io(&old, e))?;
-        } else {
-            let aside = unused_path(&self.target, "old");
-            fs::rename(&old, &aside).map_err(|e| Error::io(&old, e))?;
-            tracing::warn!(
-                "{}: the new bundle has files at the paths of {} of yours ({}); yours are in {}",
-                self.target.display(),
-                kept.len(),
-                kept.join(", "),
-                aside.display()
-            );
-        }
-        Ok(())
+        self.place.commit()
     }
 
     /// Write an array artifact under `name` (little-endian, row-major).
@@ -457,62 +367,6 @@ impl BundleWriter {
     }
 }
 
-/// The files a bundle's manifest lists (artifacts, exports) and the
-/// manifest itself: what Relevo wrote there.
-fn listed_files(dir: &Path) -> BTreeSet<PathBuf> {
-    let mut listed = BTreeSet::from([PathBuf::from(MANIFEST_FILE)]);
-    let manifest = crate::files::read_to_string(&dir.join(MANIFEST_FILE))
-        .ok()
-        .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok());
-    for table in ["artifacts", "exports"] {
-        let entries = manifest
-            .as_ref()
-            .and_then(|m| m.get(table))
-            .and_then(|t| t.as_object());
-        for entry in entries.into_iter().flat_map(|t| t.values()) {
-            if let Some(file) = entry.get("file").and_then(|f| f.as_str()) {
-                listed.insert(PathBuf::from(file));
-            }
-        }
-    }
-    listed
-}
-
-/// Move every file under `dir` (inside the old bundle `root`) that `listed`
-/// does not name into the same place under `new`; those whose place is
-/// taken stay and are named in `kept`.
-fn carry_over(
-    root: &Path,
-    dir: &Path,
-    new: &Path,
-    listed: &BTreeSet<PathBuf>,
-    kept: &mut Vec<String>,
-) {
-    let Ok(entries) = fs::read_dir(dir) else {
-        return;
-    };
-    for entry in entries.flatten() {
-        let path = entry.path();
-        let Ok(relative) = path.strip_prefix(root) else {
-            continue;
-        };
-        if entry.file_type().is_ok_and(|t| t.is_dir()) {
-            carry_over(root, &path, new, listed, kept);
-            continue;
-        }
-        if listed.contains(relative) {
-            continue;
-        }
-        let to = new.join(relative);
-        let moved = to.symlink_metadata().is_err()
-            && to.parent().is_some_and(|p| fs::create_dir_all(p).is_ok())
-            && fs::rename(&path, &to).is_ok();
-        if !moved {
-            kept.push(relative.display().to_string());
-        }
-    }
-}
-
 /// Do two paths name one place (their folders resolved)?
 fn same_place(a: &Path, b: &Path) -> bool {
     let resolved = |p: &Path| {
@@ -526,14 +380,6 @@ fn same_place(a: &Path, b: &Path) -> bool {
         )
     };
     a == b || resolved(a) == resolved(b)
-}
-
-impl Drop for BundleWriter {
-    fn drop(&mut self) {
-        if !self.committed {
-            let _ = fs::remove_dir_all(&self.staging);
-        }
-    }
 }
 
 /// A terrain-only bundle of `grid` (heights, mask, LP errors and radii):
@@ -568,39 +414,4 @@ pub fn write_terrain_bundle(
         timings: Vec::new(),
     });
     writer.commit()
-}
-
-/// Is `dir` a Relevo bundle: a folder whose `manifest.json` is JSON of
-/// format `relevo-bundle` (any version)?
-pub fn is_bundle(dir: &Path) -> bool {
-    dir.is_dir()
-        && crate::files::read_to_string(&dir.join(MANIFEST_FILE))
-            .ok()
-            .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
-            .is_some_and(|m| m.get("format").and_then(|f| f.as_str()) == Some(FORMAT))
-}
-
-/// `TARGET.SUFFIX`, or `TARGET.SUFFIX.N` for the first N not taken: a place
-/// to move the replaced bundle to without touching anything of the user's.
-fn unused_path(target: &Path, suffix: &str) -> PathBuf {
-    let name = target.file_name().unwrap_or_default().to_string_lossy();
-    let mut path = target.with_file_name(format!("{name}.{suffix}"));
-    let mut n = 1;
-    while path.symlink_metadata().is_ok() {
-        path = target.with_file_name(format!("{name}.{suffix}.{n}"));
-        n += 1;
-    }
-    path
-}
-
-/// The empty file that marks a staging folder as Relevo's own, so that only
-/// such a folder is ever cleared; it is removed before the folder becomes
-/// the bundle.
-const STAGING_MARK: &str = ".relevo-staging";
-
-/// `TARGET.tmp` beside the target.
-pub(crate) fn staging_path(target: &Path) -> PathBuf {
-    let mut name = target.file_name().unwrap_or_default().to_os_string();
-    name.push(".tmp");
-    target.with_file_name(name)
 }

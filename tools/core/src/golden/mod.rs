@@ -4,13 +4,13 @@
 //!
 //! - [`record`]: the golden record — per artifact its hash and summaries,
 //!   the tolerances, reference renders — and reading and writing it.
-//! - [`reference`]: grids kept beside the record as PNGs, compared vertex
+//! - [`reference`](mod@reference): grids kept beside the record as PNGs, compared vertex
 //!   by vertex.
 //! - [`blocks`]: grids summarised by blocks (hash and statistics), one text
 //!   line per row of blocks.
 //! - [`vegetation`]: the database summarised by class and block, and two
 //!   databases matched object to object.
-//! - [`check`]: a bundle judged against a record, with places.
+//! - [`check`](mod@check): a bundle judged against a record, with places.
 //! - [`diff`]: two bundles compared cell by cell and object by object, and
 //!   pictures of what changed.
 

@@ -3,7 +3,7 @@
 //! pre-illumination the floating-horizon thesis lists as future work
 //! (Szenberg 1997, §9.1), in the manner of VistaPro's lit colour maps.
 
-use crate::grid::vertex_normal;
+use crate::grid::vertex_normal_of;
 
 /// Colour stops of the tint: (fraction of the height range, RGB).
 const STOPS: [(f64, [f64; 3]); 6] = [
@@ -42,23 +42,43 @@ pub fn terrain_drape(
     cell: f64,
     height_range_m: [f32; 2],
 ) -> Vec<u8> {
-    let [lo, hi] = height_range_m.map(|h| h as f64);
-    let span = (hi - lo).max(1e-6);
     let mut rgba = vec![0u8; side * side * 4];
+    let z = |c: usize, r: usize| heights[r * side + c];
     for (i, px) in rgba.chunks_exact_mut(4).enumerate() {
-        if mask[i] == 0 {
-            continue;
+        if mask[i] == 1 {
+            px.copy_from_slice(&drape_pixel(
+                &z,
+                side,
+                cell,
+                height_range_m,
+                (i % side, i / side),
+            ));
         }
-        let n = vertex_normal(heights, side, cell, i % side, i / side);
-        let lambert = (n[0] * SUN[0] + n[1] * SUN[1] + n[2] * SUN[2]).max(0.0);
-        let light = AMBIENT + (1.0 - AMBIENT) * lambert;
-        let tint = hypsometric((heights[i] as f64 - lo) / span);
-        for c in 0..3 {
-            px[c] = (tint[c] * light).round().clamp(0.0, 255.0) as u8;
-        }
-        px[3] = 255;
     }
     rgba
+}
+
+/// The drape's pixel at vertex (c, r) of a `side`² grid whose heights `z`
+/// gives (global column, row): the tint times the Lambert shading, opaque.
+/// [`terrain_drape`] is this at every vertex with data.
+pub fn drape_pixel(
+    z: &dyn Fn(usize, usize) -> f32,
+    side: usize,
+    cell: f64,
+    height_range_m: [f32; 2],
+    (c, r): (usize, usize),
+) -> [u8; 4] {
+    let [lo, hi] = height_range_m.map(|h| h as f64);
+    let span = (hi - lo).max(1e-6);
+    let n = vertex_normal_of(z, side, cell, c, r);
+    let lambert = (n[0] * SUN[0] + n[1] * SUN[1] + n[2] * SUN[2]).max(0.0);
+    let light = AMBIENT + (1.0 - AMBIENT) * lambert;
+    let tint = hypsometric((z(c, r) as f64 - lo) / span);
+    let mut px = [0, 0, 0, 255];
+    for k in 0..3 {
+        px[k] = (tint[k] * light).round().clamp(0.0, 255.0) as u8;
+    }
+    px
 }
 
 #[cfg(test)]
@@ -89,7 +109,7 @@ mod tests {
         // Slopes facing the sun are brighter than those facing away.
         let (mut towards, mut away) = (Vec::new(), Vec::new());
         for i in 1..side * side {
-            let n = vertex_normal(&dem.heights, side, dem.cell_size_m, i % side, i / side);
+            let n = crate::grid::vertex_normal(&dem.heights, side, dem.cell_size_m, i % side, i / side);
             if n[2] > 0.95 {
                 continue;
             }
