@@ -41,6 +41,7 @@ pub mod horizon;
 pub mod lp;
 pub mod memory;
 pub mod objects;
+pub mod pyramid;
 pub mod raster;
 pub mod scene;
 pub mod validation;

@@ -34,6 +34,6 @@ pub mod refine;
 mod vertices;
 pub mod window;
 
-pub use diamond::{children, vertex_kind, visit_bottom_up, Diamond};
+pub use diamond::{children, vertex_kind, visit_bottom_up, Diamond, Vertex};
 pub use hierarchy::{ErrorMetric, Hierarchy};
 pub use vertices::{levels, terrain_position, Layout, TILE};

@@ -148,6 +148,18 @@ fn own_error(
     }
 }
 
+/// Midpoint own error (the [`ErrorMetric::Midpoint`] metric) of vertex `v`
+/// of the `side`² grid, from the heights `z_of` gives; 0 for a corner.
+pub fn midpoint_own(side: usize, z_of: &dyn Fn(Vertex) -> f32, v: Vertex) -> f32 {
+    match vertex_kind(side, v.0, v.1) {
+        Some((h, edge)) => {
+            let (a, b) = hypotenuse(v, h, edge);
+            midpoint_error(z_of(a), z_of(b), z_of(v)) as f32
+        }
+        None => 0.0,
+    }
+}
+
 /// Own errors of the vertices of `region` (row-major over it) whose scale
 /// is at most `max_scale`; 0 for the corners and coarser vertices. The
 /// diamonds of those vertices must lie inside `window`.

@@ -107,7 +107,9 @@ impl TileLayout {
 
     /// Whether `key` names a tile of this pyramid.
     pub fn holds(&self, key: TileKey) -> bool {
-        key.level < self.levels() && key.x < self.across(key.level) && key.y < self.across(key.level)
+        key.level < self.levels()
+            && key.x < self.across(key.level)
+            && key.y < self.across(key.level)
     }
 
     /// The grid vertices a tile covers: first column and row, last column
@@ -134,13 +136,33 @@ mod tests {
     fn levels_halve_until_one_tile_and_slots_follow_each_other() {
         let l = TileLayout::new(1025, 64).unwrap();
         assert_eq!(l.levels(), 5);
-        assert_eq!((0..5).map(|lv| l.across(lv)).collect::<Vec<_>>(), [16, 8, 4, 2, 1]);
+        assert_eq!(
+            (0..5).map(|lv| l.across(lv)).collect::<Vec<_>>(),
+            [16, 8, 4, 2, 1]
+        );
         assert_eq!(l.count(), 256 + 64 + 16 + 4 + 1);
-        let slots: Vec<usize> = (0..5).flat_map(|lv| l.tiles(lv)).map(|k| l.slot(k)).collect();
+        let slots: Vec<usize> = (0..5)
+            .flat_map(|lv| l.tiles(lv))
+            .map(|k| l.slot(k))
+            .collect();
         assert_eq!(slots, (0..l.count()).collect::<Vec<_>>());
-        let top = TileKey { level: 4, x: 0, y: 0 };
+        let top = TileKey {
+            level: 4,
+            x: 0,
+            y: 0,
+        };
         assert_eq!(l.vertices(top), ([0, 0, 1024, 1024], 16));
-        assert_eq!(l.vertex(TileKey { level: 1, x: 1, y: 0 }, (1, 2)), (130, 4));
+        assert_eq!(
+            l.vertex(
+                TileKey {
+                    level: 1,
+                    x: 1,
+                    y: 0
+                },
+                (1, 2)
+            ),
+            (130, 4)
+        );
         assert!(TileLayout::new(1025, 100).is_err() && TileLayout::new(513, 1024).is_err());
     }
 }

@@ -109,7 +109,8 @@ mod tests {
         // Slopes facing the sun are brighter than those facing away.
         let (mut towards, mut away) = (Vec::new(), Vec::new());
         for i in 1..side * side {
-            let n = crate::grid::vertex_normal(&dem.heights, side, dem.cell_size_m, i % side, i / side);
+            let n =
+                crate::grid::vertex_normal(&dem.heights, side, dem.cell_size_m, i % side, i / side);
             if n[2] > 0.95 {
                 continue;
             }

@@ -1,0 +1,648 @@
+//! Building a pyramid tile by tile, in memory bounded by a few tiles and
+//! their halos whatever the region's size, with errors and radii equal bit
+//! for bit to the single grid's (`lp::window` says why):
+//!
+//! 1. heights: each level-0 tile's heights and mask from the source;
+//! 2. own errors: each level-0 tile's vertices (scale ≤ T/2) from the tile
+//!    ± T/2, and each tile's part of the own errors of the lattice of tile
+//!    corners (scale ≥ T), whose diamonds span many tiles;
+//! 3. saturation: each level-0 tile's errors and radii from the tile ± T
+//!    (the farthest a descendant of a tile's vertex lies);
+//! 4. the lattice: the corners' errors and radii, level by level, from the
+//!    parts and the tiles' centres, written into the tiles' corners;
+//! 5. the drape derived from the heights (tint and hillshade), each tile
+//!    from the tile ± 1;
+//! 6. coarser levels: each tile every other sample of its four children,
+//!    its drape from its own samples.
+//!
+//! Every pass records its tiles as done (see `store`), so a killed build
+//! resumes where it stopped and ends with the same bytes.
+
+use super::layout::{TileKey, TileLayout};
+use super::store::{Pass, TileArray, TileStore};
+use crate::grid::HeightGrid;
+use crate::lp::window::{combine, own_errors, own_partial, saturate, HeightWindow, Rect};
+use crate::lp::Vertex;
+use crate::lp::{vertex_kind, ErrorMetric};
+use crate::raster::tint::drape_pixel;
+use crate::{Error, Result};
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// Where a build reads the (2^n+1)² grid from: heights in metres and the
+/// data mask of any rectangle of it.
+pub trait HeightSource: Sync {
+    fn window(&self, rect: Rect) -> Result<(Vec<f32>, Vec<u8>)>;
+}
+
+impl HeightSource for HeightGrid {
+    fn window(&self, rect: Rect) -> Result<(Vec<f32>, Vec<u8>)> {
+        let rows = rect.r0..rect.r0 + rect.height;
+        let cut = |values: &[f32]| -> Vec<f32> {
+            rows.clone()
+                .flat_map(|r| {
+                    values[r * self.side + rect.c0..r * self.side + rect.c0 + rect.width]
+                        .iter()
+                        .copied()
+                })
+                .collect()
+        };
+        let heights = cut(&self.heights);
+        let mask = rows
+            .flat_map(|r| {
+                self.mask[r * self.side + rect.c0..r * self.side + rect.c0 + rect.width]
+                    .iter()
+                    .copied()
+            })
+            .collect();
+        Ok((heights, mask))
+    }
+}
+
+/// What a build computes.
+#[derive(Debug, Clone, Copy)]
+pub struct BuildOptions {
+    pub metric: ErrorMetric,
+    /// Vertex spacing at level 0, metres.
+    pub cell_size_m: f64,
+    /// Derive each tile's drape from its heights (tint and hillshade).
+    pub drape: bool,
+}
+
+/// How far a build has come: tiles of the current pass done and in all.
+#[derive(Debug, Clone, Copy)]
+pub struct Progress {
+    pub pass: &'static str,
+    pub done: usize,
+    pub total: usize,
+}
+
+/// What a build found of the grid's data.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BuildReport {
+    /// Lowest and highest height with data, metres.
+    pub height_range_m: [f32; 2],
+    pub valid_vertices: u64,
+}
+
+/// Entries a level-0 tile's partial-errors slot needs: per coarse level,
+/// the edge and centre lattice vertices whose diamonds can meet a tile.
+pub fn partials_capacity(layout: &TileLayout) -> usize {
+    16 * layout.levels() as usize + 16
+}
+
+/// Build every tile of `store` from `source`, reporting progress.
+pub fn build(
+    source: &dyn HeightSource,
+    store: &TileStore,
+    options: &BuildOptions,
+    progress: &dyn Fn(Progress),
+) -> Result<BuildReport> {
+    let layout = store.layout;
+    let level0: Vec<TileKey> = layout.tiles(0).collect();
+    each(store, &level0, Pass::Heights, "heights", progress, &|key| {
+        heights(source, store, key)
+    })?;
+    let report = statistics(store, &level0)?;
+    let lattice_z = lattice_heights(store)?;
+    each(
+        store,
+        &level0,
+        Pass::OwnErrors,
+        "own errors",
+        progress,
+        &|key| own_pass(store, options, &lattice_z, key),
+    )?;
+    each(
+        store,
+        &level0,
+        Pass::Saturate,
+        "errors and radii",
+        progress,
+        &|key| saturate_pass(store, options, key),
+    )?;
+    let top = TileKey {
+        level: 0,
+        x: 0,
+        y: 0,
+    };
+    if !store.done(Pass::Lattice, top)? {
+        lattice_pass(store, options, &lattice_z, &level0)?;
+        store.mark(Pass::Lattice, top)?;
+    }
+    if options.drape {
+        each(store, &level0, Pass::Drape, "drape", progress, &|key| {
+            drape_pass(store, options, report.height_range_m, key)
+        })?;
+    }
+    for level in 1..layout.levels() {
+        let tiles: Vec<TileKey> = layout.tiles(level).collect();
+        each(
+            store,
+            &tiles,
+            Pass::Coarse,
+            "coarser levels",
+            progress,
+            &|key| coarse_pass(store, key),
+        )?;
+        if options.drape {
+            each(
+                store,
+                &tiles,
+                Pass::CoarseDrape,
+                "coarser drapes",
+                progress,
+                &|key| drape_pass(store, options, report.height_range_m, key),
+            )?;
+        }
+    }
+    Ok(report)
+}
+
+/// Run `work` on every tile of `tiles` not yet done in `pass`, in parallel,
+/// marking each when it is.
+fn each(
+    store: &TileStore,
+    tiles: &[TileKey],
+    pass: Pass,
+    name: &'static str,
+    progress: &dyn Fn(Progress),
+    work: &(dyn Fn(TileKey) -> Result<()> + Sync),
+) -> Result<()> {
+    let done = AtomicUsize::new(0);
+    let total = tiles.len();
+    let report = |n| {
+        progress(Progress {
+            pass: name,
+            done: n,
+            total,
+        });
+    };
+    report(0);
+    let results: Vec<Result<usize>> = tiles
+        .par_iter()
+        .map(|&key| {
+            if !store.done(pass, key)? {
+                work(key)?;
+                store.mark(pass, key)?;
+            }
+            Ok(done.fetch_add(1, Ordering::Relaxed) + 1)
+        })
+        .collect();
+    for r in results {
+        r?;
+    }
+    report(total);
+    Ok(())
+}
+
+/// The rectangle of level-`level` samples a tile covers, grown by `margin`.
+fn tile_rect(layout: &TileLayout, key: TileKey, margin: usize) -> Rect {
+    let t = layout.tile_cells;
+    let side = (layout.side - 1) / layout.stride(key.level) + 1;
+    Rect::around(
+        [key.x * t, key.y * t, (key.x + 1) * t, (key.y + 1) * t],
+        margin,
+        side,
+    )
+}
+
+fn heights(source: &dyn HeightSource, store: &TileStore, key: TileKey) -> Result<()> {
+    let rect = tile_rect(&store.layout, key, 0);
+    let (heights, mask) = source.window(rect)?;
+    if let Some(i) = heights.iter().position(|h| !h.is_finite()) {
+        return Err(Error::Input(format!(
+            "tile {key:?}: height {} at column {}, row {} is not a finite number",
+            heights[i],
+            rect.c0 + i % rect.width,
+            rect.r0 + i / rect.width
+        )));
+    }
+    let (mut lo, mut hi, mut count) = (f32::INFINITY, f32::NEG_INFINITY, 0u64);
+    for (&h, &m) in heights.iter().zip(&mask) {
+        if m == 1 {
+            lo = lo.min(h);
+            hi = hi.max(h);
+            count += 1;
+        }
+    }
+    store.write(TileArray::Height, key, &heights)?;
+    store.write(TileArray::Mask, key, &mask)?;
+    store.write_stats(key, (lo, hi, count))
+}
+
+/// The grid's height range and vertices with data, from the tiles' own
+/// (border vertices counted once).
+fn statistics(store: &TileStore, level0: &[TileKey]) -> Result<BuildReport> {
+    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    for &key in level0 {
+        let (l, h, _) = store.read_stats(key)?;
+        lo = lo.min(l);
+        hi = hi.max(h);
+    }
+    // Count each vertex once: a tile's own are all but its last row and
+    // column, except along the grid's far edges.
+    let layout = store.layout;
+    let (t, across) = (layout.tile_cells, layout.across(0));
+    let mut valid = 0u64;
+    for &key in level0 {
+        let mask: Vec<u8> = store.read(TileArray::Mask, key)?;
+        let rows = if key.y + 1 == across { t + 1 } else { t };
+        let cols = if key.x + 1 == across { t + 1 } else { t };
+        for r in 0..rows {
+            valid += mask[r * (t + 1)..r * (t + 1) + cols]
+                .iter()
+                .filter(|&&m| m == 1)
+                .count() as u64;
+        }
+    }
+    if valid == 0 {
+        return Err(Error::Input("the grid holds no data".into()));
+    }
+    Ok(BuildReport {
+        height_range_m: [lo, hi],
+        valid_vertices: valid,
+    })
+}
+
+/// Heights of the lattice of tile corners (every T-th vertex), row-major.
+fn lattice_heights(store: &TileStore) -> Result<Vec<f32>> {
+    let layout = store.layout;
+    let (t, n) = (layout.tile_cells, layout.across(0) + 1);
+    let mut z = vec![0.0f32; n * n];
+    for key in layout.tiles(0) {
+        let heights: Vec<f32> = store.read(TileArray::Height, key)?;
+        for (dy, dx) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+            z[(key.y + dy) * n + key.x + dx] = heights[dy * t * (t + 1) + dx * t];
+        }
+    }
+    Ok(z)
+}
+
+/// Own errors of a level-0 tile's vertices, and its parts of the lattice's.
+fn own_pass(
+    store: &TileStore,
+    options: &BuildOptions,
+    lattice_z: &[f32],
+    key: TileKey,
+) -> Result<()> {
+    let layout = store.layout;
+    let t = layout.tile_cells;
+    let tile = tile_rect(&layout, key, 0);
+    let halo = tile_rect(&layout, key, t / 2);
+    let heights: Vec<f32> = store.window(TileArray::Height, 0, halo)?;
+    let window = HeightWindow {
+        heights: &heights,
+        rect: halo,
+        side: layout.side,
+        cell_size_m: options.cell_size_m,
+    };
+    store.write_own(key, &own_errors(&window, tile, options.metric, t / 2))?;
+    let mut partials = Vec::new();
+    if options.metric == ErrorMetric::Bound {
+        let n = layout.across(0) + 1;
+        let z_of = |(c, r): Vertex| lattice_z[(r / t) * n + c / t];
+        for ly in 0..n {
+            for lx in 0..n {
+                let v = (lx * t, ly * t);
+                let Some((h, _)) = vertex_kind(layout.side, v.0, v.1) else {
+                    continue;
+                };
+                // The diamond reaches h from the vertex every way.
+                let meets = v.0 + h >= tile.c0
+                    && v.0 <= tile.c0 + tile.width - 1 + h
+                    && v.1 + h >= tile.r0
+                    && v.1 <= tile.r0 + tile.height - 1 + h;
+                if meets {
+                    let part = own_partial(&window, &z_of, v, tile);
+                    if part > 0.0 {
+                        partials.push(((ly * n + lx) as u32, part));
+                    }
+                }
+            }
+        }
+    }
+    store.write_partials(key, &partials)
+}
+
+/// Errors and radii of a level-0 tile's vertices below the lattice.
+fn saturate_pass(store: &TileStore, options: &BuildOptions, key: TileKey) -> Result<()> {
+    let layout = store.layout;
+    let t = layout.tile_cells;
+    let tile = tile_rect(&layout, key, 0);
+    let wide = tile_rect(&layout, key, t);
+    let heights: Vec<f32> = store.window(TileArray::Height, 0, wide)?;
+    let own = store.own_window(wide)?;
+    let window = HeightWindow {
+        heights: &heights,
+        rect: wide,
+        side: layout.side,
+        cell_size_m: options.cell_size_m,
+    };
+    let out = saturate(&window, &own, t / 2);
+    let mut lp = vec![[0.0f32; 2]; layout.tile_len()];
+    for r in 0..tile.height {
+        for c in 0..tile.width {
+            lp[r * tile.width + c] = out[wide.index((tile.c0 + c, tile.r0 + r))];
+        }
+    }
+    store.write(TileArray::Lp, key, &lp)
+}
+
+/// Errors and radii of the lattice of tile corners, coarsest scales last,
+/// written into every tile corner they are.
+fn lattice_pass(
+    store: &TileStore,
+    options: &BuildOptions,
+    lattice_z: &[f32],
+    level0: &[TileKey],
+) -> Result<()> {
+    let layout = store.layout;
+    let (t, n, side) = (layout.tile_cells, layout.across(0) + 1, layout.side);
+    // Own errors: the largest of the tiles' parts (Bound), else from the
+    // vertex and its hypotenuse alone.
+    let mut own = vec![0.0f32; n * n];
+    if options.metric == ErrorMetric::Bound {
+        for &key in level0 {
+            for (i, e) in store.read_partials(key)? {
+                let i = i as usize;
+                own[i] = own[i].max(e);
+            }
+        }
+    } else {
+        let z_of = |(c, r): Vertex| lattice_z[(r / t) * n + c / t];
+        for ly in 0..n {
+            for lx in 0..n {
+                own[ly * n + lx] = crate::lp::window::midpoint_own(side, &z_of, (lx * t, ly * t));
+            }
+        }
+    }
+    // The tiles' centres (the scale-T edges' children), with their heights.
+    let mut centres: HashMap<Vertex, ([f32; 2], f32)> = HashMap::new();
+    let middle = (t / 2) * (t + 1) + t / 2;
+    for &key in level0 {
+        let lp: Vec<[f32; 2]> = store.read(TileArray::Lp, key)?;
+        let z: Vec<f32> = store.read(TileArray::Height, key)?;
+        centres.insert(
+            (key.x * t + t / 2, key.y * t + t / 2),
+            (lp[middle], z[middle]),
+        );
+    }
+    let mut values = vec![[0.0f32; 2]; n * n];
+    let mut h = t;
+    while h < side - 1 {
+        for edge in [true, false] {
+            for ly in 0..n {
+                for lx in 0..n {
+                    let v = (lx * t, ly * t);
+                    if vertex_kind(side, v.0, v.1) != Some((h, edge)) {
+                        continue;
+                    }
+                    let i = ly * n + lx;
+                    values[i] = combine(
+                        side,
+                        options.cell_size_m,
+                        (v, lattice_z[i]),
+                        own[i],
+                        (h, edge),
+                        |(c, r)| {
+                            if c % t == 0 && r % t == 0 {
+                                let k = (r / t) * n + c / t;
+                                Some((values[k], lattice_z[k]))
+                            } else {
+                                centres.get(&(c, r)).copied()
+                            }
+                        },
+                    );
+                }
+            }
+        }
+        h *= 2;
+    }
+    for &key in level0 {
+        for (dy, dx) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+            let value = values[(key.y + dy) * n + key.x + dx];
+            store.write_one(TileArray::Lp, key, dy * t * (t + 1) + dx * t, value)?;
+        }
+    }
+    Ok(())
+}
+
+/// A tile of level ≥ 1: every other sample of its four children.
+fn coarse_pass(store: &TileStore, key: TileKey) -> Result<()> {
+    let layout = store.layout;
+    let t = layout.tile_cells;
+    let rect = tile_rect(&layout, key, 0);
+    // The same samples at the finer level: every other one of twice the rectangle.
+    let finer = Rect {
+        c0: rect.c0 * 2,
+        r0: rect.r0 * 2,
+        width: 2 * t + 1,
+        height: 2 * t + 1,
+    };
+    let level = key.level - 1;
+    let every_other = |values: Vec<u8>, per: usize| -> Vec<u8> {
+        let mut out = Vec::with_capacity(layout.tile_len() * per);
+        for r in 0..=t {
+            for c in 0..=t {
+                let i = (2 * r * finer.width + 2 * c) * per;
+                out.extend_from_slice(&values[i..i + per]);
+            }
+        }
+        out
+    };
+    for a in [TileArray::Height, TileArray::Mask, TileArray::Lp] {
+        let per = a.bytes_per_vertex();
+        let values: Vec<u8> = store.window(a, level, finer)?;
+        store.write(a, key, &every_other(values, per))?;
+    }
+    Ok(())
+}
+
+/// A tile's drape from its samples and their neighbours'.
+fn drape_pass(
+    store: &TileStore,
+    options: &BuildOptions,
+    range: [f32; 2],
+    key: TileKey,
+) -> Result<()> {
+    let layout = store.layout;
+    let stride = layout.stride(key.level);
+    let side = (layout.side - 1) / stride + 1;
+    let tile = tile_rect(&layout, key, 0);
+    let halo = tile_rect(&layout, key, 1);
+    let heights: Vec<f32> = store.window(TileArray::Height, key.level, halo)?;
+    let mask: Vec<u8> = store.read(TileArray::Mask, key)?;
+    let z = |c: usize, r: usize| heights[halo.index((c, r))];
+    let cell = options.cell_size_m * stride as f64;
+    let mut rgba = vec![0u8; layout.tile_len() * 4];
+    for r in 0..tile.height {
+        for c in 0..tile.width {
+            let i = r * tile.width + c;
+            if mask[i] == 1 {
+                let px = drape_pixel(&z, side, cell, range, (tile.c0 + c, tile.r0 + r));
+                rgba[4 * i..4 * i + 4].copy_from_slice(&px);
+            }
+        }
+    }
+    store.write(TileArray::Drape, key, &rgba)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lp::Hierarchy;
+    use crate::pyramid::store::TileStore;
+    use crate::testdata;
+
+    /// A crop as a grid with a few vertices without data.
+    fn grid(dem: &testdata::Dem) -> HeightGrid {
+        let mut mask = vec![1u8; dem.side * dem.side];
+        for i in (0..mask.len()).step_by(97) {
+            mask[i] = 0;
+        }
+        HeightGrid {
+            side: dem.side,
+            heights: dem.heights.clone(),
+            mask,
+            geotransform: crate::geo::GeoTransform::north_up(
+                0.0,
+                0.0,
+                dem.cell_size_m,
+                dem.cell_size_m,
+            ),
+        }
+    }
+
+    fn options(dem: &testdata::Dem, metric: ErrorMetric) -> BuildOptions {
+        BuildOptions {
+            metric,
+            cell_size_m: dem.cell_size_m,
+            drape: true,
+        }
+    }
+
+    /// Every tile of every level holds the single grid's heights, mask and
+    /// errors and radii at its vertices, bit for bit: on the four real
+    /// crops, tiles of 32 cells (64 tiles at level 0, four levels), both
+    /// metrics; level 0's drape is the single grid's derived drape.
+    #[test]
+    fn every_tile_holds_the_single_grids_values_bit_for_bit() {
+        for dem in testdata::dems() {
+            for metric in [ErrorMetric::Bound, ErrorMetric::Midpoint] {
+                let g = grid(&dem);
+                let single = Hierarchy::compute(&g.heights, g.side, dem.cell_size_m, metric);
+                let range = g.height_range().unwrap();
+                let drape = crate::raster::tint::terrain_drape(
+                    &g.heights,
+                    &g.mask,
+                    g.side,
+                    dem.cell_size_m,
+                    range,
+                );
+                let dir = tempfile::tempdir().unwrap();
+                let layout = TileLayout::new(g.side, 32).unwrap();
+                let store =
+                    TileStore::open(dir.path(), layout, partials_capacity(&layout)).unwrap();
+                let report = build(&g, &store, &options(&dem, metric), &|_| {}).unwrap();
+                assert_eq!(report.height_range_m, range);
+                assert_eq!(report.valid_vertices as usize, g.valid_count());
+                for level in 0..layout.levels() {
+                    for key in layout.tiles(level) {
+                        let lp: Vec<[f32; 2]> = store.read(TileArray::Lp, key).unwrap();
+                        let heights: Vec<f32> = store.read(TileArray::Height, key).unwrap();
+                        let mask: Vec<u8> = store.read(TileArray::Mask, key).unwrap();
+                        let rgba: Vec<u8> = store.read(TileArray::Drape, key).unwrap();
+                        for j in 0..layout.samples() {
+                            for i in 0..layout.samples() {
+                                let (c, r) = layout.vertex(key, (i, j));
+                                let (k, v) = (j * layout.samples() + i, r * g.side + c);
+                                let what = format!("{} {metric:?} {key:?} ({c}, {r})", dem.name);
+                                assert_eq!(
+                                    lp[k].map(f32::to_bits),
+                                    single.error_radius[v].map(f32::to_bits),
+                                    "{what}"
+                                );
+                                assert_eq!(
+                                    (heights[k].to_bits(), mask[k]),
+                                    (g.heights[v].to_bits(), g.mask[v]),
+                                    "{what}"
+                                );
+                                if level == 0 {
+                                    assert_eq!(
+                                        rgba[4 * k..4 * k + 4],
+                                        drape[4 * v..4 * v + 4],
+                                        "{what}"
+                                    );
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// A source that fails on its `fail_at`-th window.
+    struct Failing<'a> {
+        grid: &'a HeightGrid,
+        calls: AtomicUsize,
+        fail_at: usize,
+    }
+
+    impl HeightSource for Failing<'_> {
+        fn window(&self, rect: Rect) -> Result<(Vec<f32>, Vec<u8>)> {
+            if self.calls.fetch_add(1, Ordering::SeqCst) == self.fail_at {
+                return Err(Error::Input("the source stopped".into()));
+            }
+            self.grid.window(rect)
+        }
+    }
+
+    /// A build stopped part-way and run again in the same folder ends with
+    /// the same bytes as one uninterrupted build; so do builds on one
+    /// thread and on four.
+    #[test]
+    fn stopped_builds_resume_to_the_same_bytes_at_any_thread_count() {
+        let dem = testdata::dem("fuji_257.f32");
+        let g = grid(&dem);
+        let layout = TileLayout::new(g.side, 32).unwrap();
+        let files = |dir: &std::path::Path| -> Vec<Vec<u8>> {
+            TileArray::ALL
+                .iter()
+                .map(|a| std::fs::read(dir.join(a.name().1)).unwrap())
+                .collect()
+        };
+        let run = |threads: usize, source: &dyn HeightSource, dir: &std::path::Path| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let store = TileStore::open(dir, layout, partials_capacity(&layout)).unwrap();
+                build(source, &store, &options(&dem, ErrorMetric::Bound), &|_| {}).map(|_| ())
+            })
+        };
+        let whole = tempfile::tempdir().unwrap();
+        run(1, &g, whole.path()).unwrap();
+        let four = tempfile::tempdir().unwrap();
+        run(4, &g, four.path()).unwrap();
+        assert!(
+            files(whole.path()) == files(four.path()),
+            "one thread and four differ"
+        );
+        let stopped = tempfile::tempdir().unwrap();
+        let failing = Failing {
+            grid: &g,
+            calls: AtomicUsize::new(0),
+            fail_at: 40,
+        };
+        assert!(run(2, &failing, stopped.path()).is_err());
+        run(2, &g, stopped.path()).unwrap();
+        assert!(
+            files(whole.path()) == files(stopped.path()),
+            "the resumed build differs"
+        );
+    }
+}

@@ -1,0 +1,255 @@
+//! The pyramid bundle: a region of any size as a quadtree of tiles of
+//! (2^k+1)² vertices on the Lindstrom–Pascucci hierarchy, each holding its
+//! heights, mask, errors and radii and drape, packed into four large
+//! memory-mappable files, with a manifest (`format: relevo-pyramid`). See
+//! docs/formats.md#pyramid for the specification.
+//!
+//! - [`layout`]: where each tile lies on the grid and in the files.
+//! - [`store`]: the tile files being written, and a build's scratch and
+//!   progress.
+//! - [`build`]: the tiles computed pass by pass in bounded memory, equal
+//!   bit for bit to the single grid.
+//! - [`reader`]: a pyramid opened, its tiles mapped without copying, the
+//!   tiles a camera sees, and the checks `relevo validate` runs.
+
+pub mod build;
+pub mod layout;
+pub mod reader;
+pub mod store;
+
+pub use build::{BuildOptions, BuildReport, HeightSource, Progress};
+pub use layout::{TileKey, TileLayout, DEFAULT_TILE_CELLS};
+pub use reader::Pyramid;
+
+use crate::bundle::{
+    sha256_file, Artifact, BundleLock, Crs, Dtype, GridInfo, InputFile, Leftover, StageTiming,
+    Staging, MANIFEST_FILE, PYRAMID_FORMAT,
+};
+use crate::lp::ErrorMetric;
+use crate::{Error, Result};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use store::{TileArray, TileStore};
+
+/// The version of the pyramid format this build reads and writes.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// `manifest.json` of a pyramid.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PyramidManifest {
+    pub format: String,
+    pub format_version: u32,
+    pub region: String,
+    pub tool_version: String,
+    pub crs: Crs,
+    /// The level-0 grid, as a single-grid bundle describes it.
+    pub grid: GridInfo,
+    pub lp_error_metric: ErrorMetric,
+    pub tiling: Tiling,
+    /// The tile files: `height`, `mask`, `lp`, `drape`, each
+    /// `[tiles, T+1, T+1(, channels)]`.
+    pub files: BTreeMap<String, Artifact>,
+    pub inputs: Vec<InputFile>,
+    #[serde(default)]
+    pub parameters: BTreeMap<String, serde_json::Value>,
+    #[serde(default)]
+    pub timings: Vec<StageTiming>,
+}
+
+/// How the grid is tiled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Tiling {
+    /// Cells a tile side, 2^k (tiles have `tile_cells + 1` vertices a side).
+    pub tile_cells: usize,
+    /// Levels, 0 finest.
+    pub levels: u32,
+    /// Tiles in all levels (the files' slots).
+    pub tiles: usize,
+}
+
+/// What a pyramid's manifest says besides its tiling and files.
+#[derive(Debug, Clone)]
+pub struct PyramidDescription {
+    pub region: String,
+    pub crs: Crs,
+    /// The grid; its height range and data count are filled in by the build.
+    pub grid: GridInfo,
+    pub inputs: Vec<InputFile>,
+    pub parameters: BTreeMap<String, serde_json::Value>,
+}
+
+/// How a pyramid is written.
+#[derive(Debug, Clone, Copy)]
+pub struct WriteOptions {
+    pub tile_cells: usize,
+    pub build: BuildOptions,
+    /// Replace an existing bundle at the target.
+    pub force: bool,
+    /// Go on from the staging folder a killed build left.
+    pub resume: bool,
+}
+
+/// The build's plan, kept in the staging folder: a resumed build must be
+/// the same build.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct Plan {
+    layout: TileLayout,
+    metric: ErrorMetric,
+    cell_size_m: f64,
+    drape: bool,
+    inputs: Vec<InputFile>,
+    parameters: BTreeMap<String, serde_json::Value>,
+}
+
+const PLAN_FILE: &str = "plan.json";
+
+/// Build the pyramid of `source` at `target`: staged beside it, refused
+/// before anything is written when the disk cannot hold it, resumable
+/// after a kill, checked, then moved into place.
+pub fn write_pyramid(
+    target: &Path,
+    source: &dyn HeightSource,
+    description: PyramidDescription,
+    options: WriteOptions,
+    progress: &dyn Fn(Progress),
+) -> Result<PathBuf> {
+    let layout = TileLayout::new(description.grid.side, options.tile_cells)?;
+    let capacity = build::partials_capacity(&layout);
+    if let Some(parent) = target.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+    }
+    let leftover = if options.resume {
+        Leftover::Resume
+    } else {
+        Leftover::Clear
+    };
+    let staging = Staging::start(
+        BundleLock::acquire(target)?,
+        target,
+        options.force,
+        leftover,
+    )?;
+    let dir = staging.dir().to_path_buf();
+    let plan = Plan {
+        layout,
+        metric: options.build.metric,
+        cell_size_m: options.build.cell_size_m,
+        drape: options.build.drape,
+        inputs: description.inputs.clone(),
+        parameters: description.parameters.clone(),
+    };
+    let plan_path = dir.join(PLAN_FILE);
+    if staging.resumed() {
+        let kept: Option<Plan> = crate::files::read_to_string(&plan_path)
+            .ok()
+            .and_then(|text| serde_json::from_str(&text).ok());
+        if kept.as_ref() != Some(&plan) {
+            return Err(Error::invalid(
+                &dir,
+                "holds a build of other inputs or options; run without --resume to start afresh",
+            ));
+        }
+    } else {
+        check_free_space(&dir, TileStore::bytes_needed(&layout, capacity))?;
+        let text = serde_json::to_string_pretty(&plan)
+            .map_err(|e| Error::Input(format!("cannot write the build plan ({e})")))?;
+        std::fs::write(&plan_path, text).map_err(|e| Error::io(&plan_path, e))?;
+    }
+    let store = TileStore::open(&dir, layout, capacity)?;
+    let report = build::build(source, &store, &options.build, progress)?;
+    store.remove_scratch()?;
+    let mut files = BTreeMap::new();
+    for a in TileArray::ALL {
+        let (key, file) = a.name();
+        let (bytes, sha256) = sha256_file(&dir.join(file))?;
+        let channels = match a {
+            TileArray::Lp => vec![2],
+            TileArray::Drape => vec![4],
+            _ => vec![],
+        };
+        let mut shape = vec![layout.count(), layout.samples(), layout.samples()];
+        shape.extend(channels);
+        let dtype = if matches!(a, TileArray::Mask | TileArray::Drape) {
+            Dtype::U8
+        } else {
+            Dtype::F32
+        };
+        files.insert(
+            key.to_string(),
+            Artifact {
+                file: file.to_string(),
+                dtype,
+                shape,
+                bytes,
+                sha256,
+            },
+        );
+    }
+    let mut grid = description.grid;
+    grid.height_range_m = report.height_range_m;
+    grid.valid_vertices = report.valid_vertices as usize;
+    let manifest = PyramidManifest {
+        format: PYRAMID_FORMAT.into(),
+        format_version: FORMAT_VERSION,
+        region: description.region,
+        tool_version: env!("CARGO_PKG_VERSION").into(),
+        crs: description.crs,
+        grid,
+        lp_error_metric: options.build.metric,
+        tiling: Tiling {
+            tile_cells: layout.tile_cells,
+            levels: layout.levels(),
+            tiles: layout.count(),
+        },
+        files,
+        inputs: description.inputs,
+        parameters: description.parameters,
+        timings: Vec::new(),
+    };
+    let path = dir.join(MANIFEST_FILE);
+    let mut json = serde_json::to_string_pretty(&manifest).map_err(|e| Error::Manifest {
+        path: path.clone(),
+        json: e,
+    })?;
+    json.push('\n');
+    std::fs::write(&path, json).map_err(|e| Error::io(&path, e))?;
+    std::fs::remove_file(&plan_path).map_err(|e| Error::io(&plan_path, e))?;
+    let problems = reader::validate(&Pyramid::open(&dir)?, false);
+    if !problems.is_empty() {
+        return Err(Error::invalid(
+            target,
+            format!(
+                "the pyramid written does not pass validation, so it was not kept: {}",
+                problems.join("; ")
+            ),
+        ));
+    }
+    staging.commit()
+}
+
+/// Refuse to start when the file system holding `dir` has less than
+/// `needed` bytes free.
+fn check_free_space(dir: &Path, needed: u64) -> Result<()> {
+    use std::os::unix::ffi::OsStrExt;
+    let c = std::ffi::CString::new(dir.as_os_str().as_bytes())
+        .map_err(|_| Error::invalid(dir, "a path with a NUL byte"))?;
+    // SAFETY: `stat` is a plain C struct, fully written by a successful
+    // statvfs; `c` is a NUL-terminated path living across the call.
+    let free = unsafe {
+        let mut stat: libc::statvfs = std::mem::zeroed();
+        (libc::statvfs(c.as_ptr(), &mut stat) == 0)
+            .then(|| stat.f_bavail as u64 * stat.f_frsize as u64)
+    };
+    match free {
+        Some(free) if free < needed => Err(Error::invalid(
+            dir,
+            format!(
+                "the pyramid needs about {} on disk (tiles and the build's scratch) but {} is free",
+                crate::memory::human(needed),
+                crate::memory::human(free)
+            ),
+        )),
+        _ => Ok(()),
+    }
+}

@@ -1,0 +1,345 @@
+//! A pyramid opened for reading: its manifest checked, its four tile files
+//! mapped into memory, any tile's arrays handed out as slices without a
+//! copy, the tiles a camera sees, and the checks `relevo validate` runs.
+
+use super::layout::{TileKey, TileLayout};
+use super::store::TileArray;
+use super::{PyramidManifest, FORMAT_VERSION};
+use crate::bundle::{sha256_file, MANIFEST_FILE, PYRAMID_FORMAT};
+use crate::camera::Camera;
+use crate::lp::terrain_position;
+use crate::{Error, Result};
+use memmap2::Mmap;
+use std::path::{Path, PathBuf};
+
+/// Level 0 over a rectangle of the grid, row-major over it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GridWindow {
+    pub rect: crate::lp::window::Rect,
+    pub heights: Vec<f32>,
+    pub mask: Vec<u8>,
+    /// `[error, radius]`.
+    pub lp: Vec<[f32; 2]>,
+}
+
+/// An opened pyramid.
+pub struct Pyramid {
+    pub dir: PathBuf,
+    pub manifest: PyramidManifest,
+    pub layout: TileLayout,
+    maps: [Mmap; 4],
+}
+
+/// One tile's arrays, `(T+1)²` samples row-major, mapped.
+#[derive(Debug, Clone, Copy)]
+pub struct TileView<'a> {
+    pub key: TileKey,
+    pub heights: &'a [f32],
+    pub mask: &'a [u8],
+    pub lp: &'a [[f32; 2]],
+    /// RGBA8.
+    pub drape: &'a [u8],
+}
+
+impl Pyramid {
+    /// Open the pyramid at `dir`: the manifest's format, version and tiling
+    /// checked, every tile file a regular file of the size the tiling says,
+    /// mapped. Errors name the file and the problem.
+    pub fn open(dir: &Path) -> Result<Pyramid> {
+        let path = dir.join(MANIFEST_FILE);
+        let text = crate::files::read_to_string(&path)?;
+        let manifest: PyramidManifest =
+            serde_json::from_str(&text).map_err(|e| Error::Manifest {
+                path: path.clone(),
+                json: e,
+            })?;
+        if manifest.format != PYRAMID_FORMAT {
+            return Err(Error::invalid(
+                &path,
+                format!(
+                    "format is {:?}, expected {PYRAMID_FORMAT:?}",
+                    manifest.format
+                ),
+            ));
+        }
+        if manifest.format_version != FORMAT_VERSION {
+            return Err(Error::invalid(
+                &path,
+                format!(
+                    "pyramid format version {} is not supported (this build reads {FORMAT_VERSION})",
+                    manifest.format_version
+                ),
+            ));
+        }
+        let bad = |p: String| Error::invalid(&path, p);
+        if !(manifest.grid.cell_size_m.is_finite() && manifest.grid.cell_size_m > 0.0) {
+            return Err(bad(format!(
+                "cell size {} is not a positive number",
+                manifest.grid.cell_size_m
+            )));
+        }
+        if manifest.grid.side > crate::bundle::MAX_SIDE {
+            return Err(bad(format!(
+                "grid side {} exceeds {}",
+                manifest.grid.side,
+                crate::bundle::MAX_SIDE
+            )));
+        }
+        let layout = TileLayout::new(manifest.grid.side, manifest.tiling.tile_cells)
+            .map_err(|e| bad(e.to_string()))?;
+        if (manifest.tiling.levels, manifest.tiling.tiles) != (layout.levels(), layout.count()) {
+            return Err(bad(format!(
+                "tiling says {} levels and {} tiles; a {}² grid in tiles of {} cells has {} and {}",
+                manifest.tiling.levels,
+                manifest.tiling.tiles,
+                layout.side,
+                layout.tile_cells,
+                layout.levels(),
+                layout.count()
+            )));
+        }
+        let map = |a: TileArray| -> Result<Mmap> {
+            let (key, file) = a.name();
+            let artifact = manifest
+                .files
+                .get(key)
+                .ok_or_else(|| bad(format!("no {key} file")))?;
+            if artifact.file != file {
+                return Err(bad(format!(
+                    "{key}: file {:?}, expected {file:?}",
+                    artifact.file
+                )));
+            }
+            let file_path = dir.join(file);
+            let handle = crate::files::open_regular(&file_path)?;
+            let len = handle
+                .metadata()
+                .map_err(|e| Error::io(&file_path, e))?
+                .len();
+            let expected = (layout.count() * layout.tile_len() * a.bytes_per_vertex()) as u64;
+            if len != expected {
+                return Err(Error::invalid(
+                    &file_path,
+                    format!(
+                        "is {len} bytes; {} tiles of {}² samples need {expected}",
+                        layout.count(),
+                        layout.samples()
+                    ),
+                ));
+            }
+            // SAFETY: the file is a regular file of the checked length;
+            // readers only read the map, and a bundle is never written in
+            // place (writers build a new folder and rename it).
+            unsafe { Mmap::map(&handle) }.map_err(|e| Error::io(&file_path, e))
+        };
+        Ok(Pyramid {
+            maps: [
+                map(TileArray::Height)?,
+                map(TileArray::Mask)?,
+                map(TileArray::Lp)?,
+                map(TileArray::Drape)?,
+            ],
+            dir: dir.to_path_buf(),
+            manifest,
+            layout,
+        })
+    }
+
+    /// Tile `key`'s arrays, mapped.
+    pub fn tile(&self, key: TileKey) -> Result<TileView<'_>> {
+        if !self.layout.holds(key) {
+            return Err(Error::invalid(&self.dir, format!("has no tile {key:?}")));
+        }
+        let slot = self.layout.slot(key);
+        let n = self.layout.tile_len();
+        let slice = |a: TileArray| {
+            let size = n * a.bytes_per_vertex();
+            &self.maps[a as usize][slot * size..(slot + 1) * size]
+        };
+        Ok(TileView {
+            key,
+            heights: bytemuck::cast_slice(slice(TileArray::Height)),
+            mask: slice(TileArray::Mask),
+            lp: bytemuck::cast_slice(slice(TileArray::Lp)),
+            drape: slice(TileArray::Drape),
+        })
+    }
+
+    /// The tiles of `level` whose box (their extent, between the lowest and
+    /// highest height) meets `camera`'s frustum.
+    pub fn tiles_meeting(&self, camera: &Camera, level: u32) -> Vec<TileKey> {
+        let planes = camera.frustum_planes();
+        let [lo, hi] = self.manifest.grid.height_range_m.map(f64::from);
+        let (side, cell) = (self.layout.side, self.manifest.grid.cell_size_m);
+        self.layout
+            .tiles(level)
+            .filter(|&key| {
+                let ([c0, r0, c1, r1], _) = self.layout.vertices(key);
+                let a = terrain_position(c0, r1, side, cell, lo);
+                let b = terrain_position(c1, r0, side, cell, hi);
+                // Outside when the box's corner farthest along a plane's
+                // normal is behind it.
+                planes.iter().all(|p| {
+                    let x = if p[0] >= 0.0 { b[0] } else { a[0] };
+                    let y = if p[1] >= 0.0 { b[1] } else { a[1] };
+                    let z = if p[2] >= 0.0 { b[2] } else { a[2] };
+                    p[0] * x + p[1] * y + p[2] * z + p[3] >= 0.0
+                })
+            })
+            .collect()
+    }
+
+    /// Level 0 over `rect` of the grid as whole arrays, assembled from the
+    /// tiles — for callers that work
+    /// on a window that fits in memory (`relevo mesh` of a region).
+    pub fn level0_window(&self, rect: crate::lp::window::Rect) -> Result<GridWindow> {
+        crate::memory::check(
+            &format!("a {}×{} window of the pyramid", rect.width, rect.height),
+            rect.len() as u64,
+            13,
+            "take a smaller window",
+        )?;
+        let (t, samples) = (self.layout.tile_cells, self.layout.samples());
+        let across = self.layout.across(0);
+        let mut heights = vec![0.0f32; rect.len()];
+        let mut mask = vec![0u8; rect.len()];
+        let mut lp = vec![[0.0f32; 2]; rect.len()];
+        for y in rect.r0 / t..=((rect.r0 + rect.height - 1) / t).min(across - 1) {
+            for x in rect.c0 / t..=((rect.c0 + rect.width - 1) / t).min(across - 1) {
+                let tile = self.tile(TileKey { level: 0, x, y })?;
+                let (tc, tr) = (x * t, y * t);
+                for r in rect.r0.max(tr)..(rect.r0 + rect.height).min(tr + samples) {
+                    for c in rect.c0.max(tc)..(rect.c0 + rect.width).min(tc + samples) {
+                        let (i, k) = (rect.index((c, r)), (r - tr) * samples + (c - tc));
+                        heights[i] = tile.heights[k];
+                        mask[i] = tile.mask[k];
+                        lp[i] = tile.lp[k];
+                    }
+                }
+            }
+        }
+        Ok(GridWindow {
+            rect,
+            heights,
+            mask,
+            lp,
+        })
+    }
+}
+
+/// Every problem `relevo validate` finds in a pyramid, one line each (at
+/// most a few of each kind): files whose hash differs from the manifest's
+/// (when `hashes`), samples a reader would refuse (a mask not 0/1, a height
+/// not finite where there is data, an error or radius not finite and
+/// non-negative), neighbours that disagree on the border they share, and
+/// tiles that disagree with the finer tiles under them.
+pub fn validate(p: &Pyramid, hashes: bool) -> Vec<String> {
+    let mut problems = Vec::new();
+    if hashes {
+        for (key, a) in &p.manifest.files {
+            match sha256_file(&p.dir.join(&a.file)) {
+                Err(e) => problems.push(e.to_string()),
+                Ok((_, sha)) if sha != a.sha256 => {
+                    problems.push(format!(
+                        "{key}: {} has sha256 {sha}, manifest says {}",
+                        a.file, a.sha256
+                    ));
+                }
+                Ok(_) => {}
+            }
+        }
+        if !problems.is_empty() {
+            return problems;
+        }
+    }
+    let layout = p.layout;
+    let samples = layout.samples();
+    let t = layout.tile_cells;
+    let most = 8;
+    for level in 0..layout.levels() {
+        for key in layout.tiles(level) {
+            if problems.len() >= most {
+                return problems;
+            }
+            let Ok(tile) = p.tile(key) else { continue };
+            if let Some(i) = tile.mask.iter().position(|&m| m > 1) {
+                problems.push(format!("tile {key:?}: mask {} at sample {i}", tile.mask[i]));
+            }
+            if let Some(i) =
+                (0..tile.heights.len()).find(|&i| tile.mask[i] == 1 && !tile.heights[i].is_finite())
+            {
+                problems.push(format!(
+                    "tile {key:?}: height {} at sample {i} is not finite",
+                    tile.heights[i]
+                ));
+            }
+            if let Some(i) = tile
+                .lp
+                .iter()
+                .position(|v| !v.iter().all(|x| x.is_finite() && *x >= 0.0))
+            {
+                problems.push(format!(
+                    "tile {key:?}: LP {:?} at sample {i} is not finite and non-negative",
+                    tile.lp[i]
+                ));
+            }
+            // The border shared with the right and lower neighbours.
+            for (dx, dy) in [(1, 0), (0, 1)] {
+                let next = TileKey {
+                    level,
+                    x: key.x + dx,
+                    y: key.y + dy,
+                };
+                let Ok(other) = p.tile(next) else { continue };
+                for k in 0..samples {
+                    let (i, j) = if dx == 1 {
+                        (k * samples + t, k * samples)
+                    } else {
+                        (t * samples + k, k)
+                    };
+                    if !same_sample(&tile, i, &other, j) {
+                        problems.push(format!(
+                            "tiles {key:?} and {next:?} disagree at their shared sample {k}"
+                        ));
+                        break;
+                    }
+                }
+            }
+            // Every sample is the finer tile's sample at the same vertex.
+            if level > 0 {
+                let mut disagreement = None;
+                'samples: for r in 0..samples {
+                    for c in 0..samples {
+                        let (gc, gr) = layout.vertex(key, (c, r));
+                        let stride = layout.stride(level - 1);
+                        let (fc, fr) = (gc / stride, gr / stride);
+                        let child = TileKey {
+                            level: level - 1,
+                            x: (fc / t).min(layout.across(level - 1) - 1),
+                            y: (fr / t).min(layout.across(level - 1) - 1),
+                        };
+                        let Ok(finer) = p.tile(child) else { continue };
+                        let j = (fr - child.y * t) * samples + (fc - child.x * t);
+                        if !same_sample(&tile, r * samples + c, &finer, j) {
+                            disagreement = Some((c, r, child));
+                            break 'samples;
+                        }
+                    }
+                }
+                if let Some((c, r, child)) = disagreement {
+                    problems.push(format!(
+                        "tile {key:?}: sample ({c}, {r}) disagrees with tile {child:?}"
+                    ));
+                }
+            }
+        }
+    }
+    problems
+}
+
+/// Whether sample `i` of `a` and sample `j` of `b` hold the same bits.
+fn same_sample(a: &TileView, i: usize, b: &TileView, j: usize) -> bool {
+    a.heights[i].to_bits() == b.heights[j].to_bits()
+        && a.mask[i] == b.mask[j]
+        && a.lp[i].map(f32::to_bits) == b.lp[j].map(f32::to_bits)
+}
