@@ -13,3 +13,17 @@ pub fn bar(len: u64, label: &str) -> ProgressBar {
     bar.set_prefix(label.to_string());
     bar
 }
+
+/// A bar for a long job's passes: the pass's name, tiles done of all, the
+/// rate and the time left.
+pub fn pass_bar() -> ProgressBar {
+    let bar = ProgressBar::new(0);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{msg:>18} [{bar:30}] {pos}/{len} tiles, {per_sec}, {eta} left",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    bar
+}

@@ -21,6 +21,10 @@ pub fn run(a: InfoArgs) -> Result<()> {
 }
 
 fn describe(path: &Path, json: bool) -> Result<()> {
+    if relevo_core::bundle::format_of(path).as_deref() == Some(relevo_core::bundle::PYRAMID_FORMAT)
+    {
+        return describe_pyramid(path, json);
+    }
     let bundle = Bundle::open(path)?;
     let m = &bundle.manifest;
     if json {
@@ -94,6 +98,56 @@ fn describe(path: &Path, json: bool) -> Result<()> {
     }
     for t in &m.timings {
         println!("  stage {:<6} {:.1} ms", t.stage, t.ms);
+    }
+    Ok(())
+}
+
+/// `relevo info` of a pyramid: the grid, the tiling level by level, the files.
+fn describe_pyramid(path: &Path, json: bool) -> Result<()> {
+    let p = relevo_core::pyramid::Pyramid::open(path)?;
+    let m = &p.manifest;
+    if json {
+        println!("{}", serde_json::to_string_pretty(m)?);
+        return Ok(());
+    }
+    println!(
+        "{} — region {:?}, format {} v{}",
+        path.display(),
+        m.region,
+        m.format,
+        m.format_version
+    );
+    match m.crs.epsg {
+        Some(code) => println!("  CRS          EPSG:{code}"),
+        None if m.crs.wkt.is_empty() => println!("  CRS          none (grid units)"),
+        None => println!("  CRS          custom (WKT in manifest)"),
+    }
+    let g = &m.grid;
+    println!(
+        "  grid         {0}×{0} vertices, {1:.3} m cells",
+        g.side, g.cell_size_m
+    );
+    println!(
+        "  data         {} vertices, heights {:.2}..{:.2} m",
+        g.valid_vertices, g.height_range_m[0], g.height_range_m[1]
+    );
+    println!(
+        "  tiles        {} of {}² vertices in {} levels, LP errors: {:?}",
+        m.tiling.tiles,
+        m.tiling.tile_cells + 1,
+        m.tiling.levels,
+        m.lp_error_metric
+    );
+    for level in 0..p.layout.levels() {
+        let across = p.layout.across(level);
+        println!(
+            "    level {level:<2}   {across}×{across} tiles, a sample every {} vertices ({:.1} m)",
+            p.layout.stride(level),
+            g.cell_size_m * p.layout.stride(level) as f64
+        );
+    }
+    for (key, a) in &m.files {
+        println!("  {key:<12} {} ({:.1} MB)", a.file, a.bytes as f64 / 1e6);
     }
     Ok(())
 }

@@ -4,7 +4,9 @@ use crate::output;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use relevo_core::bundle::Bundle;
-use relevo_core::lp::{export, ErrorMetric};
+use relevo_core::lp::window::Rect;
+use relevo_core::lp::{export, ErrorMetric, Hierarchy};
+use relevo_core::pyramid::Pyramid;
 use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
@@ -59,25 +61,28 @@ pub fn run(a: MeshArgs) -> Result<()> {
             a.max_error
         );
     }
+    let pyramid = relevo_core::bundle::format_of(&a.bundle).as_deref()
+        == Some(relevo_core::bundle::PYRAMID_FORMAT);
+    if pyramid {
+        let p = Pyramid::open(&a.bundle)?;
+        let w = p.level0_window(Rect::whole(p.layout.side))?;
+        let side = p.layout.side;
+        let surface = export::Surface {
+            frame: p.frame(),
+            heights: &w.heights,
+            mask: &w.mask,
+            hierarchy: Hierarchy::borrowed(side, p.manifest.grid.cell_size_m, &w.lp),
+            drape: Some(export::DrapeImage {
+                rgba: &w.drape,
+                width: side,
+                height: side,
+                geotransform: p.manifest.grid.geotransform,
+            }),
+        };
+        let metric = p.manifest.lp_error_metric;
+        return write_mesh(&a, format, &surface, &p.manifest.crs.wkt, metric);
+    }
     let bundle = Bundle::open(&a.bundle)?;
-    // Every file this writes, side files included, checked before any work.
-    let stem = a
-        .out
-        .file_stem()
-        .map(|s| s.to_string_lossy().to_string())
-        .unwrap_or_else(|| "mesh".into());
-    let side_files = match format {
-        MeshFormat::Obj if bundle.manifest.color.is_some() => vec![
-            a.out.with_file_name(format!("{stem}.mtl")),
-            a.out.with_file_name(format!("{stem}.png")),
-        ],
-        _ => Vec::new(),
-    };
-    let outputs: Vec<&Path> = std::iter::once(&a.out)
-        .chain(&side_files)
-        .map(PathBuf::as_path)
-        .collect();
-    output::check(&outputs, a.force)?;
     let (heights, mask, lp, drape) = (
         bundle.heights()?,
         bundle.mask()?,
@@ -96,11 +101,42 @@ pub fn run(a: MeshArgs) -> Result<()> {
             geotransform: d.info.geotransform,
         }),
     };
-    let m = export::build(&surface, a.max_error, a.keep_padding)
+    let metric = bundle.manifest.lp_error_metric;
+    write_mesh(&a, format, &surface, &bundle.manifest.crs.wkt, metric)
+}
+
+/// Extract the mesh of `surface` at the tolerance and write it (and, for
+/// OBJ with a drape, its material and texture), all or nothing.
+fn write_mesh(
+    a: &MeshArgs,
+    format: MeshFormat,
+    surface: &export::Surface,
+    crs_wkt: &str,
+    metric: ErrorMetric,
+) -> Result<()> {
+    // Every file this writes, side files included, checked before any work.
+    let stem = a
+        .out
+        .file_stem()
+        .map(|s| s.to_string_lossy().to_string())
+        .unwrap_or_else(|| "mesh".into());
+    let side_files = match format {
+        MeshFormat::Obj if surface.drape.is_some() => vec![
+            a.out.with_file_name(format!("{stem}.mtl")),
+            a.out.with_file_name(format!("{stem}.png")),
+        ],
+        _ => Vec::new(),
+    };
+    let outputs: Vec<&Path> = std::iter::once(&a.out)
+        .chain(&side_files)
+        .map(PathBuf::as_path)
+        .collect();
+    output::check(&outputs, a.force)?;
+    let m = export::build(surface, a.max_error, a.keep_padding)
         .with_context(|| a.bundle.display().to_string())?;
     match format {
         MeshFormat::Glb => {
-            output::write_atomic(&a.out, &export::to_glb(&m, &bundle.manifest.crs.wkt)?)?;
+            output::write_atomic(&a.out, &export::to_glb(&m, crs_wkt)?)?;
         }
         MeshFormat::Obj => {
             let obj = export::to_obj(&m, m.texture_png.as_ref().map(|_| stem.as_str()));
@@ -121,7 +157,7 @@ pub fn run(a: MeshArgs) -> Result<()> {
         a.max_error,
         m.largest_deviation_m
     );
-    if bundle.manifest.lp_error_metric == ErrorMetric::Midpoint {
+    if metric == ErrorMetric::Midpoint {
         tracing::warn!(
             "{}: errors measured at hypotenuse midpoints (martini's metric), so --max-error is not a bound; \
              prep the bundle again with the default --error-metric bound to make it one",

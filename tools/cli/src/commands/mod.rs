@@ -76,7 +76,9 @@ pub enum Command {
   relevo prep --dem srtm_ref.tif --out turkey.relevo --json
   relevo prep --dem t1.tif t2.tif --image ortho.tif --bands 3,2,1 --crs EPSG:32633 --out r.relevo --force
   relevo prep --dem dem.tif --image ortho.tif --samples marks.csv --out r.relevo   # with vegetation
-  relevo prep --dem alps.tif --terrain-drape --out alps.relevo   # drape tinted and lit from the heights")]
+  relevo prep --dem alps.tif --terrain-drape --out alps.relevo   # drape tinted and lit from the heights
+  relevo prep --dem country.vrt --tiled --out country.relevo      # a pyramid of 513² tiles
+  relevo prep --dem country.vrt --tiled --resume --out country.relevo   # go on after a kill")]
     Prep(prep::PrepArgs),
     /// Export the mesh at an object-space tolerance as glTF (.glb) or OBJ.
     #[command(after_help = "Examples:

@@ -8,6 +8,7 @@ use crate::prep::region::{
     parse_nodata, DemSection, FillSection, GridSection, ImageSection, NoData, RegionSpec,
     VegetationSection,
 };
+use crate::prep::tiled::{prep_tiled, TiledOptions};
 use anyhow::{bail, Result};
 use clap::Args;
 use relevo_core::raster::mosaic::Overlap;
@@ -59,6 +60,18 @@ pub struct PrepArgs {
     /// `mesh --max-error` a true bound; `midpoint` gives martini's meshes.
     #[arg(long, value_enum, default_value_t = ErrorMetricArg::Bound)]
     pub error_metric: ErrorMetricArg,
+    /// Write a pyramid bundle: tiles on the LP hierarchy, errors and radii
+    /// computed tile by tile in bounded memory (see docs/guide.md, "Large
+    /// regions"). The drape is derived from the heights.
+    #[arg(long)]
+    pub tiled: bool,
+    /// With --tiled: cells a tile side, a power of two 16–4096 (tiles have
+    /// one more vertex a side).
+    #[arg(long, default_value_t = relevo_core::pyramid::DEFAULT_TILE_CELLS, requires = "tiled")]
+    pub tile_size: usize,
+    /// With --tiled: go on from the build a killed `prep` left beside --out.
+    #[arg(long, requires = "tiled")]
+    pub resume: bool,
     /// Replace an existing bundle.
     #[arg(long)]
     pub force: bool,
@@ -113,6 +126,34 @@ pub fn run(a: PrepArgs) -> Result<()> {
     // Only the folder is checked here: the bundle writer decides what an
     // existing bundle at `--out` needs (`--force`).
     output::check(&[&a.out], true)?;
+    if a.tiled {
+        let options = TiledOptions {
+            tile_cells: a.tile_size,
+            force: a.force,
+            resume: a.resume,
+        };
+        let s = prep_tiled(&region, &a.out, options)?;
+        if a.json {
+            println!("{}", serde_json::to_string(&s)?);
+        } else {
+            println!(
+                "{}: pyramid of a {}×{} grid, {:.2} m cells, {} levels of tiles of {} cells ({} tiles), \
+                 {} vertices with data, heights {:.1}..{:.1} m, {:.0} ms",
+                s.bundle.display(),
+                s.side,
+                s.side,
+                s.cell_size_m,
+                s.levels,
+                s.tile_cells,
+                s.tiles,
+                s.valid_vertices,
+                s.height_range_m[0],
+                s.height_range_m[1],
+                s.grid_ms + s.pyramid_ms
+            );
+        }
+        return Ok(());
+    }
     let summary = prep(&region, &a.out, a.force)?;
     if a.json {
         println!("{}", serde_json::to_string(&summary)?);

@@ -14,8 +14,14 @@ pub struct ValidateArgs {
 
 pub fn run(a: ValidateArgs) -> Result<()> {
     let path = &a.bundle;
-    let bundle = Bundle::open(path)?;
-    let problems = validate(&bundle);
+    let problems = if relevo_core::bundle::format_of(path).as_deref()
+        == Some(relevo_core::bundle::PYRAMID_FORMAT)
+    {
+        let pyramid = relevo_core::pyramid::Pyramid::open(path)?;
+        relevo_core::pyramid::reader::validate(&pyramid, true)
+    } else {
+        validate(&Bundle::open(path)?)
+    };
     if problems.is_empty() {
         println!("{}: valid", path.display());
         Ok(())

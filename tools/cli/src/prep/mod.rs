@@ -5,6 +5,7 @@
 //! writing one such function and listing it.
 
 pub mod region;
+pub mod tiled;
 
 use crate::clusters::{bake_with_progress, ClustersSummary};
 use crate::ingest::crs;
@@ -74,7 +75,9 @@ pub struct Summary {
 struct Build<'a> {
     region: &'a RegionSpec,
     name: String,
-    writer: BundleWriter,
+    /// The single-grid bundle being written (none for a pyramid, which is
+    /// written after the grid stages).
+    writer: Option<BundleWriter>,
     /// The DEM stitched onto the bundle's metric grid (heights in metres).
     dem: Option<Mosaic>,
     cell_size_m: f64,
@@ -94,6 +97,27 @@ struct Build<'a> {
     clusters: Option<(Clusters, usize, BakeOptions)>,
 }
 
+impl<'a> Build<'a> {
+    /// A build of `region` named `name` that no stage has run on yet.
+    fn new(region: &'a RegionSpec, name: String, writer: Option<BundleWriter>) -> Build<'a> {
+        Build {
+            region,
+            name,
+            writer,
+            dem: None,
+            cell_size_m: 1.0,
+            fill: FillReport::default(),
+            grid: None,
+            hierarchy: None,
+            color: None,
+            rgba: Vec::new(),
+            vegetation: None,
+            samples_csv: None,
+            clusters: None,
+        }
+    }
+}
+
 /// Run every stage and move the finished bundle to `out`.
 pub fn prep(region: &RegionSpec, out: &Path, force: bool) -> Result<Summary> {
     let name = region.name.clone().unwrap_or_else(|| {
@@ -101,22 +125,8 @@ pub fn prep(region: &RegionSpec, out: &Path, force: bool) -> Result<Summary> {
             .map(|s| s.to_string_lossy().to_string())
             .unwrap_or_else(|| "region".into())
     });
-    let writer = BundleWriter::create(out, force)?;
-    let mut build = Build {
-        region,
-        name,
-        writer,
-        dem: None,
-        cell_size_m: 1.0,
-        fill: FillReport::default(),
-        grid: None,
-        hierarchy: None,
-        color: None,
-        rgba: Vec::new(),
-        vegetation: None,
-        samples_csv: None,
-        clusters: None,
-    };
+    let writer = Some(BundleWriter::create(out, force)?);
+    let mut build = Build::new(region, name, writer);
     let mut timings = Vec::new();
     let bar = crate::progress::bar(STAGES.len() as u64, "prep");
     for (stage, run) in STAGES {
@@ -250,11 +260,12 @@ fn stage_grid(b: &mut Build) -> Result<()> {
         );
     }
     // Heights, mask, errors and radii, the shaded drape, the hierarchy's
-    // working copy: about 25 bytes per vertex.
+    // working copy: about 25 bytes per vertex; for a pyramid, which writes
+    // everything but the heights and mask tile by tile, 5.
     relevo_core::memory::check(
         &format!("the {side}×{side} grid"),
         (side * side) as u64,
-        25,
+        if b.writer.is_some() { 25 } else { 5 },
         "choose a coarser cell size or a smaller extent",
     )?;
     let grid = HeightGrid::square(
@@ -426,12 +437,13 @@ fn stage_clusters(b: &mut Build) -> Result<()> {
 
 /// Write the arrays and the GeoTIFF exports into the staging directory.
 fn stage_write(b: &mut Build) -> Result<()> {
+    let writer = b.writer.as_mut().context("the bundle writer is gone")?;
     let grid = b.grid.as_ref().context("grid stage did not run")?;
     let dem = b.dem.as_ref().context("dem stage did not run")?;
     let side = grid.side;
-    b.writer.write_grid(grid)?;
+    writer.write_grid(grid)?;
     if let Some(h) = &b.hierarchy {
-        b.writer.write_hierarchy(h)?;
+        writer.write_hierarchy(h)?;
     }
 
     let spec = GridSpec {
@@ -449,13 +461,13 @@ fn stage_write(b: &mut Build) -> Result<()> {
     let raster = Raster::from_data(side, side, 1, heights);
     let export = names::HEIGHT_GEOTIFF;
     gdalio::write_geotiff(
-        &b.writer.export_path(export)?,
+        &writer.export_path(export)?,
         &raster,
         &spec,
         GdalDataType::Float32,
         Some(-9999.0),
     )?;
-    b.writer.record_export(export)?;
+    writer.record_export(export)?;
 
     if let Some((drape_grid, bands)) = &b.color {
         let rgba = &b.rgba;
@@ -466,50 +478,49 @@ fn stage_write(b: &mut Build) -> Result<()> {
             geotransform: drape_grid.geotransform,
             bands: *bands,
         };
-        b.writer.write_drape(rgba, info)?;
+        writer.write_drape(rgba, info)?;
         let bands: Vec<f64> = (0..4)
             .flat_map(|c| rgba.iter().skip(c).step_by(4).map(|&v| v as f64))
             .collect();
         let raster = Raster::from_data(w, h, 4, bands);
         let export = names::COLOR_GEOTIFF;
         gdalio::write_geotiff(
-            &b.writer.export_path(export)?,
+            &writer.export_path(export)?,
             &raster,
             drape_grid,
             GdalDataType::UInt8,
             None,
         )?;
-        b.writer.record_export(export)?;
+        writer.record_export(export)?;
     }
     if let Some((image, extraction)) = &b.vegetation {
-        b.writer.write_vegetation(&extraction.objects)?;
+        writer.write_vegetation(&extraction.objects)?;
         if let Some(csv) = &b.samples_csv {
-            b.writer.write_vegetation_samples(csv)?;
+            writer.write_vegetation_samples(csv)?;
         }
         let export = names::VEGETATION_GEOPACKAGE;
         veg_io::write_gpkg(
-            &b.writer.export_path(export)?,
+            &writer.export_path(export)?,
             &extraction.objects,
             &image.crs_wkt,
         )?;
-        b.writer.record_export(export)?;
+        writer.record_export(export)?;
         let export = names::VEGETATION_LABELS;
-        veg_io::write_labels(&b.writer.export_path(export)?, image, extraction)?;
-        b.writer.record_export(export)?;
+        veg_io::write_labels(&writer.export_path(export)?, image, extraction)?;
+        writer.record_export(export)?;
     }
     if let Some((clusters, off_terrain, options)) = &b.clusters {
-        store::write(&mut b.writer, clusters, options, *off_terrain)?;
+        store::write(writer, clusters, options, *off_terrain)?;
     }
     Ok(())
 }
 
-/// Write the manifest and move the bundle into place.
-fn finish(b: Build, timings: Vec<StageTiming>) -> Result<Summary> {
-    let grid = b.grid.context("grid stage did not run")?;
-    let dem = b.dem.context("dem stage did not run")?;
-    let grid_info = GridInfo::of(&grid, b.cell_size_m, b.region.z_scale)
-        .context("the DEM has no valid data")?;
-    let height_range_m = grid_info.height_range_m;
+/// What a manifest records of where a bundle came from: the CRS, every
+/// input file with its hash, and the region's parameters.
+fn provenance(
+    region: &RegionSpec,
+    dem: &Mosaic,
+) -> Result<(Crs, Vec<InputFile>, BTreeMap<String, serde_json::Value>)> {
     let mut inputs = Vec::new();
     let mut record = |role: &str, paths: &[PathBuf]| -> Result<()> {
         for p in paths {
@@ -523,11 +534,11 @@ fn finish(b: Build, timings: Vec<StageTiming>) -> Result<Summary> {
         }
         Ok(())
     };
-    record("dem", &b.region.dem.files)?;
-    if let Some(image) = &b.region.image {
+    record("dem", &region.dem.files)?;
+    if let Some(image) = &region.image {
         record("image", &image.files)?;
     }
-    let parameters: BTreeMap<String, serde_json::Value> = match serde_json::to_value(b.region)? {
+    let parameters: BTreeMap<String, serde_json::Value> = match serde_json::to_value(region)? {
         serde_json::Value::Object(map) => map.into_iter().collect(),
         _ => BTreeMap::new(),
     };
@@ -535,7 +546,18 @@ fn finish(b: Build, timings: Vec<StageTiming>) -> Result<Summary> {
         wkt: dem.grid.crs_wkt.clone(),
         epsg: dem.srs.as_ref().and_then(crs::epsg),
     };
-    let mut writer = b.writer;
+    Ok((crs, inputs, parameters))
+}
+
+/// Write the manifest and move the bundle into place.
+fn finish(b: Build, timings: Vec<StageTiming>) -> Result<Summary> {
+    let grid = b.grid.context("grid stage did not run")?;
+    let dem = b.dem.context("dem stage did not run")?;
+    let grid_info = GridInfo::of(&grid, b.cell_size_m, b.region.z_scale)
+        .context("the DEM has no valid data")?;
+    let height_range_m = grid_info.height_range_m;
+    let (crs, inputs, parameters) = provenance(b.region, &dem)?;
+    let mut writer = b.writer.context("the bundle writer is gone")?;
     writer.describe(Description {
         region: b.name.clone(),
         crs,

@@ -239,16 +239,20 @@ fn carry_over(
     }
 }
 
-/// Is `dir` a Relevo bundle: a folder whose `manifest.json` is JSON of
-/// format `relevo-bundle` or `relevo-pyramid` (any version)?
-pub fn is_bundle(dir: &Path) -> bool {
-    let format = dir
-        .is_dir()
+/// The `format` of the folder `dir`'s `manifest.json` (`relevo-bundle`,
+/// `relevo-pyramid`), or `None` when it has no readable one.
+pub fn format_of(dir: &Path) -> Option<String> {
+    dir.is_dir()
         .then(|| crate::files::read_to_string(&dir.join(MANIFEST_FILE)).ok())
         .flatten()
         .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
-        .and_then(|m| m.get("format").and_then(|f| f.as_str()).map(str::to_string));
-    matches!(format.as_deref(), Some(FORMAT | PYRAMID_FORMAT))
+        .and_then(|m| m.get("format").and_then(|f| f.as_str()).map(str::to_string))
+}
+
+/// Is `dir` a Relevo bundle: a folder whose `manifest.json` is JSON of
+/// format `relevo-bundle` or `relevo-pyramid` (any version)?
+pub fn is_bundle(dir: &Path) -> bool {
+    matches!(format_of(dir).as_deref(), Some(FORMAT | PYRAMID_FORMAT))
 }
 
 /// `TARGET.SUFFIX`, or `TARGET.SUFFIX.N` for the first N not taken: a place

@@ -97,7 +97,7 @@ pub fn build(
     source: &dyn HeightSource,
     store: &TileStore,
     options: &BuildOptions,
-    progress: &dyn Fn(Progress),
+    progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<BuildReport> {
     let layout = store.layout;
     let level0: Vec<TileKey> = layout.tiles(0).collect();
@@ -167,7 +167,7 @@ fn each(
     tiles: &[TileKey],
     pass: Pass,
     name: &'static str,
-    progress: &dyn Fn(Progress),
+    progress: &(dyn Fn(Progress) + Sync),
     work: &(dyn Fn(TileKey) -> Result<()> + Sync),
 ) -> Result<()> {
     let done = AtomicUsize::new(0);
@@ -187,7 +187,9 @@ fn each(
                 work(key)?;
                 store.mark(pass, key)?;
             }
-            Ok(done.fetch_add(1, Ordering::Relaxed) + 1)
+            let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+            report(n);
+            Ok(n)
         })
         .collect();
     for r in results {

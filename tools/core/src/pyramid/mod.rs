@@ -112,7 +112,7 @@ pub fn write_pyramid(
     source: &dyn HeightSource,
     description: PyramidDescription,
     options: WriteOptions,
-    progress: &dyn Fn(Progress),
+    progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<PathBuf> {
     let layout = TileLayout::new(description.grid.side, options.tile_cells)?;
     let capacity = build::partials_capacity(&layout);

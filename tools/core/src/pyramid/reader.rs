@@ -20,6 +20,8 @@ pub struct GridWindow {
     pub mask: Vec<u8>,
     /// `[error, radius]`.
     pub lp: Vec<[f32; 2]>,
+    /// The drape, RGBA8, a pixel a vertex.
+    pub drape: Vec<u8>,
 }
 
 /// An opened pyramid.
@@ -165,6 +167,16 @@ impl Pyramid {
         })
     }
 
+    /// The terrain frame of the level-0 grid.
+    pub fn frame(&self) -> crate::geo::TerrainFrame {
+        let g = &self.manifest.grid;
+        crate::geo::TerrainFrame {
+            side: g.side,
+            cell_size_m: g.cell_size_m,
+            geotransform: g.geotransform,
+        }
+    }
+
     /// The tiles of `level` whose box (their extent, between the lowest and
     /// highest height) meets `camera`'s frustum.
     pub fn tiles_meeting(&self, camera: &Camera, level: u32) -> Vec<TileKey> {
@@ -196,7 +208,7 @@ impl Pyramid {
         crate::memory::check(
             &format!("a {}×{} window of the pyramid", rect.width, rect.height),
             rect.len() as u64,
-            13,
+            17,
             "take a smaller window",
         )?;
         let (t, samples) = (self.layout.tile_cells, self.layout.samples());
@@ -204,6 +216,7 @@ impl Pyramid {
         let mut heights = vec![0.0f32; rect.len()];
         let mut mask = vec![0u8; rect.len()];
         let mut lp = vec![[0.0f32; 2]; rect.len()];
+        let mut drape = vec![0u8; rect.len() * 4];
         for y in rect.r0 / t..=((rect.r0 + rect.height - 1) / t).min(across - 1) {
             for x in rect.c0 / t..=((rect.c0 + rect.width - 1) / t).min(across - 1) {
                 let tile = self.tile(TileKey { level: 0, x, y })?;
@@ -214,6 +227,7 @@ impl Pyramid {
                         heights[i] = tile.heights[k];
                         mask[i] = tile.mask[k];
                         lp[i] = tile.lp[k];
+                        drape[4 * i..4 * i + 4].copy_from_slice(&tile.drape[4 * k..4 * k + 4]);
                     }
                 }
             }
@@ -223,6 +237,7 @@ impl Pyramid {
             heights,
             mask,
             lp,
+            drape,
         })
     }
 }

@@ -1,0 +1,122 @@
+//! `relevo prep --tiled`: the grid stages of `prep` (stitch, fill, square),
+//! then the pyramid bundle written tile by tile through relevo-core —
+//! errors and radii, the derived drape and the coarser levels computed in
+//! memory bounded by a few tiles and their halos, resumable after a kill,
+//! with progress and an ETA per pass. The drape is always derived from the
+//! heights; imagery, vegetation and clusters are not yet written into
+//! pyramids and are refused.
+
+use super::region::RegionSpec;
+use super::{provenance, stage_dem, stage_fill, stage_grid, Build};
+use anyhow::{bail, Context, Result};
+use relevo_core::bundle::GridInfo;
+use relevo_core::grid::HeightGrid;
+use relevo_core::pyramid::{self, BuildOptions, PyramidDescription, WriteOptions};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// How a pyramid is prepared.
+#[derive(Debug, Clone, Copy)]
+pub struct TiledOptions {
+    /// Cells a tile side (2^k).
+    pub tile_cells: usize,
+    pub force: bool,
+    /// Go on from a killed build's staging folder.
+    pub resume: bool,
+}
+
+/// What `prep --tiled` reports (`--json` prints it).
+#[derive(Debug, Serialize)]
+pub struct TiledSummary {
+    pub bundle: PathBuf,
+    pub region: String,
+    pub side: usize,
+    pub cell_size_m: f64,
+    pub tile_cells: usize,
+    pub levels: u32,
+    pub tiles: usize,
+    pub valid_vertices: usize,
+    pub height_range_m: [f32; 2],
+    pub grid_ms: f64,
+    pub pyramid_ms: f64,
+}
+
+/// Prepare `region` as a pyramid at `out`.
+pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Result<TiledSummary> {
+    if region.image.is_some() || region.vegetation.is_some() || region.clusters.is_some() {
+        bail!(
+            "a tiled bundle (--tiled) derives its drape from the heights; imagery, vegetation \
+             and clusters are not written into pyramids yet — drop [image], [vegetation] and \
+             [clusters], or prepare a single-grid bundle"
+        );
+    }
+    if out.symlink_metadata().is_ok() && !options.force && !options.resume {
+        bail!(
+            "{}: already exists (pass --force to replace it)",
+            out.display()
+        );
+    }
+    let name = region.name.clone().unwrap_or_else(|| {
+        out.file_stem()
+            .map(|s| s.to_string_lossy().to_string())
+            .unwrap_or_else(|| "region".into())
+    });
+    let start = Instant::now();
+    let mut b = Build::new(region, name.clone(), None);
+    for (stage, run) in [
+        ("dem", stage_dem as fn(&mut Build) -> Result<()>),
+        ("fill", stage_fill),
+        ("grid", stage_grid),
+    ] {
+        run(&mut b).with_context(|| format!("stage {stage}"))?;
+    }
+    let grid_ms = start.elapsed().as_secs_f64() * 1e3;
+    let grid: HeightGrid = b.grid.take().context("grid stage did not run")?;
+    let dem = b.dem.take().context("dem stage did not run")?;
+    let info =
+        GridInfo::of(&grid, b.cell_size_m, region.z_scale).context("the DEM has no valid data")?;
+    let (crs, inputs, parameters) = provenance(region, &dem)?;
+    drop(dem);
+    let description = PyramidDescription {
+        region: name.clone(),
+        crs,
+        grid: info,
+        inputs,
+        parameters,
+    };
+    let write = WriteOptions {
+        tile_cells: options.tile_cells,
+        build: BuildOptions {
+            metric: region.grid.error_metric,
+            cell_size_m: b.cell_size_m,
+            drape: true,
+        },
+        force: options.force,
+        resume: options.resume,
+    };
+    let start = Instant::now();
+    let bar = crate::progress::pass_bar();
+    let bundle = pyramid::write_pyramid(out, &grid, description, write, &|p| {
+        bar.set_message(p.pass);
+        bar.set_length(p.total as u64);
+        bar.set_position(p.done as u64);
+    })?;
+    bar.finish_and_clear();
+    let pyramid_ms = start.elapsed().as_secs_f64() * 1e3;
+    let opened = pyramid::Pyramid::open(&bundle)?;
+    let m = &opened.manifest;
+    Ok(TiledSummary {
+        bundle,
+        region: name,
+        side: m.grid.side,
+        cell_size_m: m.grid.cell_size_m,
+        tile_cells: m.tiling.tile_cells,
+        levels: m.tiling.levels,
+        tiles: m.tiling.tiles,
+        valid_vertices: m.grid.valid_vertices,
+        height_range_m: m.grid.height_range_m,
+        grid_ms,
+        pyramid_ms,
+    })
+}

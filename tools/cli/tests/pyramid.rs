@@ -1,0 +1,246 @@
+//! `relevo prep --tiled` on the real Grenoble DEM (Copernicus, 1025² grid):
+//! every level-0 vertex holds the single grid's heights, mask, errors and
+//! radii bit for bit at any tile size, the mesh through the tiles is the
+//! single grid's byte for byte, a killed build resumes to the same bytes,
+//! the files match their golden hashes, and tampered pyramids are refused
+//! by name.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+mod common;
+
+use common::{relevo, relevo_ok, repo, sha256};
+use relevo_core::bundle::Bundle;
+use relevo_core::lp::window::Rect;
+use relevo_core::pyramid::Pyramid;
+use std::path::{Path, PathBuf};
+
+fn dem() -> PathBuf {
+    repo("data/grenoble/Copernicus_DSM_10_N45_00_E005_00_DEM.tif")
+}
+
+/// `relevo prep --dem DEM --tiled --tile-size T EXTRA… --out DIR/NAME`.
+fn tiled(dir: &Path, name: &str, tile: usize, extra: &[&str]) -> PathBuf {
+    let out = dir.join(name);
+    let mut args = vec![
+        "prep".to_string(),
+        "--dem".into(),
+        dem().display().to_string(),
+        "--tiled".into(),
+        "--tile-size".into(),
+        tile.to_string(),
+        "--out".into(),
+        out.display().to_string(),
+        "-q".into(),
+    ];
+    args.extend(extra.iter().map(|s| s.to_string()));
+    relevo_ok(&args);
+    out
+}
+
+fn tile_files(p: &Path) -> Vec<String> {
+    ["height.f32", "mask.u8", "lp.f32x2", "drape.rgba8"]
+        .iter()
+        .map(|f| sha256(&p.join("tiles").join(f)))
+        .collect()
+}
+
+#[test]
+fn the_pyramid_holds_the_single_grid_at_any_tile_size_and_meshes_the_same() {
+    let d = tempfile::tempdir().unwrap();
+    let single = d.path().join("single.relevo");
+    relevo_ok([
+        "prep".as_ref(),
+        "--dem".as_ref(),
+        dem().as_os_str(),
+        "--terrain-drape".as_ref(),
+        "--out".as_ref(),
+        single.as_os_str(),
+        "-q".as_ref(),
+    ]);
+    let bundle = Bundle::open(&single).unwrap();
+    let (heights, mask, lp) = (
+        bundle.heights().unwrap(),
+        bundle.mask().unwrap(),
+        bundle.lp().unwrap(),
+    );
+    let h = lp.hierarchy();
+    let drape = bundle.drape().unwrap().unwrap();
+    for tile in [32, 128] {
+        let p = tiled(d.path(), &format!("t{tile}.relevo"), tile, &[]);
+        relevo_ok(["validate".as_ref(), p.as_os_str()]);
+        let pyramid = Pyramid::open(&p).unwrap();
+        let w = pyramid
+            .level0_window(Rect::whole(pyramid.layout.side))
+            .unwrap();
+        assert!(w
+            .heights
+            .iter()
+            .zip(heights.iter())
+            .all(|(a, b)| a.to_bits() == b.to_bits()));
+        assert!(w.mask[..] == mask[..]);
+        let differing =
+            w.lp.iter()
+                .zip(h.error_radius.iter())
+                .filter(|(a, b)| a.map(f32::to_bits) != b.map(f32::to_bits))
+                .count();
+        assert_eq!(
+            differing, 0,
+            "tile {tile}: {differing} vertices' errors or radii differ"
+        );
+        assert!(w.drape[..] == drape.rgba[..], "tile {tile}: drape");
+        // The mesh through the tiles, byte for byte the single grid's.
+        let (a, b) = (
+            d.path().join(format!("t{tile}.glb")),
+            d.path().join("single.glb"),
+        );
+        for (bundle, out) in [(&p, &a), (&single, &b)] {
+            relevo_ok([
+                "mesh".as_ref(),
+                bundle.as_os_str(),
+                "--max-error".as_ref(),
+                "5".as_ref(),
+                "--out".as_ref(),
+                out.as_os_str(),
+                "--force".as_ref(),
+            ]);
+        }
+        assert_eq!(
+            std::fs::read(&a).unwrap(),
+            std::fs::read(&b).unwrap(),
+            "tile {tile}: meshes differ"
+        );
+    }
+    // Golden hashes of the 64-cell pyramid's files.
+    let p = tiled(d.path(), "t64.relevo", 64, &[]);
+    let golden: Vec<String> = serde_json::from_str(
+        &std::fs::read_to_string(repo("data/golden/grenoble_pyramid.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(tile_files(&p), golden, "data/golden/grenoble_pyramid.json");
+}
+
+#[test]
+fn a_killed_build_resumes_to_the_same_bytes() {
+    let d = tempfile::tempdir().unwrap();
+    // Small tiles and 41 m cells (a 4097² grid): a build of a few seconds.
+    let whole = tiled(d.path(), "whole.relevo", 32, &["--cell-size", "41"]);
+    let out = d.path().join("killed.relevo");
+    for delay_ms in [1500, 2500, 3500] {
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_relevo"))
+            .args(["prep".as_ref(), "--dem".as_ref(), dem().as_os_str()])
+            .args([
+                "--tiled",
+                "--tile-size",
+                "32",
+                "--cell-size",
+                "41",
+                "-q",
+                "--force",
+            ])
+            .arg("--out")
+            .arg(&out)
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(delay_ms));
+        let _ = child.kill();
+        let _ = child.wait();
+        if !out.exists() {
+            break;
+        }
+        std::fs::remove_dir_all(&out).unwrap();
+    }
+    let staging = d.path().join("killed.relevo.tmp");
+    assert!(
+        staging.exists() || out.exists(),
+        "the build neither left its staging nor finished"
+    );
+    tiled(
+        d.path(),
+        "killed.relevo",
+        32,
+        &["--cell-size", "41", "--resume", "--force"],
+    );
+    assert_eq!(tile_files(&out), tile_files(&whole));
+    assert!(!staging.exists());
+}
+
+#[test]
+fn tampered_or_truncated_pyramids_are_refused_by_name() {
+    let d = tempfile::tempdir().unwrap();
+    let good = tiled(d.path(), "good.relevo", 64, &[]);
+    let copy = |name: &str| {
+        let to = d.path().join(name);
+        let ok = std::process::Command::new("cp")
+            .args(["-a".as_ref(), good.as_os_str(), to.as_os_str()])
+            .status()
+            .unwrap();
+        assert!(ok.success());
+        to
+    };
+    // Truncated heights.
+    let truncated = copy("truncated.relevo");
+    let f = std::fs::OpenOptions::new()
+        .write(true)
+        .open(truncated.join("tiles/height.f32"))
+        .unwrap();
+    f.set_len(1000).unwrap();
+    // A manifest whose tiling disagrees with its grid.
+    let tiling = copy("tiling.relevo");
+    let path = tiling.join("manifest.json");
+    let text = std::fs::read_to_string(&path)
+        .unwrap()
+        .replace("\"levels\": 5", "\"levels\": 9");
+    std::fs::write(&path, text).unwrap();
+    // A border sample changed in one tile, its hash fixed up.
+    let border = copy("border.relevo");
+    let heights = border.join("tiles/height.f32");
+    let mut bytes = std::fs::read(&heights).unwrap();
+    // Tile 0's last column, row 10: shared with tile 1's first column.
+    let at = (10 * 65 + 64) * 4;
+    bytes[at..at + 4].copy_from_slice(&1234.5f32.to_le_bytes());
+    std::fs::write(&heights, bytes).unwrap();
+    let path = border.join("manifest.json");
+    let mut manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    manifest["files"]["height"]["sha256"] = sha256(&heights).into();
+    std::fs::write(&path, serde_json::to_string_pretty(&manifest).unwrap()).unwrap();
+    for (bundle, needles) in [
+        (&truncated, vec!["height.f32", "is 1000 bytes"]),
+        (&tiling, vec!["manifest.json", "tiling says 9 levels"]),
+        (&border, vec!["disagree at their shared sample"]),
+    ] {
+        let out = relevo(["validate".as_ref(), bundle.as_os_str()]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        for n in needles {
+            assert!(stderr.contains(n), "{}: {stderr}", bundle.display());
+        }
+    }
+}
+
+#[test]
+fn a_grid_beyond_the_memory_budget_and_bad_tile_sizes_are_refused() {
+    let d = tempfile::tempdir().unwrap();
+    for (args, needle) in [
+        (vec!["--tile-size", "100"], "a tile of 100 cells"),
+        (
+            vec!["--tile-size", "2048"],
+            "cannot be cut into tiles of 2048 cells",
+        ),
+        (
+            vec!["--cell-size", "10", "--max-memory", "256M"],
+            "needs about",
+        ),
+    ] {
+        let dem = dem();
+        let mut all = vec!["prep", "--dem", dem.to_str().unwrap(), "--tiled", "--out"];
+        let out = d.path().join("x.relevo");
+        all.push(out.to_str().unwrap());
+        all.extend(args);
+        let o = relevo(&all);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{stderr}");
+        assert!(stderr.contains(needle) && !out.exists(), "{stderr}");
+    }
+}
