@@ -1,14 +1,16 @@
 //! `relevo prep --tiled` on the real Grenoble DEM (Copernicus, 1025² grid):
 //! every level-0 vertex holds the single grid's heights, mask, errors and
 //! radii bit for bit at any tile size, the mesh through the tiles is the
-//! single grid's byte for byte, a killed build resumes to the same bytes,
+//! single grid's byte for byte, a projected DEM is read window by window
+//! to the same pyramid in a budget its grid exceeds, a killed build
+//! resumes to the same bytes,
 //! the files match their golden hashes, and tampered pyramids are refused
 //! by name.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
 
-use common::{relevo, relevo_ok, repo, sha256};
+use common::{gdal_tool, relevo, relevo_ok, repo, sha256};
 use relevo_core::bundle::Bundle;
 use relevo_core::lp::window::Rect;
 use relevo_core::pyramid::Pyramid;
@@ -44,20 +46,27 @@ fn tile_files(p: &Path) -> Vec<String> {
         .collect()
 }
 
-#[test]
-fn the_pyramid_holds_the_single_grid_at_any_tile_size_and_meshes_the_same() {
-    let d = tempfile::tempdir().unwrap();
-    let single = d.path().join("single.relevo");
+/// `relevo prep --dem DEM --terrain-drape --out DIR/single.relevo`.
+fn single_grid(dir: &Path, dem: &Path) -> PathBuf {
+    let single = dir.join("single.relevo");
     relevo_ok([
         "prep".as_ref(),
         "--dem".as_ref(),
-        dem().as_os_str(),
+        dem.as_os_str(),
         "--terrain-drape".as_ref(),
         "--out".as_ref(),
         single.as_os_str(),
         "-q".as_ref(),
     ]);
-    let bundle = Bundle::open(&single).unwrap();
+    single
+}
+
+/// Every level-0 vertex of `pyramid` holds the single grid's heights, mask,
+/// errors, radii and drape bit for bit, and the mesh through its tiles is
+/// the single grid's byte for byte.
+fn assert_same_as_single(single: &Path, pyramid: &Path, label: &str) {
+    relevo_ok(["validate".as_ref(), pyramid.as_os_str()]);
+    let bundle = Bundle::open(single).unwrap();
     let (heights, mask, lp) = (
         bundle.heights().unwrap(),
         bundle.mask().unwrap(),
@@ -65,50 +74,57 @@ fn the_pyramid_holds_the_single_grid_at_any_tile_size_and_meshes_the_same() {
     );
     let h = lp.hierarchy();
     let drape = bundle.drape().unwrap().unwrap();
-    for tile in [32, 128] {
-        let p = tiled(d.path(), &format!("t{tile}.relevo"), tile, &[]);
-        relevo_ok(["validate".as_ref(), p.as_os_str()]);
-        let pyramid = Pyramid::open(&p).unwrap();
-        let w = pyramid
-            .level0_window(Rect::whole(pyramid.layout.side))
-            .unwrap();
-        assert!(w
-            .heights
+    let p = Pyramid::open(pyramid).unwrap();
+    let w = p.level0_window(Rect::whole(p.layout.side)).unwrap();
+    assert!(
+        w.heights
             .iter()
             .zip(heights.iter())
-            .all(|(a, b)| a.to_bits() == b.to_bits()));
-        assert!(w.mask[..] == mask[..]);
-        let differing =
-            w.lp.iter()
-                .zip(h.error_radius.iter())
-                .filter(|(a, b)| a.map(f32::to_bits) != b.map(f32::to_bits))
-                .count();
-        assert_eq!(
-            differing, 0,
-            "tile {tile}: {differing} vertices' errors or radii differ"
-        );
-        assert!(w.drape[..] == drape.rgba[..], "tile {tile}: drape");
-        // The mesh through the tiles, byte for byte the single grid's.
-        let (a, b) = (
-            d.path().join(format!("t{tile}.glb")),
-            d.path().join("single.glb"),
-        );
-        for (bundle, out) in [(&p, &a), (&single, &b)] {
-            relevo_ok([
-                "mesh".as_ref(),
-                bundle.as_os_str(),
-                "--max-error".as_ref(),
-                "5".as_ref(),
-                "--out".as_ref(),
-                out.as_os_str(),
-                "--force".as_ref(),
-            ]);
-        }
-        assert_eq!(
-            std::fs::read(&a).unwrap(),
-            std::fs::read(&b).unwrap(),
-            "tile {tile}: meshes differ"
-        );
+            .all(|(a, b)| a.to_bits() == b.to_bits()),
+        "{label}: heights"
+    );
+    assert!(w.mask[..] == mask[..], "{label}: mask");
+    let differing =
+        w.lp.iter()
+            .zip(h.error_radius.iter())
+            .filter(|(a, b)| a.map(f32::to_bits) != b.map(f32::to_bits))
+            .count();
+    assert_eq!(
+        differing, 0,
+        "{label}: {differing} vertices' errors or radii differ"
+    );
+    assert!(w.drape[..] == drape.rgba[..], "{label}: drape");
+    // The mesh through the tiles, byte for byte the single grid's.
+    let dir = pyramid.parent().unwrap();
+    let (a, b) = (
+        dir.join(format!("{label}.glb")),
+        dir.join(format!("{label}.single.glb")),
+    );
+    for (bundle, out) in [(pyramid, &a), (single, &b)] {
+        relevo_ok([
+            "mesh".as_ref(),
+            bundle.as_os_str(),
+            "--max-error".as_ref(),
+            "5".as_ref(),
+            "--out".as_ref(),
+            out.as_os_str(),
+            "--force".as_ref(),
+        ]);
+    }
+    assert_eq!(
+        std::fs::read(&a).unwrap(),
+        std::fs::read(&b).unwrap(),
+        "{label}: meshes differ"
+    );
+}
+
+#[test]
+fn the_pyramid_holds_the_single_grid_at_any_tile_size_and_meshes_the_same() {
+    let d = tempfile::tempdir().unwrap();
+    let single = single_grid(d.path(), &dem());
+    for tile in [32, 128] {
+        let p = tiled(d.path(), &format!("t{tile}.relevo"), tile, &[]);
+        assert_same_as_single(&single, &p, &format!("t{tile}"));
     }
     // Golden hashes of the 64-cell pyramid's files.
     let p = tiled(d.path(), "t64.relevo", 64, &[]);
@@ -117,6 +133,79 @@ fn the_pyramid_holds_the_single_grid_at_any_tile_size_and_meshes_the_same() {
     )
     .unwrap();
     assert_eq!(tile_files(&p), golden, "data/golden/grenoble_pyramid.json");
+}
+
+/// The Grenoble DEM warped by GDAL to UTM 31N at 30 m (1000² cells, no
+/// voids): a DEM already on the target grid, which `prep --tiled` reads
+/// window by window.
+fn projected_dem(dir: &Path) -> PathBuf {
+    let out = dir.join("grenoble_utm31n_30m.tif");
+    gdal_tool(
+        "gdalwarp",
+        &[
+            "-q",
+            "-t_srs",
+            "EPSG:32631",
+            "-tr",
+            "30",
+            "30",
+            "-r",
+            "bilinear",
+            "-te",
+            "660000",
+            "4990000",
+            "690000",
+            "5020000",
+            dem().to_str().unwrap(),
+            out.to_str().unwrap(),
+        ],
+    );
+    out
+}
+
+#[test]
+fn a_projected_dem_is_read_window_by_window_within_a_budget_the_grid_exceeds() {
+    let d = tempfile::tempdir().unwrap();
+    let dem = projected_dem(d.path());
+    let single = single_grid(d.path(), &dem);
+    // Two threads, so the tile work's budget is the same on any machine.
+    let run = |name: &str, tile: &str, extra: &[&str]| {
+        let out = d.path().join(name);
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_relevo"))
+            .env("RAYON_NUM_THREADS", "2")
+            .args(["prep", "--dem", dem.to_str().unwrap(), "--tiled"])
+            .args(["--tile-size", tile, "--max-memory", "16M", "--json", "-q"])
+            .args(extra)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        (out, o)
+    };
+    // Window by window: the 1025² grid (23 MiB of heights alone) is never
+    // held, so a 16 MiB budget suffices.
+    let (p, o) = run("direct.relevo", "128", &[]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(summary["read_by_windows"], true, "{summary}");
+    assert_same_as_single(&single, &p, "direct");
+    // Through the in-memory stages (a resampling asked for), refused by name.
+    let (p, o) = run("staged.relevo", "128", &["--cell-size", "30"]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("memory budget is 16.0 MiB") && !p.exists(),
+        "{stderr}"
+    );
+    // Tiles too large for the budget are refused before anything is written.
+    let (p, o) = run("wide.relevo", "1024", &[]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("building tiles of 1024 cells") && !p.exists(),
+        "{stderr}"
+    );
 }
 
 #[test]

@@ -78,6 +78,7 @@ pub enum Command {
   relevo prep --dem dem.tif --image ortho.tif --samples marks.csv --out r.relevo   # with vegetation
   relevo prep --dem alps.tif --terrain-drape --out alps.relevo   # drape tinted and lit from the heights
   relevo prep --dem country.vrt --tiled --out country.relevo      # a pyramid of 513² tiles
+  relevo prep --dem county_utm.tif --tiled --out county.relevo    # a projected DEM, read window by window
   relevo prep --dem country.vrt --tiled --resume --out country.relevo   # go on after a kill")]
     Prep(prep::PrepArgs),
     /// Export the mesh at an object-space tolerance as glTF (.glb) or OBJ.

@@ -4,6 +4,7 @@
 //! earlier stages left in `Build` and adds its own results. Adding a stage is
 //! writing one such function and listing it.
 
+mod direct;
 pub mod region;
 pub mod tiled;
 
@@ -521,6 +522,19 @@ fn provenance(
     region: &RegionSpec,
     dem: &Mosaic,
 ) -> Result<(Crs, Vec<InputFile>, BTreeMap<String, serde_json::Value>)> {
+    let (inputs, parameters) = provenance_of(region)?;
+    let crs = Crs {
+        wkt: dem.grid.crs_wkt.clone(),
+        epsg: dem.srs.as_ref().and_then(crs::epsg),
+    };
+    Ok((crs, inputs, parameters))
+}
+
+/// Every input file of `region` with its hash, and its parameters (the
+/// CRS is left to the caller, which knows the grid's).
+fn provenance_of(
+    region: &RegionSpec,
+) -> Result<(Vec<InputFile>, BTreeMap<String, serde_json::Value>)> {
     let mut inputs = Vec::new();
     let mut record = |role: &str, paths: &[PathBuf]| -> Result<()> {
         for p in paths {
@@ -542,11 +556,7 @@ fn provenance(
         serde_json::Value::Object(map) => map.into_iter().collect(),
         _ => BTreeMap::new(),
     };
-    let crs = Crs {
-        wkt: dem.grid.crs_wkt.clone(),
-        epsg: dem.srs.as_ref().and_then(crs::epsg),
-    };
-    Ok((crs, inputs, parameters))
+    Ok((inputs, parameters))
 }
 
 /// Write the manifest and move the bundle into place.

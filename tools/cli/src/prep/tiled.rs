@@ -1,17 +1,20 @@
-//! `relevo prep --tiled`: the grid stages of `prep` (stitch, fill, square),
-//! then the pyramid bundle written tile by tile through relevo-core —
+//! `relevo prep --tiled`: the heights read window by window (a single
+//! void-free DEM on the target grid, `direct`) or through the grid stages
+//! of `prep` (stitch, fill, square, in memory), then the pyramid bundle
+//! written tile by tile through relevo-core —
 //! errors and radii, the derived drape and the coarser levels computed in
 //! memory bounded by a few tiles and their halos, resumable after a kill,
 //! with progress and an ETA per pass. The drape is always derived from the
 //! heights; imagery, vegetation and clusters are not yet written into
 //! pyramids and are refused.
 
+use super::direct::DirectSource;
 use super::region::RegionSpec;
-use super::{provenance, stage_dem, stage_fill, stage_grid, Build};
+use super::{provenance, provenance_of, stage_dem, stage_fill, stage_grid, Build};
 use anyhow::{bail, Context, Result};
 use relevo_core::bundle::GridInfo;
 use relevo_core::grid::HeightGrid;
-use relevo_core::pyramid::{self, BuildOptions, PyramidDescription, WriteOptions};
+use relevo_core::pyramid::{self, BuildOptions, HeightSource, PyramidDescription, WriteOptions};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -38,6 +41,9 @@ pub struct TiledSummary {
     pub tiles: usize,
     pub valid_vertices: usize,
     pub height_range_m: [f32; 2],
+    /// Whether the DEM was read window by window (else through the
+    /// in-memory grid stages).
+    pub read_by_windows: bool,
     pub grid_ms: f64,
     pub pyramid_ms: f64,
 }
@@ -63,33 +69,56 @@ pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Res
             .unwrap_or_else(|| "region".into())
     });
     let start = Instant::now();
-    let mut b = Build::new(region, name.clone(), None);
-    for (stage, run) in [
-        ("dem", stage_dem as fn(&mut Build) -> Result<()>),
-        ("fill", stage_fill),
-        ("grid", stage_grid),
-    ] {
-        run(&mut b).with_context(|| format!("stage {stage}"))?;
-    }
+    // A single void-free DEM on the target grid is read window by window;
+    // anything else goes through the in-memory grid stages.
+    let direct = DirectSource::for_region(region)?;
+    let in_memory: Option<HeightGrid>;
+    let (source, description, cell_size_m): (&dyn HeightSource, PyramidDescription, f64) =
+        match &direct {
+            Some(d) => {
+                let (inputs, parameters) = provenance_of(region)?;
+                let description = PyramidDescription {
+                    region: name.clone(),
+                    crs: d.crs.clone(),
+                    grid: d.grid.clone(),
+                    inputs,
+                    parameters,
+                };
+                (d, description, d.grid.cell_size_m)
+            }
+            None => {
+                let mut b = Build::new(region, name.clone(), None);
+                for (stage, run) in [
+                    ("dem", stage_dem as fn(&mut Build) -> Result<()>),
+                    ("fill", stage_fill),
+                    ("grid", stage_grid),
+                ] {
+                    run(&mut b).with_context(|| format!("stage {stage}"))?;
+                }
+                let grid = b.grid.take().context("grid stage did not run")?;
+                let dem = b.dem.take().context("dem stage did not run")?;
+                let info = GridInfo::of(&grid, b.cell_size_m, region.z_scale)
+                    .context("the DEM has no valid data")?;
+                let (crs, inputs, parameters) = provenance(region, &dem)?;
+                let cell = b.cell_size_m;
+                in_memory = Some(grid);
+                let description = PyramidDescription {
+                    region: name.clone(),
+                    crs,
+                    grid: info,
+                    inputs,
+                    parameters,
+                };
+                let grid = in_memory.as_ref().context("grid stage did not run")?;
+                (grid, description, cell)
+            }
+        };
     let grid_ms = start.elapsed().as_secs_f64() * 1e3;
-    let grid: HeightGrid = b.grid.take().context("grid stage did not run")?;
-    let dem = b.dem.take().context("dem stage did not run")?;
-    let info =
-        GridInfo::of(&grid, b.cell_size_m, region.z_scale).context("the DEM has no valid data")?;
-    let (crs, inputs, parameters) = provenance(region, &dem)?;
-    drop(dem);
-    let description = PyramidDescription {
-        region: name.clone(),
-        crs,
-        grid: info,
-        inputs,
-        parameters,
-    };
     let write = WriteOptions {
         tile_cells: options.tile_cells,
         build: BuildOptions {
             metric: region.grid.error_metric,
-            cell_size_m: b.cell_size_m,
+            cell_size_m,
             drape: true,
         },
         force: options.force,
@@ -97,7 +126,7 @@ pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Res
     };
     let start = Instant::now();
     let bar = crate::progress::pass_bar();
-    let bundle = pyramid::write_pyramid(out, &grid, description, write, &|p| {
+    let bundle = pyramid::write_pyramid(out, source, description, write, &|p| {
         bar.set_message(p.pass);
         bar.set_length(p.total as u64);
         bar.set_position(p.done as u64);
@@ -116,6 +145,7 @@ pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Res
         tiles: m.tiling.tiles,
         valid_vertices: m.grid.valid_vertices,
         height_range_m: m.grid.height_range_m,
+        read_by_windows: direct.is_some(),
         grid_ms,
         pyramid_ms,
     })

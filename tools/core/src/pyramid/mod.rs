@@ -116,6 +116,7 @@ pub fn write_pyramid(
 ) -> Result<PathBuf> {
     let layout = TileLayout::new(description.grid.side, options.tile_cells)?;
     let capacity = build::partials_capacity(&layout);
+    build::check_working_memory(&layout)?;
     if let Some(parent) = target.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
     }
