@@ -21,6 +21,10 @@ use std::path::PathBuf;
 /// Rows read at a time when the file is scanned for voids.
 const SCAN_ROWS: usize = 256;
 
+/// GDAL's block cache, MB: its default (5 % of the machine's memory) would
+/// grow with the machine, not with the work.
+const GDAL_CACHE_MB: &str = "64";
+
 /// A DEM read window by window. Each window opens the file anew (GDAL's
 /// handles are not shared between threads; an open costs far less than a
 /// tile's read), so tiles are read in parallel.
@@ -47,6 +51,7 @@ impl DirectSource {
         {
             return Ok(None);
         }
+        gdal::config::set_config_option("GDAL_CACHEMAX", GDAL_CACHE_MB)?;
         let source = gdalio::open(&r.dem.files[0])?;
         let (Some(geo), Some(srs)) = (source.geotransform, source.srs.clone()) else {
             return Ok(None);
