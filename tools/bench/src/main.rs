@@ -8,6 +8,7 @@ mod bench;
 mod check;
 mod clusters;
 mod measure;
+mod pyramid;
 mod render;
 mod veg_protocol;
 mod view;
@@ -30,7 +31,8 @@ use std::process::ExitCode;
   cargo run --release -p relevo-bench -- veg-protocol --json
   cargo run --release -p relevo-bench -- view --json --runs 3
   cargo run --release -p relevo-bench -- clusters --json --runs 5
-  cargo run --release -p relevo-bench -- check --json --runs 5"
+  cargo run --release -p relevo-bench -- check --json --runs 5
+  cargo build --release -p relevo && cargo run --release -p relevo-bench -- pyramid --json --max-side 32769"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -44,6 +46,26 @@ enum BenchCommand {
   relevo-bench ingest
   relevo-bench ingest --json --runs 7")]
     Ingest(BenchArgs),
+    /// The pyramid at scale: `relevo prep --tiled` on a real 8193² DEM and
+    /// the fractal at 16385² and 32769², wall time and peak memory, beside
+    /// gdaladdo and a COG of the same file. Needs the `relevo` binary built
+    /// beside this one.
+    #[command(after_help = "Examples:
+  cargo build --release -p relevo
+  relevo-bench pyramid --json
+  relevo-bench pyramid --json --max-side 32769
+  relevo-bench pyramid --pictures docs/images")]
+    Pyramid {
+        #[command(flatten)]
+        common: BenchArgs,
+        /// Largest fractal side (16385 or 32769; 8193 runs the real DEM alone).
+        #[arg(long, default_value_t = 16385)]
+        max_side: usize,
+        /// Write docs/images' picture of the pyramid's levels to this
+        /// folder instead of measuring.
+        #[arg(long)]
+        pictures: Option<PathBuf>,
+    },
     /// LP errors and radii beside @mapbox/martini; view-dependent refinement.
     #[command(after_help = "Examples:
   relevo-bench hierarchy --json
@@ -213,6 +235,14 @@ fn main() -> ExitCode {
             None => clusters::clusters(&a.repo, a.runs.max(1), max_objects, budget_mib, a.json),
         },
         BenchCommand::Ingest(a) => bench::ingest(&a.repo, &a.data, a.runs.max(1), a.json),
+        BenchCommand::Pyramid {
+            common: a,
+            max_side,
+            pictures,
+        } => match pictures {
+            Some(dir) => pyramid::picture(&a.repo, &dir),
+            None => pyramid::run(&a.repo, a.runs.max(1), max_side, a.json),
+        },
         BenchCommand::Check(a) => check::run(&a.repo, a.runs.max(1), a.json),
         BenchCommand::Render {
             common: a,

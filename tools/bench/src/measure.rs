@@ -59,3 +59,28 @@ pub fn srtm_padded(data: &Path) -> Result<relevo_core::grid::HeightGrid> {
         Squaring::Pad,
     ))
 }
+
+/// Run `command` to its end with its output discarded: wall time in
+/// milliseconds and peak resident memory in MB (the kernel's own count
+/// for that child), failing on a non-zero exit.
+pub fn run_measured(command: &mut std::process::Command) -> Result<(f64, f64)> {
+    let start = Instant::now();
+    let child = command
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .with_context(|| format!("starting {command:?}"))?;
+    let pid = child.id() as libc::pid_t;
+    let mut status = 0;
+    // SAFETY: `rusage` is a plain C struct that wait4 fills; `pid` is this
+    // process's child, not yet waited for, and both pointers are valid
+    // for the call.
+    let (waited, usage) = unsafe {
+        let mut usage: libc::rusage = std::mem::zeroed();
+        (libc::wait4(pid, &mut status, 0, &mut usage), usage)
+    };
+    let ms = start.elapsed().as_secs_f64() * 1e3;
+    if waited != pid || !libc::WIFEXITED(status) || libc::WEXITSTATUS(status) != 0 {
+        anyhow::bail!("{command:?} failed (wait status {status})");
+    }
+    Ok((ms, usage.ru_maxrss as f64 / 1024.0))
+}
