@@ -60,27 +60,34 @@ pub fn srtm_padded(data: &Path) -> Result<relevo_core::grid::HeightGrid> {
     ))
 }
 
-/// Run `command` to its end with its output discarded: wall time in
-/// milliseconds and peak resident memory in MB (the kernel's own count
-/// for that child), failing on a non-zero exit.
-pub fn run_measured(command: &mut std::process::Command) -> Result<(f64, f64)> {
+/// Run `program` with `args` to its end, its output discarded, under GNU
+/// time: wall time in milliseconds and the child's peak resident memory in
+/// MB, failing on a non-zero exit. (A child forked from this process would
+/// report this process's own peak too: Linux carries the parent's
+/// high-water mark across fork and exec; GNU time's child starts small.)
+pub fn run_measured(command: &std::process::Command) -> Result<(f64, f64)> {
+    let (program, args): (&std::ffi::OsStr, Vec<&std::ffi::OsStr>) =
+        (command.get_program(), command.get_args().collect());
+    let report = std::env::temp_dir().join(format!("relevo-bench-time-{}", std::process::id()));
     let start = Instant::now();
-    let child = command
+    let status = std::process::Command::new("/usr/bin/time")
+        .args(["-f", "%M", "-o"])
+        .arg(&report)
+        .arg(program)
+        .args(&args)
         .stdout(std::process::Stdio::null())
-        .spawn()
-        .with_context(|| format!("starting {command:?}"))?;
-    let pid = child.id() as libc::pid_t;
-    let mut status = 0;
-    // SAFETY: `rusage` is a plain C struct that wait4 fills; `pid` is this
-    // process's child, not yet waited for, and both pointers are valid
-    // for the call.
-    let (waited, usage) = unsafe {
-        let mut usage: libc::rusage = std::mem::zeroed();
-        (libc::wait4(pid, &mut status, 0, &mut usage), usage)
-    };
+        .status()
+        .context("running /usr/bin/time (Debian package `time`)")?;
     let ms = start.elapsed().as_secs_f64() * 1e3;
-    if waited != pid || !libc::WIFEXITED(status) || libc::WEXITSTATUS(status) != 0 {
-        anyhow::bail!("{command:?} failed (wait status {status})");
+    if !status.success() {
+        anyhow::bail!("{program:?} {args:?} failed ({status})");
     }
-    Ok((ms, usage.ru_maxrss as f64 / 1024.0))
+    let text = std::fs::read_to_string(&report).with_context(|| report.display().to_string())?;
+    let _ = std::fs::remove_file(&report);
+    let kib: f64 = text
+        .lines()
+        .last()
+        .and_then(|l| l.trim().parse().ok())
+        .with_context(|| format!("GNU time's report {text:?}"))?;
+    Ok((ms, kib / 1024.0))
 }

@@ -309,6 +309,43 @@ fn tampered_or_truncated_pyramids_are_refused_by_name() {
 }
 
 #[test]
+fn commands_that_read_single_grids_refuse_a_pyramid_by_name() {
+    let d = tempfile::tempdir().unwrap();
+    let p = tiled(d.path(), "p.relevo", 128, &[]);
+    let golden = d.path().join("golden.json");
+    let png = d.path().join("shot.png");
+    for (args, code) in [
+        (
+            vec![
+                "check",
+                p.to_str().unwrap(),
+                "--golden",
+                golden.to_str().unwrap(),
+                "--bless",
+            ],
+            2,
+        ),
+        (
+            vec![
+                "render",
+                p.to_str().unwrap(),
+                "--camera",
+                "730000,5000000,3000,0",
+                "--out",
+                png.to_str().unwrap(),
+            ],
+            1,
+        ),
+    ] {
+        let o = relevo(&args);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(code), "{args:?}: {stderr}");
+        assert!(stderr.contains("is a pyramid bundle"), "{args:?}: {stderr}");
+        assert!(!golden.exists() && !png.exists());
+    }
+}
+
+#[test]
 fn a_grid_beyond_the_memory_budget_and_bad_tile_sizes_are_refused() {
     let d = tempfile::tempdir().unwrap();
     for (args, needle) in [

@@ -269,7 +269,8 @@ fn warp_all(
         &format!("the stitched grid of {width}×{height} cells"),
         (width as u64).saturating_mul(height as u64),
         24 * bands,
-        "choose a coarser resolution or a smaller extent",
+        "choose a coarser resolution or a smaller extent; a region of any size is \
+         prepared by `prep --tiled` from one projected GeoTIFF (docs/guide.md, \"Large regions\")",
     )?;
 
     let bar = progress::bar(sources.len() as u64, "warping tiles");

@@ -183,6 +183,16 @@ impl Bundle {
     pub fn open(dir: &Path) -> Result<Bundle> {
         let path = dir.join(MANIFEST_FILE);
         let text = files::read_to_string(&path)?;
+        let format = serde_json::from_str::<serde_json::Value>(&text)
+            .ok()
+            .and_then(|m| m.get("format").and_then(|f| f.as_str()).map(str::to_string));
+        if format.as_deref() == Some(super::PYRAMID_FORMAT) {
+            return Err(Error::invalid(
+                dir,
+                "is a pyramid bundle (prep --tiled), which this command does not read yet; \
+                 relevo info, validate and mesh read pyramids",
+            ));
+        }
         let manifest: Manifest = serde_json::from_str(&text).map_err(|e| Error::Manifest {
             path: path.clone(),
             json: e,
