@@ -3,7 +3,7 @@
 use crate::clusters::print_report;
 use anyhow::Result;
 use clap::Args;
-use relevo_core::bundle::Bundle;
+use relevo_core::bundle::{Bundle, Crs};
 use relevo_core::cluster::store;
 use std::path::{Path, PathBuf};
 
@@ -31,18 +31,7 @@ fn describe(path: &Path, json: bool) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(m)?);
         return Ok(());
     }
-    println!(
-        "{} — region {:?}, format {} v{}",
-        path.display(),
-        m.region,
-        m.format,
-        m.format_version
-    );
-    match m.crs.epsg {
-        Some(code) => println!("  CRS          EPSG:{code}"),
-        None if m.crs.wkt.is_empty() => println!("  CRS          none (grid units)"),
-        None => println!("  CRS          custom (WKT in manifest)"),
-    }
+    print_header(path, &m.region, &m.format, m.format_version, &m.crs);
     let g = &m.grid;
     println!(
         "  grid         {0}×{0} vertices, {1:.3} m cells, z scale {2}",
@@ -102,6 +91,19 @@ fn describe(path: &Path, json: bool) -> Result<()> {
     Ok(())
 }
 
+/// The first lines of either kind of bundle: path, region, format, CRS.
+fn print_header(path: &Path, region: &str, format: &str, version: u32, crs: &Crs) {
+    println!(
+        "{} — region {region:?}, format {format} v{version}",
+        path.display()
+    );
+    match crs.epsg {
+        Some(code) => println!("  CRS          EPSG:{code}"),
+        None if crs.wkt.is_empty() => println!("  CRS          none (grid units)"),
+        None => println!("  CRS          custom (WKT in manifest)"),
+    }
+}
+
 /// `relevo info` of a pyramid: the grid, the tiling level by level, the files.
 fn describe_pyramid(path: &Path, json: bool) -> Result<()> {
     let p = relevo_core::pyramid::Pyramid::open(path)?;
@@ -110,18 +112,7 @@ fn describe_pyramid(path: &Path, json: bool) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(m)?);
         return Ok(());
     }
-    println!(
-        "{} — region {:?}, format {} v{}",
-        path.display(),
-        m.region,
-        m.format,
-        m.format_version
-    );
-    match m.crs.epsg {
-        Some(code) => println!("  CRS          EPSG:{code}"),
-        None if m.crs.wkt.is_empty() => println!("  CRS          none (grid units)"),
-        None => println!("  CRS          custom (WKT in manifest)"),
-    }
+    print_header(path, &m.region, &m.format, m.format_version, &m.crs);
     let g = &m.grid;
     println!(
         "  grid         {0}×{0} vertices, {1:.3} m cells",

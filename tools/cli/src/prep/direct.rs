@@ -39,10 +39,10 @@ pub struct DirectSource {
 }
 
 impl DirectSource {
-    /// The region's DEM as a direct source, when it qualifies (see the
-    /// module); `None` when the in-memory stages must run. Scans the file
-    /// once, a strip of rows at a time, for voids and absurd heights.
-    pub fn for_region(region: &RegionSpec) -> Result<Option<DirectSource>> {
+    /// The region's DEM as a direct source, when it qualifies by its
+    /// header (see the module); `None` when the in-memory stages must run.
+    /// [`DirectSource::scan`] then reads it once for voids.
+    pub fn open(region: &RegionSpec) -> Result<Option<DirectSource>> {
         let r = region;
         if r.dem.files.len() != 1
             || r.dem.encoding != Encoding::Plain
@@ -68,17 +68,6 @@ impl DirectSource {
         let (width, height) = (source.width, source.height);
         if width < 2 || height < 2 {
             return Ok(None);
-        }
-        let name = source.path.display().to_string();
-        for row in (0..height).step_by(SCAN_ROWS) {
-            let rows = SCAN_ROWS.min(height - row);
-            let mut strip = source.read_window(0, row, width, rows, Some(&[1]), nodata)?;
-            if strip.data.iter().any(|v| v.is_nan()) {
-                tracing::info!("{name}: has voids; the grid is built in memory");
-                return Ok(None);
-            }
-            strip.data.iter_mut().for_each(|v| *v *= r.z_scale);
-            gdalio::check_heights(&strip, &format!("{name} (rows from {row})"))?;
         }
         let side = pow2_plus_1_at_least(width.max(height));
         if side > relevo_core::bundle::MAX_SIDE {
@@ -112,6 +101,25 @@ impl DirectSource {
             grid,
             crs,
         }))
+    }
+
+    /// Read the file once, a strip of rows at a time: `false` when it has
+    /// voids (the in-memory stages fill them), an error for absurd heights.
+    pub fn scan(&self) -> Result<bool> {
+        let source = gdalio::open(&self.path)?;
+        let name = self.path.display().to_string();
+        for row in (0..self.height).step_by(SCAN_ROWS) {
+            let rows = SCAN_ROWS.min(self.height - row);
+            let mut strip =
+                source.read_window(0, row, self.width, rows, Some(&[1]), self.nodata)?;
+            if strip.data.iter().any(|v| v.is_nan()) {
+                tracing::info!("{name}: has voids; the grid is built in memory");
+                return Ok(false);
+            }
+            strip.data.iter_mut().for_each(|v| *v *= self.z_scale);
+            gdalio::check_heights(&strip, &format!("{name} (rows from {row})"))?;
+        }
+        Ok(true)
     }
 }
 

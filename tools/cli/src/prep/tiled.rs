@@ -71,7 +71,14 @@ pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Res
     let start = Instant::now();
     // A single void-free DEM on the target grid is read window by window;
     // anything else goes through the in-memory grid stages.
-    let direct = DirectSource::for_region(region)?;
+    // The tiling, memory and disk are checked before the file is scanned.
+    let direct = match DirectSource::open(region)? {
+        Some(d) => {
+            pyramid::preflight(out, d.grid.side, options.tile_cells, options.resume)?;
+            d.scan()?.then_some(d)
+        }
+        None => None,
+    };
     let in_memory: Option<HeightGrid>;
     let (source, description, cell_size_m): (&dyn HeightSource, PyramidDescription, f64) =
         match &direct {

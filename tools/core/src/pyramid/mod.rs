@@ -116,7 +116,7 @@ pub fn write_pyramid(
 ) -> Result<PathBuf> {
     let layout = TileLayout::new(description.grid.side, options.tile_cells)?;
     let capacity = build::partials_capacity(&layout);
-    build::check_working_memory(&layout)?;
+    preflight(target, layout.side, layout.tile_cells, options.resume)?;
     if let Some(parent) = target.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
     }
@@ -152,7 +152,6 @@ pub fn write_pyramid(
             ));
         }
     } else {
-        check_free_space(&dir, TileStore::bytes_needed(&layout, capacity))?;
         let text = serde_json::to_string_pretty(&plan)
             .map_err(|e| Error::Input(format!("cannot write the build plan ({e})")))?;
         std::fs::write(&plan_path, text).map_err(|e| Error::io(&plan_path, e))?;
@@ -229,6 +228,32 @@ pub fn write_pyramid(
     staging.commit()
 }
 
+/// The checks a pyramid of a `side`² grid in tiles of `tile_cells` at
+/// `target` must pass before any work: the tiling, the build's working
+/// memory against the budget and, for a fresh build, the disk space the
+/// tiles and the build's scratch need on the file system that will hold
+/// them. [`write_pyramid`] runs them; a caller with slow work to do before
+/// (a scan of its input) runs them first.
+pub fn preflight(target: &Path, side: usize, tile_cells: usize, resume: bool) -> Result<()> {
+    let layout = TileLayout::new(side, tile_cells)?;
+    build::check_working_memory(&layout)?;
+    if resume {
+        return Ok(());
+    }
+    // The nearest folder that exists on the way to the target.
+    let mut dir = target.parent().unwrap_or(Path::new("."));
+    while !dir.as_os_str().is_empty() && !dir.is_dir() {
+        dir = dir.parent().unwrap_or(Path::new("."));
+    }
+    let dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    let capacity = build::partials_capacity(&layout);
+    check_free_space(dir, TileStore::bytes_needed(&layout, capacity))
+}
+
 /// Refuse to start when the file system holding `dir` has less than
 /// `needed` bytes free.
 fn check_free_space(dir: &Path, needed: u64) -> Result<()> {
@@ -252,5 +277,23 @@ fn check_free_space(dir: &Path, needed: u64) -> Result<()> {
             ),
         )),
         _ => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_disk_too_small_is_refused_naming_the_estimate_and_the_free_space() {
+        let d = tempfile::tempdir().unwrap();
+        let e = check_free_space(d.path(), u64::MAX / 4)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("needs about") && e.contains("is free"), "{e}");
+        assert!(e.contains(&d.path().display().to_string()), "{e}");
+        check_free_space(d.path(), 1).unwrap();
+        // Through the preflight, from a target whose folders do not exist yet.
+        preflight(&d.path().join("a/b/x.relevo"), 1025, 128, false).unwrap();
     }
 }
