@@ -140,5 +140,8 @@ fn describe_pyramid(path: &Path, json: bool) -> Result<()> {
     for (key, a) in &m.files {
         println!("  {key:<12} {} ({:.1} MB)", a.file, a.bytes as f64 / 1e6);
     }
+    for t in &m.timings {
+        println!("  pass {:<16} {:.1} s", t.stage, t.ms / 1e3);
+    }
     Ok(())
 }

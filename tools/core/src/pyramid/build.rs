@@ -20,6 +20,7 @@
 
 use super::layout::{TileKey, TileLayout};
 use super::store::{Pass, TileArray, TileStore};
+use crate::bundle::StageTiming;
 use crate::grid::HeightGrid;
 use crate::lp::window::{combine, own_errors, own_partial, saturate, HeightWindow, Rect};
 use crate::lp::Vertex;
@@ -78,12 +79,15 @@ pub struct Progress {
     pub total: usize,
 }
 
-/// What a build found of the grid's data.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// What a build found of the grid's data, and where its time went.
+#[derive(Debug, Clone, PartialEq)]
 pub struct BuildReport {
     /// Lowest and highest height with data, metres.
     pub height_range_m: [f32; 2],
     pub valid_vertices: u64,
+    /// Wall time of each pass, in the order they ran (a resumed build's
+    /// passes count only what this run did).
+    pub timings: Vec<StageTiming>,
 }
 
 /// Entries a level-0 tile's partial-errors slot needs: per coarse level,
@@ -124,63 +128,83 @@ pub fn build(
 ) -> Result<BuildReport> {
     let layout = store.layout;
     let level0: Vec<TileKey> = layout.tiles(0).collect();
-    each(store, &level0, Pass::Heights, "heights", progress, &|key| {
-        heights(source, store, key)
-    })?;
-    let report = statistics(store, &level0)?;
+    let mut timings: Vec<StageTiming> = Vec::new();
+    let mut spent = |stage: &str, ms: f64| match timings.iter_mut().find(|t| t.stage == stage) {
+        Some(t) => t.ms += ms,
+        None => timings.push(StageTiming {
+            stage: stage.into(),
+            ms,
+        }),
+    };
+    let name = "heights";
+    spent(
+        name,
+        each(store, &level0, Pass::Heights, name, progress, &|key| {
+            heights(source, store, key)
+        })?,
+    );
+    let start = std::time::Instant::now();
+    let (height_range_m, valid_vertices) = statistics(store, &level0)?;
     let lattice_z = lattice_heights(store)?;
-    each(
-        store,
-        &level0,
-        Pass::OwnErrors,
-        "own errors",
-        progress,
-        &|key| own_pass(store, options, &lattice_z, key),
-    )?;
-    each(
-        store,
-        &level0,
-        Pass::Saturate,
-        "errors and radii",
-        progress,
-        &|key| saturate_pass(store, options, key),
-    )?;
+    spent("statistics", start.elapsed().as_secs_f64() * 1e3);
+    let name = "own errors";
+    spent(
+        name,
+        each(store, &level0, Pass::OwnErrors, name, progress, &|key| {
+            own_pass(store, options, &lattice_z, key)
+        })?,
+    );
+    let name = "errors and radii";
+    spent(
+        name,
+        each(store, &level0, Pass::Saturate, name, progress, &|key| {
+            saturate_pass(store, options, key)
+        })?,
+    );
     let top = TileKey {
         level: 0,
         x: 0,
         y: 0,
     };
+    let start = std::time::Instant::now();
     if !store.done(Pass::Lattice, top)? {
         lattice_pass(store, options, &lattice_z, &level0)?;
         store.mark(Pass::Lattice, top)?;
     }
+    spent("lattice", start.elapsed().as_secs_f64() * 1e3);
     if options.drape {
-        each(store, &level0, Pass::Drape, "drape", progress, &|key| {
-            drape_pass(store, options, report.height_range_m, key)
-        })?;
+        let name = "drape";
+        spent(
+            name,
+            each(store, &level0, Pass::Drape, name, progress, &|key| {
+                drape_pass(store, options, height_range_m, key)
+            })?,
+        );
     }
     for level in 1..layout.levels() {
         let tiles: Vec<TileKey> = layout.tiles(level).collect();
-        each(
-            store,
-            &tiles,
-            Pass::Coarse,
-            "coarser levels",
-            progress,
-            &|key| coarse_pass(store, key),
-        )?;
+        let name = "coarser levels";
+        spent(
+            name,
+            each(store, &tiles, Pass::Coarse, name, progress, &|key| {
+                coarse_pass(store, key)
+            })?,
+        );
         if options.drape {
-            each(
-                store,
-                &tiles,
-                Pass::CoarseDrape,
-                "coarser drapes",
-                progress,
-                &|key| drape_pass(store, options, report.height_range_m, key),
-            )?;
+            let name = "coarser drapes";
+            spent(
+                name,
+                each(store, &tiles, Pass::CoarseDrape, name, progress, &|key| {
+                    drape_pass(store, options, height_range_m, key)
+                })?,
+            );
         }
     }
-    Ok(report)
+    Ok(BuildReport {
+        height_range_m,
+        valid_vertices,
+        timings,
+    })
 }
 
 /// Run `work` on every tile of `tiles` not yet done in `pass`, in parallel,
@@ -192,7 +216,8 @@ fn each(
     name: &'static str,
     progress: &(dyn Fn(Progress) + Sync),
     work: &(dyn Fn(TileKey) -> Result<()> + Sync),
-) -> Result<()> {
+) -> Result<f64> {
+    let start = std::time::Instant::now();
     let done = AtomicUsize::new(0);
     let total = tiles.len();
     let report = |n| {
@@ -219,7 +244,7 @@ fn each(
         r?;
     }
     report(total);
-    Ok(())
+    Ok(start.elapsed().as_secs_f64() * 1e3)
 }
 
 /// The rectangle of level-`level` samples a tile covers, grown by `margin`.
@@ -259,7 +284,7 @@ fn heights(source: &dyn HeightSource, store: &TileStore, key: TileKey) -> Result
 
 /// The grid's height range and vertices with data, from the tiles' own
 /// (border vertices counted once).
-fn statistics(store: &TileStore, level0: &[TileKey]) -> Result<BuildReport> {
+fn statistics(store: &TileStore, level0: &[TileKey]) -> Result<([f32; 2], u64)> {
     let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
     for &key in level0 {
         let (l, h, _) = store.read_stats(key)?;
@@ -285,10 +310,7 @@ fn statistics(store: &TileStore, level0: &[TileKey]) -> Result<BuildReport> {
     if valid == 0 {
         return Err(Error::Input("the grid holds no data".into()));
     }
-    Ok(BuildReport {
-        height_range_m: [lo, hi],
-        valid_vertices: valid,
-    })
+    Ok(([lo, hi], valid))
 }
 
 /// Heights of the lattice of tile corners (every T-th vertex), row-major.
@@ -351,7 +373,12 @@ fn own_pass(
     store.write_partials(key, &partials)
 }
 
-/// Errors and radii of a level-0 tile's vertices below the lattice.
+/// Errors and radii of a level-0 tile's vertices below the lattice, from
+/// the tile and a tile's width around it. The margin is what the values
+/// need: from a tile's edge vertex of scale T/2 the chain of children runs
+/// outwards T/4 (to a square centre), T/4 (to its edge vertex), T/8, T/8,
+/// … — T in all. (A margin of T/2 gives different values on the crops.)
+/// This window, nine tiles' area, makes the pass the build's costliest.
 fn saturate_pass(store: &TileStore, options: &BuildOptions, key: TileKey) -> Result<()> {
     let layout = store.layout;
     let t = layout.tile_cells;

@@ -159,6 +159,7 @@ pub fn write_pyramid(
     let store = TileStore::open(&dir, layout, capacity)?;
     let report = build::build(source, &store, &options.build, progress)?;
     store.remove_scratch()?;
+    let start = std::time::Instant::now();
     let mut files = BTreeMap::new();
     for a in TileArray::ALL {
         let (key, file) = a.name();
@@ -186,6 +187,11 @@ pub fn write_pyramid(
             },
         );
     }
+    let mut timings = report.timings.clone();
+    timings.push(StageTiming {
+        stage: "hashes".into(),
+        ms: start.elapsed().as_secs_f64() * 1e3,
+    });
     let mut grid = description.grid;
     grid.height_range_m = report.height_range_m;
     grid.valid_vertices = report.valid_vertices as usize;
@@ -205,7 +211,7 @@ pub fn write_pyramid(
         files,
         inputs: description.inputs,
         parameters: description.parameters,
-        timings: Vec::new(),
+        timings,
     };
     let path = dir.join(MANIFEST_FILE);
     let mut json = serde_json::to_string_pretty(&manifest).map_err(|e| Error::Manifest {
