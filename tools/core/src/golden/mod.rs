@@ -10,6 +10,8 @@
 //!   line per row of blocks.
 //! - [`vegetation`]: the database summarised by class and block, and two
 //!   databases matched object to object.
+//! - [`finding`]: what a check finds per artifact: outcome, figure,
+//!   tolerance, places.
 //! - [`check`](mod@check): a bundle judged against a record, with places.
 //! - [`diff`]: two bundles compared cell by cell and object by object, and
 //!   pictures of what changed.
@@ -17,9 +19,11 @@
 pub mod blocks;
 pub mod check;
 pub mod diff;
+pub mod finding;
 pub mod record;
 pub mod reference;
 pub mod vegetation;
 
-pub use check::{check, CheckOptions, CheckReport, Finding, Outcome, Place};
+pub use check::{check, CheckOptions, CheckReport};
+pub use finding::{Finding, Outcome, Place};
 pub use record::{GoldenRecord, RenderRecord, Tolerances};

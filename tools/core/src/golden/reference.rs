@@ -5,7 +5,7 @@
 //! vertex that moved most — not only the block it lies in.
 
 use super::blocks::BlockLayout;
-use super::check::{Finding, Outcome, Place, MOST_PLACES};
+use super::finding::{Finding, Outcome, Place, MOST_PLACES};
 use crate::bundle::{names, Bundle};
 use crate::raster::png::{decode_grey16, decode_rgba, encode_grey16, encode_rgba};
 use crate::{Error, Result};
