@@ -47,6 +47,18 @@ pub fn size(bytes: &[u8]) -> Result<(usize, usize)> {
     Ok((w as usize, h as usize))
 }
 
+/// Refuse, before decoding, a PNG whose header declares more pixels than
+/// the memory budget holds at `bytes_per_pixel` (the decoded buffer and
+/// its conversion): a small file that decodes to a huge image is refused.
+fn check_decoded_size(width: u32, height: u32, bytes_per_pixel: u64) -> Result<()> {
+    crate::memory::check(
+        &format!("decoding a {width}×{height} PNG"),
+        u64::from(width) * u64::from(height),
+        bytes_per_pixel,
+        "use a smaller image",
+    )
+}
+
 /// A PNG decoded to RGBA8 (grey, grey-alpha and RGB are expanded; 16-bit
 /// samples keep their high byte): pixels, width, height.
 pub fn decode_rgba(bytes: &[u8]) -> Result<(Vec<u8>, usize, usize)> {
@@ -54,15 +66,8 @@ pub fn decode_rgba(bytes: &[u8]) -> Result<(Vec<u8>, usize, usize)> {
     let mut decoder = png::Decoder::new(std::io::Cursor::new(bytes));
     decoder.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
     let mut reader = decoder.read_info().map_err(bad)?;
-    // The header declares the size: check it before allocating, so a small
-    // file that decodes to a huge image is refused, not decoded.
     let (w, h) = reader.info().size();
-    crate::memory::check(
-        &format!("decoding a {w}×{h} PNG"),
-        u64::from(w) * u64::from(h),
-        8,
-        "use a smaller image",
-    )?;
+    check_decoded_size(w, h, 8)?;
     let (buf, info) = next_frame(&mut reader)?;
     let (w, h) = (info.width as usize, info.height as usize);
     let rgba = match info.color_type.samples() {
@@ -118,12 +123,7 @@ pub fn decode_grey16(bytes: &[u8]) -> Result<(Vec<u16>, usize, usize)> {
             "a {colour:?} PNG of {depth:?} bits, expected 16-bit greyscale"
         )));
     }
-    crate::memory::check(
-        &format!("decoding a {w}×{h} PNG"),
-        u64::from(w) * u64::from(h),
-        4,
-        "use a smaller image",
-    )?;
+    check_decoded_size(w, h, 4)?;
     let (buf, info) = next_frame(&mut reader)?;
     let values = buf
         .chunks_exact(2)
