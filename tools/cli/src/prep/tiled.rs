@@ -69,63 +69,13 @@ pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Res
             .unwrap_or_else(|| "region".into())
     });
     let start = Instant::now();
-    // A single void-free DEM on the target grid is read window by window;
-    // anything else goes through the in-memory grid stages.
-    // The tiling, memory and disk are checked before the file is scanned.
-    let direct = match DirectSource::open(region)? {
-        Some(d) => {
-            pyramid::preflight(out, d.grid.side, options.tile_cells, options.resume)?;
-            d.scan()?.then_some(d)
-        }
-        None => None,
-    };
-    let in_memory: Option<HeightGrid>;
-    let (source, description, cell_size_m): (&dyn HeightSource, PyramidDescription, f64) =
-        match &direct {
-            Some(d) => {
-                let (inputs, parameters) = provenance_of(region)?;
-                let description = PyramidDescription {
-                    region: name.clone(),
-                    crs: d.crs.clone(),
-                    grid: d.grid.clone(),
-                    inputs,
-                    parameters,
-                };
-                (d, description, d.grid.cell_size_m)
-            }
-            None => {
-                let mut b = Build::new(region, name.clone(), None);
-                for (stage, run) in [
-                    ("dem", stage_dem as fn(&mut Build) -> Result<()>),
-                    ("fill", stage_fill),
-                    ("grid", stage_grid),
-                ] {
-                    run(&mut b).with_context(|| format!("stage {stage}"))?;
-                }
-                let grid = b.grid.take().context("grid stage did not run")?;
-                let dem = b.dem.take().context("dem stage did not run")?;
-                let info = GridInfo::of(&grid, b.cell_size_m, region.z_scale)
-                    .context("the DEM has no valid data")?;
-                let (crs, inputs, parameters) = provenance(region, &dem)?;
-                let cell = b.cell_size_m;
-                in_memory = Some(grid);
-                let description = PyramidDescription {
-                    region: name.clone(),
-                    crs,
-                    grid: info,
-                    inputs,
-                    parameters,
-                };
-                let grid = in_memory.as_ref().context("grid stage did not run")?;
-                (grid, description, cell)
-            }
-        };
+    let (source, description, read_by_windows) = height_source(region, &name, out, &options)?;
     let grid_ms = start.elapsed().as_secs_f64() * 1e3;
     let write = WriteOptions {
         tile_cells: options.tile_cells,
         build: BuildOptions {
             metric: region.grid.error_metric,
-            cell_size_m,
+            cell_size_m: description.grid.cell_size_m,
             drape: true,
         },
         force: options.force,
@@ -133,7 +83,7 @@ pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Res
     };
     let start = Instant::now();
     let bar = crate::progress::pass_bar();
-    let bundle = pyramid::write_pyramid(out, source, description, write, &|p| {
+    let bundle = pyramid::write_pyramid(out, source.as_ref(), description, write, &|p| {
         bar.set_message(p.pass);
         bar.set_length(p.total as u64);
         bar.set_position(p.done as u64);
@@ -152,8 +102,55 @@ pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Res
         tiles: m.tiling.tiles,
         valid_vertices: m.grid.valid_vertices,
         height_range_m: m.grid.height_range_m,
-        read_by_windows: direct.is_some(),
+        read_by_windows,
         grid_ms,
         pyramid_ms,
     })
+}
+
+/// Where the pyramid's heights come from, its description, and whether the
+/// DEM is read window by window: a single void-free DEM on the target grid
+/// is (the tiling, memory and disk checked before the file is scanned);
+/// anything else goes through the in-memory grid stages.
+fn height_source(
+    region: &RegionSpec,
+    name: &str,
+    out: &Path,
+    options: &TiledOptions,
+) -> Result<(Box<dyn HeightSource>, PyramidDescription, bool)> {
+    if let Some(d) = DirectSource::open(region)? {
+        pyramid::preflight(out, d.grid.side, options.tile_cells, options.resume)?;
+        if d.scan()? {
+            let (inputs, parameters) = provenance_of(region)?;
+            let description = PyramidDescription {
+                region: name.to_string(),
+                crs: d.crs.clone(),
+                grid: d.grid.clone(),
+                inputs,
+                parameters,
+            };
+            return Ok((Box::new(d), description, true));
+        }
+    }
+    let mut b = Build::new(region, name.to_string(), None);
+    for (stage, run) in [
+        ("dem", stage_dem as fn(&mut Build) -> Result<()>),
+        ("fill", stage_fill),
+        ("grid", stage_grid),
+    ] {
+        run(&mut b).with_context(|| format!("stage {stage}"))?;
+    }
+    let grid: HeightGrid = b.grid.take().context("grid stage did not run")?;
+    let dem = b.dem.take().context("dem stage did not run")?;
+    let info =
+        GridInfo::of(&grid, b.cell_size_m, region.z_scale).context("the DEM has no valid data")?;
+    let (crs, inputs, parameters) = provenance(region, &dem)?;
+    let description = PyramidDescription {
+        region: name.to_string(),
+        crs,
+        grid: info,
+        inputs,
+        parameters,
+    };
+    Ok((Box::new(grid), description, false))
 }
