@@ -105,6 +105,12 @@ fn read_everything(dir: &std::path::Path) {
         }
     }
     let _ = p.level0_window(Rect::whole(p.layout.side));
+    if let Ok(source) = relevo_core::pyramid::mesh::PyramidMesh::new(&p) {
+        let window = Rect { c0: 3, r0: 5, width: 40, height: 21 };
+        for (max_error, window) in [(0.5, None), (5.0, Some(window))] {
+            let _ = relevo_core::lp::export::build(&source, max_error, false, window);
+        }
+    }
     let _ = reader::validate(&p, true);
     let _ = reader::validate(&p, false);
 }

@@ -8,7 +8,6 @@ use relevo_core::bundle::Bundle;
 use relevo_core::lp::extract::extract;
 use serde_json::Value;
 use std::path::Path;
-use std::process::Command;
 
 /// The JSON chunk of a .glb.
 fn glb_json(path: &Path) -> Value {
@@ -17,23 +16,6 @@ fn glb_json(path: &Path) -> Value {
     let len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
     assert_eq!(&bytes[16..20], b"JSON");
     serde_json::from_slice(&bytes[20..20 + len]).unwrap()
-}
-
-/// Run the Khronos validator (installed by scripts/setup-test) on a .glb.
-fn khronos_validate(path: &Path) -> Value {
-    let script = repo("tools/js/validate-gltf.mjs");
-    let out = Command::new("node")
-        .arg(script)
-        .arg(path)
-        .output()
-        .expect("node is installed by scripts/setup-test");
-    let report: Value = serde_json::from_slice(&out.stdout)
-        .unwrap_or_else(|_| panic!("validator output: {}", String::from_utf8_lossy(&out.stderr)));
-    assert!(
-        out.status.success(),
-        "glTF validator found errors: {report}"
-    );
-    report
 }
 
 #[test]

@@ -10,7 +10,7 @@
 
 mod common;
 
-use common::{gdal_tool, relevo, relevo_ok, repo, sha256};
+use common::{gdal_tool, khronos_validate, relevo, relevo_ok, repo, sha256};
 use relevo_core::bundle::Bundle;
 use relevo_core::lp::window::Rect;
 use relevo_core::pyramid::Pyramid;
@@ -133,6 +133,106 @@ fn the_pyramid_holds_the_single_grid_at_any_tile_size_and_meshes_the_same() {
     )
     .unwrap();
     assert_eq!(tile_files(&p), golden, "data/golden/grenoble_pyramid.json");
+}
+
+/// `relevo mesh --window` through a pyramid of small tiles gives the
+/// single grid's window mesh vertex for vertex and triangle for triangle
+/// (the textures come from different crops), as valid glTF; a window off
+/// the grid and a budget the mesh exceeds are refused by name.
+#[test]
+fn a_window_of_the_pyramid_meshes_as_the_single_grids_window() {
+    let d = tempfile::tempdir().unwrap();
+    let single = single_grid(d.path(), &dem());
+    let pyramid = tiled(d.path(), "t32.relevo", 32, &[]);
+    let frame = Bundle::open(&single).unwrap().frame();
+    // Corners between vertices, across several tiles' borders.
+    let (x0, y0) = frame.world_from_vertex(300.3, 505.6);
+    let (x1, y1) = frame.world_from_vertex(610.2, 200.1);
+    let window = format!("{x0},{y0},{x1},{y1}");
+    let mesh = |bundle: &Path, out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "mesh",
+            bundle.to_str().unwrap(),
+            "--max-error",
+            "3",
+            "--window",
+            &window,
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend(extra);
+        relevo(args)
+    };
+    let geometry = |path: &Path| -> Vec<String> {
+        std::fs::read_to_string(path)
+            .unwrap()
+            .lines()
+            .filter(|l| l.starts_with("v ") || l.starts_with("vn ") || l.starts_with("f "))
+            .map(str::to_string)
+            .collect()
+    };
+    let (a, b) = (d.path().join("p.obj"), d.path().join("s.obj"));
+    for (bundle, out) in [(&pyramid, &a), (&single, &b)] {
+        let run = mesh(bundle, out, &[]);
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+    }
+    let (pa, sb) = (geometry(&a), geometry(&b));
+    let faces = pa.iter().filter(|l| l.starts_with("f ")).count();
+    assert!(faces > 1000, "{faces} triangles in the window");
+    assert!(pa == sb, "the window meshes differ");
+    // Fewer triangles than the whole region's.
+    let whole = d.path().join("whole.obj");
+    relevo_ok([
+        "mesh".as_ref(),
+        pyramid.as_os_str(),
+        "--max-error".as_ref(),
+        "3".as_ref(),
+        "--out".as_ref(),
+        whole.as_os_str(),
+    ]);
+    assert!(
+        geometry(&whole)
+            .iter()
+            .filter(|l| l.starts_with("f "))
+            .count()
+            > 2 * faces
+    );
+    let glb = d.path().join("p.glb");
+    assert!(mesh(&pyramid, &glb, &[]).status.success());
+    let report = khronos_validate(&glb);
+    assert_eq!(report["numErrors"], 0, "{report}");
+    // A window off the grid, and a budget the mesh exceeds.
+    let off = format!("{},{},{},{}", x0 - 1e6, y0, x1 - 1e6, y1);
+    let run = relevo([
+        "mesh",
+        pyramid.to_str().unwrap(),
+        "--max-error",
+        "3",
+        "--window",
+        &off,
+        "--out",
+        d.path().join("off.glb").to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        !run.status.success() && err.contains("does not meet the grid"),
+        "{err}"
+    );
+    let run = mesh(
+        &pyramid,
+        &d.path().join("tight.glb"),
+        &["--max-memory", "200K"],
+    );
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        !run.status.success() && err.contains("raise the tolerance"),
+        "{err}"
+    );
+    assert!(!d.path().join("off.glb").exists() && !d.path().join("tight.glb").exists());
 }
 
 /// The Grenoble DEM warped by GDAL to UTM 31N at 30 m (1000² cells, no

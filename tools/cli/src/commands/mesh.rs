@@ -4,8 +4,11 @@ use crate::output;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use relevo_core::bundle::Bundle;
+use relevo_core::geo::TerrainFrame;
+use relevo_core::lp::export::{self, MeshSource};
 use relevo_core::lp::window::Rect;
-use relevo_core::lp::{export, ErrorMetric, Hierarchy};
+use relevo_core::lp::ErrorMetric;
+use relevo_core::pyramid::mesh::PyramidMesh;
 use relevo_core::pyramid::Pyramid;
 use std::path::{Path, PathBuf};
 
@@ -26,6 +29,11 @@ pub struct MeshArgs {
     /// Mesh the padding and voids too (as martini does), ignoring the mask.
     #[arg(long)]
     pub keep_padding: bool,
+    /// Mesh only the triangles meeting this rectangle, in the bundle's CRS
+    /// (easting and northing of two opposite corners); positions are then
+    /// local to its south-west corner and the texture covers it.
+    #[arg(long, value_name = "X0,Y0,X1,Y1", allow_hyphen_values = true, value_parser = parse_window)]
+    pub window: Option<[f64; 4]>,
     /// Replace existing outputs.
     #[arg(long)]
     pub force: bool,
@@ -65,22 +73,9 @@ pub fn run(a: MeshArgs) -> Result<()> {
         == Some(relevo_core::bundle::PYRAMID_FORMAT);
     if pyramid {
         let p = Pyramid::open(&a.bundle)?;
-        let w = p.level0_window(Rect::whole(p.layout.side))?;
-        let side = p.layout.side;
-        let surface = export::Surface {
-            frame: p.frame(),
-            heights: &w.heights,
-            mask: &w.mask,
-            hierarchy: Hierarchy::borrowed(side, p.manifest.grid.cell_size_m, &w.lp),
-            drape: Some(export::DrapeImage {
-                rgba: &w.drape,
-                width: side,
-                height: side,
-                geotransform: p.manifest.grid.geotransform,
-            }),
-        };
+        let source = PyramidMesh::new(&p)?;
         let metric = p.manifest.lp_error_metric;
-        return write_mesh(&a, format, &surface, &p.manifest.crs.wkt, metric);
+        return write_mesh(&a, format, &source, &p.manifest.crs.wkt, metric);
     }
     let bundle = Bundle::open(&a.bundle)?;
     let (heights, mask, lp, drape) = (
@@ -95,7 +90,7 @@ pub fn run(a: MeshArgs) -> Result<()> {
         mask: &mask,
         hierarchy: lp.hierarchy(),
         drape: drape.as_ref().map(|d| export::DrapeImage {
-            rgba: &d.rgba,
+            rgba: std::borrow::Cow::Borrowed(&d.rgba),
             width: d.info.width,
             height: d.info.height,
             geotransform: d.info.geotransform,
@@ -105,12 +100,55 @@ pub fn run(a: MeshArgs) -> Result<()> {
     write_mesh(&a, format, &surface, &bundle.manifest.crs.wkt, metric)
 }
 
-/// Extract the mesh of `surface` at the tolerance and write it (and, for
+/// `X0,Y0,X1,Y1`: four finite numbers.
+fn parse_window(text: &str) -> std::result::Result<[f64; 4], String> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().map_err(|e| format!("{v:?}: {e}")))
+        .collect::<std::result::Result<_, _>>()?;
+    match values[..] {
+        [x0, y0, x1, y1] if values.iter().all(|v| v.is_finite()) => Ok([x0, y0, x1, y1]),
+        _ => Err(format!(
+            "{text:?}: expected four finite numbers X0,Y0,X1,Y1"
+        )),
+    }
+}
+
+/// The grid vertices `--window` covers: the corners' columns and rows
+/// rounded outwards, within the grid; an error when it misses the grid.
+fn window_rect([x0, y0, x1, y1]: [f64; 4], frame: &TerrainFrame) -> Result<Rect> {
+    if x0 == x1 || y0 == y1 {
+        bail!("--window {x0},{y0},{x1},{y1}: not a rectangle");
+    }
+    let corner = |x: f64, y: f64| frame.vertex_from_world(x, y);
+    let (Some(a), Some(b)) = (corner(x0, y0), corner(x1, y1)) else {
+        bail!("the grid's georeferencing cannot be inverted");
+    };
+    let last = (frame.side - 1) as f64;
+    let (c0, c1) = (a.0.min(b.0).floor().max(0.0), a.0.max(b.0).ceil().min(last));
+    let (r0, r1) = (a.1.min(b.1).floor().max(0.0), a.1.max(b.1).ceil().min(last));
+    if c0 >= c1 || r0 >= r1 {
+        let (w, n) = frame.world_from_vertex(0.0, 0.0);
+        let (e, s) = frame.world_from_vertex(last, last);
+        bail!(
+            "--window {x0},{y0},{x1},{y1} does not meet the grid, which spans east {w:.1} to \
+             {e:.1} and north {s:.1} to {n:.1} in its CRS"
+        );
+    }
+    Ok(Rect {
+        c0: c0 as usize,
+        r0: r0 as usize,
+        width: (c1 - c0) as usize + 1,
+        height: (r1 - r0) as usize + 1,
+    })
+}
+
+/// Extract the mesh of `source` at the tolerance and write it (and, for
 /// OBJ with a drape, its material and texture), all or nothing.
 fn write_mesh(
     a: &MeshArgs,
     format: MeshFormat,
-    surface: &export::Surface,
+    source: &dyn MeshSource,
     crs_wkt: &str,
     metric: ErrorMetric,
 ) -> Result<()> {
@@ -121,7 +159,7 @@ fn write_mesh(
         .map(|s| s.to_string_lossy().to_string())
         .unwrap_or_else(|| "mesh".into());
     let side_files = match format {
-        MeshFormat::Obj if surface.drape.is_some() => vec![
+        MeshFormat::Obj if source.has_drape() => vec![
             a.out.with_file_name(format!("{stem}.mtl")),
             a.out.with_file_name(format!("{stem}.png")),
         ],
@@ -132,7 +170,11 @@ fn write_mesh(
         .map(PathBuf::as_path)
         .collect();
     output::check(&outputs, a.force)?;
-    let m = export::build(surface, a.max_error, a.keep_padding)
+    let window = a
+        .window
+        .map(|w| window_rect(w, &source.frame()))
+        .transpose()?;
+    let m = export::build(source, a.max_error, a.keep_padding, window)
         .with_context(|| a.bundle.display().to_string())?;
     match format {
         MeshFormat::Glb => {

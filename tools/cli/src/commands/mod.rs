@@ -81,11 +81,13 @@ pub enum Command {
   relevo prep --dem county_utm.tif --tiled --out county.relevo    # a projected DEM, read window by window
   relevo prep --dem country.vrt --tiled --resume --out country.relevo   # go on after a kill")]
     Prep(prep::PrepArgs),
-    /// Export the mesh at an object-space tolerance as glTF (.glb) or OBJ.
+    /// Export the mesh at an object-space tolerance as glTF (.glb) or OBJ,
+    /// of the whole region or a window of it (single grid or pyramid).
     #[command(after_help = "Examples:
   relevo mesh olinda.relevo --max-error 2 --out olinda.glb
   relevo mesh olinda.relevo --max-error 0.5 --format obj --out olinda.obj   # also olinda.mtl, olinda.png
-  relevo mesh fuji.relevo --max-error 5 --keep-padding --out fuji.glb")]
+  relevo mesh fuji.relevo --max-error 5 --keep-padding --out fuji.glb
+  relevo mesh country.relevo --max-error 1 --window 712000,5000000,716000,5004000 --out part.glb   # a window of a pyramid")]
     Mesh(mesh::MeshArgs),
     /// Render a bundle with the CPU floating-horizon raycaster (PNG and depth).
     #[command(after_help = "Examples:

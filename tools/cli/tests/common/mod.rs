@@ -219,3 +219,20 @@ pub fn burn(raster: &Path, epsg: u32, [c, r, w, h]: [usize; 4], metres: f64, ban
     gdal_tool("gdal_rasterize", &args);
     std::fs::remove_file(polygon).unwrap();
 }
+
+/// Run the Khronos validator (installed by scripts/setup-test) on a .glb.
+pub fn khronos_validate(path: &Path) -> serde_json::Value {
+    let script = repo("tools/js/validate-gltf.mjs");
+    let out = Command::new("node")
+        .arg(script)
+        .arg(path)
+        .output()
+        .expect("node is installed by scripts/setup-test");
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|_| panic!("validator output: {}", String::from_utf8_lossy(&out.stderr)));
+    assert!(
+        out.status.success(),
+        "glTF validator found errors: {report}"
+    );
+    report
+}

@@ -7,14 +7,18 @@
 //! south-west vertex so that f32 keeps centimetres; the world origin goes in
 //! the glTF node's translation and in an OBJ comment.
 
-use super::extract::extract;
+use super::extract::{walk, GridMesh, MeshWalk};
 use super::hierarchy::Hierarchy;
+use super::metric::triangle_deviation;
 use super::vertices::terrain_position;
+use super::window::Rect;
 use crate::geo::{GeoTransform, TerrainFrame};
-use crate::grid::vertex_normal;
+use crate::grid::vertex_normal_of;
 use crate::raster::png::encode_rgba;
 use crate::{Error, Result};
+use rayon::prelude::*;
 use serde_json::json;
+use std::borrow::Cow;
 use std::io::Write;
 
 /// Mesh arrays ready to write.
@@ -36,7 +40,9 @@ pub struct ExportMesh {
 }
 
 /// The terrain a mesh is exported from: the grid's frame, heights (metres),
-/// data mask, LP hierarchy and, when there is one, the drape.
+/// data mask, LP hierarchy and, when there is one, the drape — a single
+/// grid in memory. A pyramid is read tile by tile through its own
+/// [`MeshSource`] (`crate::pyramid::mesh`).
 pub struct Surface<'a> {
     pub frame: TerrainFrame,
     pub heights: &'a [f32],
@@ -48,30 +54,152 @@ pub struct Surface<'a> {
 /// The image an exported mesh is textured with: RGBA8 texels,
 /// `width`×`height`, placed in the world by `geotransform`.
 pub struct DrapeImage<'a> {
-    pub rgba: &'a [u8],
+    pub rgba: Cow<'a, [u8]>,
     pub width: usize,
     pub height: usize,
     pub geotransform: GeoTransform,
 }
 
-/// Build the mesh of `surface` at `max_error` metres.
-pub fn build(surface: &Surface, max_error: f32, keep_padding: bool) -> Result<ExportMesh> {
-    let Surface {
-        frame,
-        heights,
-        mask,
-        hierarchy,
-        drape,
-    } = surface;
-    let side = frame.side;
-    let grid = extract(hierarchy, max_error, (!keep_padding).then_some(mask));
-    if grid.triangles.is_empty() {
-        return Err(Error::Input("no triangles: the mask covers no data".into()));
+/// What a mesh is exported from, read vertex by vertex: a [`Surface`] in
+/// memory, or a pyramid's tiles.
+pub trait MeshSource: Sync {
+    fn frame(&self) -> TerrainFrame;
+    /// Height of vertex (column, row), metres.
+    fn height(&self, c: usize, r: usize) -> f32;
+    /// Saturated object-space error of the vertex at row-major index `i`.
+    fn error(&self, i: usize) -> f32;
+    /// Whether the vertex at row-major index `i` holds data.
+    fn has_data(&self, i: usize) -> bool;
+    /// The largest vertical distance between the grid points inside
+    /// triangle `corners` (columns, rows) and the plane through its
+    /// corners at `corner_z`, metres (see [`triangle_deviation`]).
+    fn deviation(&self, corners: [(i64, i64); 3], corner_z: [f32; 3]) -> f64;
+    /// Whether there is a drape to texture the mesh with.
+    fn has_drape(&self) -> bool;
+    /// The drape over vertices `rect` (and a little around), if there is
+    /// one.
+    fn drape(&self, rect: Rect) -> Result<Option<DrapeImage<'_>>>;
+    /// Drop what the reads so far brought into memory that can be read
+    /// again (a pyramid's mapped pages); nothing for a grid in memory.
+    fn release(&self) {}
+}
+
+impl MeshSource for Surface<'_> {
+    fn frame(&self) -> TerrainFrame {
+        self.frame
     }
+    fn height(&self, c: usize, r: usize) -> f32 {
+        self.heights[r * self.frame.side + c]
+    }
+    fn error(&self, i: usize) -> f32 {
+        self.hierarchy.error(i)
+    }
+    fn has_data(&self, i: usize) -> bool {
+        self.mask[i] != 0
+    }
+    fn deviation(&self, corners: [(i64, i64); 3], corner_z: [f32; 3]) -> f64 {
+        triangle_deviation(self.heights, self.frame.side, corners, corner_z, None)
+    }
+    fn has_drape(&self) -> bool {
+        self.drape.is_some()
+    }
+    fn drape(&self, rect: Rect) -> Result<Option<DrapeImage<'_>>> {
+        let Some(d) = &self.drape else {
+            return Ok(None);
+        };
+        if rect == Rect::whole(self.frame.side) {
+            return Ok(Some(DrapeImage {
+                rgba: Cow::Borrowed(&d.rgba),
+                ..*d
+            }));
+        }
+        // The image's pixels under the rectangle's corners, one more around.
+        let corner = |c: usize, r: usize| {
+            let (x, y) = self.frame.world_from_vertex(c as f64, r as f64);
+            d.geotransform.invert(x, y).unwrap_or((0.0, 0.0))
+        };
+        let (a, b) = (
+            corner(rect.c0, rect.r0),
+            corner(rect.c0 + rect.width - 1, rect.r0 + rect.height - 1),
+        );
+        let pixel = |v: f64, n: usize| (v.max(0.0) as usize).min(n - 1);
+        let (x0, x1) = (
+            pixel(a.0.min(b.0) - 1.0, d.width),
+            pixel(a.0.max(b.0) + 1.0, d.width),
+        );
+        let (y0, y1) = (
+            pixel(a.1.min(b.1) - 1.0, d.height),
+            pixel(a.1.max(b.1) + 1.0, d.height),
+        );
+        let (w, h) = (x1 - x0 + 1, y1 - y0 + 1);
+        let mut rgba = Vec::with_capacity(w * h * 4);
+        for y in y0..=y1 {
+            rgba.extend_from_slice(&d.rgba[4 * (y * d.width + x0)..4 * (y * d.width + x1 + 1)]);
+        }
+        let (ox, oy) = d.geotransform.apply(x0 as f64, y0 as f64);
+        let g = d.geotransform.0;
+        Ok(Some(DrapeImage {
+            rgba: Cow::Owned(rgba),
+            width: w,
+            height: h,
+            geotransform: GeoTransform([ox, g[1], g[2], oy, g[4], g[5]]),
+        }))
+    }
+}
+
+/// Bytes a mesh vertex costs while it is built and written, about: its grid
+/// coordinates and number, position, normal and texture coordinates, two
+/// triangles' indices twice, and their copy in the output file.
+const BYTES_PER_MESH_VERTEX: u64 = 160;
+
+/// Build the mesh of `source` at `max_error` metres, over the whole grid
+/// or only the triangles meeting `window` (see [`walk`]).
+pub fn build(
+    source: &dyn MeshSource,
+    max_error: f32,
+    keep_padding: bool,
+    window: Option<Rect>,
+) -> Result<ExportMesh> {
+    let frame = source.frame();
+    let side = frame.side;
+    let error = |i: usize| source.error(i);
+    let has_data = |i: usize| source.has_data(i);
+    let max_vertices = (crate::memory::budget() / BYTES_PER_MESH_VERTEX) as usize;
+    let grid = walk(&MeshWalk {
+        side,
+        max_error,
+        error: &error,
+        has_data: (!keep_padding).then_some(&has_data as &(dyn Fn(usize) -> bool + Sync)),
+        window,
+        max_vertices,
+    })
+    .ok_or_else(|| {
+        Error::Input(format!(
+            "the mesh at {max_error} m has more than {max_vertices} vertices, more than the memory \
+             budget ({}) holds: raise the tolerance or take a smaller window",
+            crate::memory::human(crate::memory::budget())
+        ))
+    })?;
+    source.release();
+    if grid.triangles.is_empty() {
+        return Err(Error::Input(match window {
+            None => "no triangles: the mask covers no data".into(),
+            Some(_) => "no triangles: the window holds no data".into(),
+        }));
+    }
+    // Positions are local to the window's south-west vertex (the grid's
+    // without a window), the drape cut to the window.
+    let anchor = window.unwrap_or(Rect::whole(side));
+    let (c0, r1) = (anchor.c0, anchor.r0 + anchor.height - 1);
     let cell = frame.cell_size_m;
+    let origin = terrain_position(c0, r1, side, cell, 0.0);
     let position = |c: usize, r: usize| {
-        let p = terrain_position(c, r, side, cell, heights[r * side + c] as f64);
-        [p[0] as f32, p[2] as f32, -p[1] as f32]
+        let p = terrain_position(c, r, side, cell, source.height(c, r) as f64);
+        [
+            (p[0] - origin[0]) as f32,
+            p[2] as f32,
+            -(p[1] - origin[1]) as f32,
+        ]
     };
     let positions: Vec<[f32; 3]> = grid
         .vertices
@@ -80,15 +208,17 @@ pub fn build(surface: &Surface, max_error: f32, keep_padding: bool) -> Result<Ex
         .collect();
     // Normals of the full-resolution surface (central differences), so
     // shading does not depend on the tolerance.
+    let z = |c: usize, r: usize| source.height(c, r);
     let normals = grid
         .vertices
         .iter()
         .map(|v| {
-            let n = vertex_normal(heights, side, cell, v[0] as usize, v[1] as usize);
+            let n = vertex_normal_of(&z, side, cell, v[0] as usize, v[1] as usize);
             // z up → y up (x east, y up, z south).
             [n[0] as f32, n[2] as f32, -n[1] as f32]
         })
         .collect();
+    source.release();
     // Grid (col, row) triangles from martini's traversal are clockwise seen
     // from above with rows growing south; reorder to counter-clockwise y-up.
     let triangles = grid
@@ -105,8 +235,8 @@ pub fn build(surface: &Surface, max_error: f32, keep_padding: bool) -> Result<Ex
             }
         })
         .collect();
-    let (origin_x, origin_y) = frame.world_origin();
-    let (uvs, texture_png) = match drape {
+    let (origin_x, origin_y) = frame.world_from_vertex(c0 as f64, r1 as f64);
+    let (uvs, texture_png) = match source.drape(anchor)? {
         None => (None, None),
         Some(color) => {
             let uvs = grid
@@ -123,10 +253,12 @@ pub fn build(surface: &Surface, max_error: f32, keep_padding: bool) -> Result<Ex
                 .collect();
             (
                 Some(uvs),
-                Some(encode_rgba(color.rgba, color.width, color.height)?),
+                Some(encode_rgba(&color.rgba, color.width, color.height)?),
             )
         }
     };
+    source.release();
+    let largest_deviation_m = largest_deviation(source, &grid);
     Ok(ExportMesh {
         positions,
         normals,
@@ -134,8 +266,33 @@ pub fn build(surface: &Surface, max_error: f32, keep_padding: bool) -> Result<Ex
         triangles,
         origin: [origin_x, origin_y],
         texture_png,
-        largest_deviation_m: grid.largest_deviation(heights, side),
+        largest_deviation_m,
     })
+}
+
+/// Triangles measured between two releases of what the reads brought in.
+const DEVIATION_CHUNK: usize = 1 << 16;
+
+/// The largest vertical distance between a grid point under `mesh` and
+/// the mesh, metres.
+fn largest_deviation(source: &dyn MeshSource, mesh: &GridMesh) -> f64 {
+    let mut largest = 0.0f64;
+    for chunk in mesh.triangles.chunks(DEVIATION_CHUNK) {
+        let part = chunk
+            .par_iter()
+            .map(|t| {
+                let corners = t.map(|i| {
+                    let [c, r] = mesh.vertices[i as usize];
+                    (c as i64, r as i64)
+                });
+                let z = corners.map(|(c, r)| source.height(c as usize, r as usize));
+                source.deviation(corners, z)
+            })
+            .reduce(|| 0.0, f64::max);
+        largest = largest.max(part);
+        source.release();
+    }
+    largest
 }
 
 /// glTF 2.0 binary container.

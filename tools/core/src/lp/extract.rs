@@ -8,7 +8,9 @@
 
 use super::hierarchy::Hierarchy;
 use super::metric::triangle_deviation;
+use super::window::Rect;
 use rayon::prelude::*;
+use std::collections::HashMap;
 
 /// An indexed triangle mesh on grid vertices.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -46,28 +48,104 @@ impl GridMesh {
 /// are dropped, so no triangle covers padding or voids.
 pub fn extract(h: &Hierarchy, max_error: f32, mask: Option<&[u8]>) -> GridMesh {
     let side = h.side;
+    let error = |i: usize| h.error(i);
+    let has_data = mask.map(|m| move |i: usize| m[i] != 0);
+    walk(&MeshWalk {
+        side,
+        max_error,
+        error: &error,
+        has_data: has_data
+            .as_ref()
+            .map(|f| f as &(dyn Fn(usize) -> bool + Sync)),
+        window: None,
+        max_vertices: usize::MAX,
+    })
+    .unwrap_or_default() // never: there is no vertex limit
+}
+
+/// What [`walk`] reads of a `side`² grid, by row-major vertex index: for a
+/// grid in memory or one read tile by tile.
+pub struct MeshWalk<'a> {
+    pub side: usize,
+    /// The tolerance, metres: a vertex whose error exceeds it is split.
+    pub max_error: f32,
+    /// A vertex's (saturated) object-space error, metres.
+    pub error: &'a (dyn Fn(usize) -> f32 + Sync),
+    /// Whether a vertex holds data; `None`: every vertex does.
+    pub has_data: Option<&'a (dyn Fn(usize) -> bool + Sync)>,
+    /// Keep only the triangles whose bounding box overlaps this rectangle
+    /// of vertices with a positive area; `None`: the whole grid.
+    pub window: Option<Rect>,
+    /// The most vertices the mesh may have: the walk stops beyond.
+    pub max_vertices: usize,
+}
+
+/// The mesh of [`extract`] for `input`: with a window, exactly the
+/// triangles of the whole grid's mesh that meet it (a triangle's box
+/// holds its children's, so the walk skips what lies outside without
+/// changing what lies inside), numbered in the same traversal order.
+/// `None` when it would have more than `max_vertices` vertices.
+pub fn walk(input: &MeshWalk) -> Option<GridMesh> {
+    let side = input.side;
     assert!(
         side - 1 <= u16::MAX as usize + 1,
         "grid too large for u16 vertex coordinates"
     );
-    let mixed = mask.map(|m| mask_boundaries(m, side));
-    let split = |m: usize| h.error(m) > max_error || mixed.as_ref().is_some_and(|x| x[m]);
+    let mixed = input.has_data.map(|d| mask_boundaries(side, d));
+    let split =
+        |m: usize| (input.error)(m) > input.max_error || mixed.as_ref().is_some_and(|x| x.get(m));
+    // A dense numbering when it is small, else only the vertices used.
+    let numbers = if side * side <= DENSE_NUMBERING_VERTICES {
+        Numbers::Dense(vec![0; side * side])
+    } else {
+        Numbers::Sparse(HashMap::new())
+    };
     let mut state = Walk {
         side,
-        index: vec![0u32; side * side],
+        max_vertices: input.max_vertices,
+        numbers,
         mesh: GridMesh::default(),
+        window: input
+            .window
+            .map(|w| [w.c0, w.r0, w.c0 + w.width - 1, w.r0 + w.height - 1].map(|v| v as i32)),
     };
     let max = (side - 1) as i32;
-    state.walk(0, 0, max, max, max, 0, &split, mask);
-    state.walk(max, max, 0, 0, 0, max, &split, mask);
-    state.mesh
+    state.walk(0, 0, max, max, max, 0, &split, input.has_data);
+    state.walk(max, max, 0, 0, 0, max, &split, input.has_data);
+    (state.mesh.vertices.len() <= input.max_vertices).then_some(state.mesh)
+}
+
+/// Grids up to this many vertices number theirs in a dense array (4 bytes
+/// a vertex, 64 MiB at 4097²); larger ones in a map of the vertices used.
+const DENSE_NUMBERING_VERTICES: usize = 4097 * 4097;
+
+/// 1 + each used vertex's number (0: not used yet).
+enum Numbers {
+    Dense(Vec<u32>),
+    Sparse(HashMap<usize, u32>),
+}
+
+impl Numbers {
+    /// The vertex's number, `next` if it has none yet (and then it has).
+    fn number(&mut self, i: usize, next: u32) -> u32 {
+        let slot = match self {
+            Numbers::Dense(v) => &mut v[i],
+            Numbers::Sparse(m) => m.entry(i).or_insert(0),
+        };
+        if *slot == 0 {
+            *slot = next + 1;
+        }
+        *slot - 1
+    }
 }
 
 struct Walk {
     side: usize,
-    /// 1 + vertex number, 0 while unused.
-    index: Vec<u32>,
+    max_vertices: usize,
+    numbers: Numbers,
     mesh: GridMesh,
+    /// Inclusive `[c0, r0, c1, r1]` the kept triangles' boxes must overlap.
+    window: Option<[i32; 4]>,
 }
 
 impl Walk {
@@ -82,47 +160,81 @@ impl Walk {
         cx: i32,
         cy: i32,
         split: &impl Fn(usize) -> bool,
-        mask: Option<&[u8]>,
+        has_data: Option<&(dyn Fn(usize) -> bool + Sync)>,
     ) {
+        if self.mesh.vertices.len() > self.max_vertices {
+            return;
+        }
+        if let Some([c0, r0, c1, r1]) = self.window {
+            // The box must overlap the window with a positive area.
+            let (x0, x1) = (ax.min(bx).min(cx), ax.max(bx).max(cx));
+            let (y0, y1) = (ay.min(by).min(cy), ay.max(by).max(cy));
+            if x1 <= c0 || x0 >= c1 || y1 <= r0 || y0 >= r1 {
+                return;
+            }
+        }
         let (mx, my) = ((ax + bx) >> 1, (ay + by) >> 1);
         let m = my as usize * self.side + mx as usize;
         if (ax - cx).abs() + (ay - cy).abs() > 1 && split(m) {
-            self.walk(cx, cy, ax, ay, mx, my, split, mask);
-            self.walk(bx, by, cx, cy, mx, my, split, mask);
+            self.walk(cx, cy, ax, ay, mx, my, split, has_data);
+            self.walk(bx, by, cx, cy, mx, my, split, has_data);
             return;
         }
         let corners = [(ax, ay), (bx, by), (cx, cy)];
-        if let Some(mask) = mask {
+        if let Some(has_data) = has_data {
             if corners
                 .iter()
-                .any(|&(x, y)| mask[y as usize * self.side + x as usize] == 0)
+                .any(|&(x, y)| !has_data(y as usize * self.side + x as usize))
             {
                 return;
             }
         }
         let mut tri = [0u32; 3];
         for (t, (x, y)) in tri.iter_mut().zip(corners) {
-            let i = y as usize * self.side + x as usize;
-            if self.index[i] == 0 {
+            let next = self.mesh.vertices.len() as u32;
+            *t = self
+                .numbers
+                .number(y as usize * self.side + x as usize, next);
+            if *t == next {
                 self.mesh.vertices.push([x as u16, y as u16]);
-                self.index[i] = self.mesh.vertices.len() as u32;
             }
-            *t = self.index[i] - 1;
         }
         self.mesh.triangles.push(tri);
     }
 }
 
+/// One bit per vertex of a grid.
+pub struct VertexBits(Vec<u64>);
+
+impl VertexBits {
+    pub(crate) fn new(vertices: usize) -> Self {
+        VertexBits(vec![0; vertices.div_ceil(64)])
+    }
+
+    #[inline]
+    pub fn get(&self, i: usize) -> bool {
+        self.0[i / 64] >> (i % 64) & 1 == 1
+    }
+
+    #[inline]
+    pub(crate) fn set(&mut self, i: usize) {
+        self.0[i / 64] |= 1 << (i % 64);
+    }
+}
+
 /// Per vertex: whether its diamond (and so any triangle it splits) holds
-/// both masked and real vertices. Computed bottom-up like the errors, so it
-/// is nested: a flagged vertex's parents are flagged too.
-pub fn mask_boundaries(mask: &[u8], side: usize) -> Vec<bool> {
-    let mut flag = vec![false; side * side];
+/// both masked and real vertices (`has_data` tells them apart). Computed
+/// bottom-up like the errors, so it is nested: a flagged vertex's parents
+/// are flagged too. One bit a vertex, for grids of any size.
+pub fn mask_boundaries(side: usize, has_data: &(dyn Fn(usize) -> bool + Sync)) -> VertexBits {
+    let mut flag = VertexBits::new(side * side);
     super::diamond::visit_bottom_up(side, |d| {
-        let m = mask[d.vertex];
+        let m = has_data(d.vertex);
         let corners = d.hypotenuse.iter().chain(d.parents.iter().flatten());
-        let own = corners.into_iter().any(|&k| mask[k] != m);
-        flag[d.vertex] = own || d.children.iter().flatten().any(|&k| flag[k]);
+        let own = corners.into_iter().any(|&k| has_data(k) != m);
+        if own || d.children.iter().flatten().any(|&k| flag.get(k)) {
+            flag.set(d.vertex);
+        }
     });
     flag
 }
@@ -288,6 +400,78 @@ mod tests {
             // Whole data cells are covered; half cells along the coast may be too.
             assert!(area2 >= 2 * full_cells, "{area2} < {}", 2 * full_cells);
             assert!(area2 > 0);
+        }
+    }
+
+    /// A window's mesh is exactly the whole mesh's triangles whose boxes
+    /// overlap it (with a positive area), with and without a mask, at
+    /// several tolerances, on windows aligned with nothing in particular.
+    #[test]
+    fn a_window_keeps_exactly_the_whole_meshs_triangles_that_meet_it() {
+        let dem = testdata::dem("gironde_257.f32");
+        let side = dem.side;
+        let h = Hierarchy::compute(&dem.heights, side, dem.cell_size_m, ErrorMetric::default());
+        let mask: Vec<u8> = dem.heights.iter().map(|&z| u8::from(z >= 0.0)).collect();
+        let error = |i: usize| h.error(i);
+        let has_data = |i: usize| mask[i] != 0;
+        let triangles = |m: &GridMesh| -> std::collections::BTreeSet<[[u16; 2]; 3]> {
+            m.triangles
+                .iter()
+                .map(|t| t.map(|i| m.vertices[i as usize]))
+                .collect()
+        };
+        for masked in [false, true] {
+            for max_error in [0.5f32, 5.0, 40.0] {
+                let input = |window| MeshWalk {
+                    side,
+                    max_error,
+                    error: &error,
+                    has_data: masked.then_some(&has_data as &(dyn Fn(usize) -> bool + Sync)),
+                    window,
+                    max_vertices: usize::MAX,
+                };
+                let whole = walk(&input(None)).unwrap();
+                assert_eq!(whole, extract(&h, max_error, masked.then_some(&mask)));
+                for rect in [
+                    [0, 0, 256, 256],
+                    [37, 101, 150, 222],
+                    [128, 0, 129, 64],
+                    [5, 5, 9, 6],
+                ] {
+                    let [c0, r0, c1, r1] = rect;
+                    let window = Rect {
+                        c0,
+                        r0,
+                        width: c1 - c0 + 1,
+                        height: r1 - r0 + 1,
+                    };
+                    let part = walk(&input(Some(window))).unwrap();
+                    let expected: std::collections::BTreeSet<_> = triangles(&whole)
+                        .into_iter()
+                        .filter(|t| {
+                            let cs = t.map(|v| v[0] as usize);
+                            let rs = t.map(|v| v[1] as usize);
+                            let (x0, x1) = (*cs.iter().min().unwrap(), *cs.iter().max().unwrap());
+                            let (y0, y1) = (*rs.iter().min().unwrap(), *rs.iter().max().unwrap());
+                            x1 > c0 && x0 < c1 && y1 > r0 && y0 < r1
+                        })
+                        .collect();
+                    let what = format!("{rect:?} at {max_error} m, masked {masked}");
+                    assert!(!expected.is_empty() || masked, "{what}: an empty window");
+                    assert_eq!(triangles(&part), expected, "{what}");
+                    assert_eq!(
+                        part.triangles.len(),
+                        expected.len(),
+                        "{what}: a triangle twice"
+                    );
+                }
+                // A vertex limit below the mesh's size stops the walk.
+                let limited = MeshWalk {
+                    max_vertices: whole.vertices.len() - 1,
+                    ..input(None)
+                };
+                assert!(walk(&limited).is_none());
+            }
         }
     }
 }

@@ -11,9 +11,12 @@
 //!   bit for bit to the single grid.
 //! - [`reader`]: a pyramid opened, its tiles mapped without copying, the
 //!   tiles a camera sees, and the checks `relevo validate` runs.
+//! - [`mesh`]: the mesh of the region or of a window of it at a tolerance,
+//!   read through the tiles.
 
 pub mod build;
 pub mod layout;
+pub mod mesh;
 pub mod reader;
 pub mod store;
 

@@ -165,19 +165,25 @@ impl Pyramid {
         if !self.layout.holds(key) {
             return Err(Error::invalid(&self.dir, format!("has no tile {key:?}")));
         }
+        Ok(self.tile_held(key))
+    }
+
+    /// Tile `key`'s arrays, for a key the layout holds (the caller's
+    /// arithmetic guarantees it).
+    pub(crate) fn tile_held(&self, key: TileKey) -> TileView<'_> {
         let slot = self.layout.slot(key);
         let n = self.layout.tile_len();
         let slice = |a: TileArray| {
             let size = n * a.bytes_per_vertex();
             &self.maps[a as usize][slot * size..(slot + 1) * size]
         };
-        Ok(TileView {
+        TileView {
             key,
             heights: bytemuck::cast_slice(slice(TileArray::Height)),
             mask: slice(TileArray::Mask),
             lp: bytemuck::cast_slice(slice(TileArray::Lp)),
             drape: slice(TileArray::Drape),
-        })
+        }
     }
 
     /// The terrain frame of the level-0 grid.
@@ -215,8 +221,8 @@ impl Pyramid {
     }
 
     /// Level 0 over `rect` of the grid as whole arrays, assembled from the
-    /// tiles — for callers that work
-    /// on a window that fits in memory (`relevo mesh` of a region).
+    /// tiles — for callers that hold a window that fits in memory (the
+    /// comparisons with a single grid).
     pub fn level0_window(&self, rect: crate::lp::window::Rect) -> Result<GridWindow> {
         crate::memory::check(
             &format!("a {}×{} window of the pyramid", rect.width, rect.height),
