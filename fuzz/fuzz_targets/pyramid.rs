@@ -104,6 +104,26 @@ fn read_everything(dir: &std::path::Path) {
             let _ = p.tiles_meeting(&camera, level);
         }
     }
+    // A raycast from above the grid's centre, its bands on the levels.
+    let g = &p.manifest.grid;
+    let middle = (g.side - 1) as f64 / 2.0 * g.cell_size_m;
+    let camera = Camera {
+        position: glam::DVec3::new(middle, middle, g.height_range_m[1] as f64 + 300.0),
+        heading_deg: 30.0,
+        pitch_deg: -20.0,
+        incl_px: 120.0,
+        fov_x_deg: 60.0,
+        width: 160,
+        height: 120,
+        near_m: 1.0,
+        far_m: 50_000.0,
+    };
+    let levels = relevo_core::pyramid::render::LevelOptions {
+        max_cell_px: 4.0,
+        hillshade: Some([315.0, 35.0]),
+    };
+    let options = relevo_core::horizon::RenderOptions::default();
+    let _ = relevo_core::pyramid::render::render(&p, &camera, &options, levels);
     let _ = p.level0_window(Rect::whole(p.layout.side));
     if let Ok(source) = relevo_core::pyramid::mesh::PyramidMesh::new(&p) {
         let window = Rect { c0: 3, r0: 5, width: 40, height: 21 };

@@ -89,12 +89,14 @@ pub enum Command {
   relevo mesh fuji.relevo --max-error 5 --keep-padding --out fuji.glb
   relevo mesh country.relevo --max-error 1 --window 712000,5000000,716000,5004000 --out part.glb   # a window of a pyramid")]
     Mesh(mesh::MeshArgs),
-    /// Render a bundle with the CPU floating-horizon raycaster (PNG and depth).
+    /// Render a bundle with the CPU floating-horizon raycaster (PNG and depth);
+    /// a pyramid's distance bands read its coarser levels farther away.
     #[command(after_help = "Examples:
   relevo render olinda.relevo --camera 290000,9112000,400,45,300 --size 960x540 --out shot.png
   relevo render olinda.relevo --camera 290000,9112000,400,45,300 --depth depth.f32 --bands 2000:4:sub,inf:1 --out shot.png
   relevo render olinda.relevo --camera 290000,9112000,900,45,-35deg --size 1920x1080 --out looking_down.png
   relevo render olinda.relevo --camera 290000,9112000,400,45,300 --mode distorted --out voxel_space.png
+  relevo render county.relevo --camera 705000,5020000,3000,60,-10deg --far 8192 --max-cell-px 2 --out far.png   # a pyramid
 
 The pitch (PITCHdeg) tilts the camera for real; the raycaster draws pitches
 while every screen row looks forward and needs at most 4 marched lines per

@@ -6,6 +6,8 @@ use anyhow::{bail, Result};
 use clap::Args;
 use relevo_core::bundle::Bundle;
 use relevo_core::horizon::{Arithmetic, DistanceBand, RaycastFrame, RaycastMode, RenderOptions};
+use relevo_core::pyramid::render::LevelOptions;
+use relevo_core::pyramid::Pyramid;
 use relevo_core::raster::png::encode_rgba;
 use relevo_core::scene::{self, CameraPose, View};
 use std::path::{Path, PathBuf};
@@ -56,6 +58,11 @@ pub struct RenderArgs {
     /// Bake a hillshade: sun AZIMUTH,ELEVATION in degrees.
     #[arg(long, value_delimiter = ',', value_name = "AZIMUTH,ELEVATION")]
     pub hillshade: Option<Vec<f64>>,
+    /// A pyramid: the largest a level's cell may look on screen, pixels,
+    /// before farther slices read the next coarser level (the bands are
+    /// the levels; --bands is for single grids).
+    #[arg(long, default_value_t = 1.0)]
+    pub max_cell_px: f64,
     /// Also write the depth buffer: raw little-endian f32, row-major, top row first, [0, 1].
     #[arg(long)]
     pub depth: Option<PathBuf>,
@@ -95,7 +102,6 @@ pub fn run(a: RenderArgs) -> Result<()> {
         RaycastFrame::BYTES_PER_PIXEL,
         "choose a smaller --size",
     )?;
-    let bundle = Bundle::open(&a.bundle)?;
     let view = View {
         eye: pose.eye,
         heading_deg: pose.heading_deg,
@@ -121,9 +127,29 @@ pub fn run(a: RenderArgs) -> Result<()> {
         grow_steps: a.grow_steps,
         ..RenderOptions::default()
     };
-    let options = scene::with_bands(options, a.bands)?;
     let hillshade = a.hillshade.map(|v| [v[0], v[1]]);
-    let frame = scene::render_bundle(&bundle, &view, &options, hillshade)?;
+    let pyramid = relevo_core::bundle::format_of(&a.bundle).as_deref()
+        == Some(relevo_core::bundle::PYRAMID_FORMAT);
+    let frame = if pyramid {
+        if a.bands.is_some() {
+            bail!(
+                "{}: a pyramid's distance bands are its levels; set where they switch with \
+                 --max-cell-px instead of --bands",
+                a.bundle.display()
+            );
+        }
+        let p = Pyramid::open(&a.bundle)?;
+        let camera = scene::camera(&p.frame(), &view)?;
+        let levels = LevelOptions {
+            max_cell_px: a.max_cell_px,
+            hillshade,
+        };
+        relevo_core::pyramid::render::render(&p, &camera, &options, levels)?
+    } else {
+        let bundle = Bundle::open(&a.bundle)?;
+        let options = scene::with_bands(options, a.bands)?;
+        scene::render_bundle(&bundle, &view, &options, hillshade)?
+    };
     let rows = frame.to_rows();
     let png = encode_rgba(rows.rgba_bytes(), rows.width, rows.height)?;
     // The image and its depth are written together or not at all.

@@ -406,16 +406,25 @@ fn next_horizon(row: usize, slopes: &[f64], horizon: &mut f64) -> bool {
     next.is_some()
 }
 
+/// The slices one terrain serves, and how it is sampled: the whole frame's
+/// for a single grid; a band's for a pyramid, whose bands read coarser
+/// levels farther away (seed 000 §6.3's bands, the pyramid's levels).
+pub(super) struct Segment<'a, S> {
+    pub sampling: S,
+    pub terrain: &'a Terrain<'a>,
+    /// The eye in this terrain's frame, metres.
+    pub eye: [f64; 2],
+    /// Indices of the frame's slices this terrain serves.
+    pub slices: std::ops::Range<usize>,
+}
+
 /// What every packet of a frame shares.
 pub(super) struct Pass<'a> {
-    pub terrain: &'a Terrain<'a>,
     pub slices: &'a [Slice],
     pub screen: &'a Screen,
     /// Ground direction of each line, scaled so that `dir · s` advances the
     /// slice distance s.
     pub directions: &'a [[f64; 2]],
-    /// The eye, terrain-frame metres.
-    pub eye: [f64; 2],
     pub eye_z: f64,
     /// Depth A − B/z of a view distance z (eq. 5.11): [A, B].
     pub depth_terms: [f64; 2],
@@ -431,7 +440,7 @@ impl Pass<'_> {
     /// No other thread may be marching any of these lines into `target`.
     pub unsafe fn march<S: Sampling>(
         &self,
-        sampling: &S,
+        segments: &[Segment<S>],
         first: usize,
         count: usize,
         target: &Target,
@@ -441,10 +450,10 @@ impl Pass<'_> {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: the machine has AVX2 (checked just above).
-            unsafe { self.paint_avx2(sampling, first, &mut lanes) };
+            unsafe { self.paint_avx2(segments, first, &mut lanes) };
             return;
         }
-        self.paint(sampling, first, &mut lanes);
+        self.paint(segments, first, &mut lanes);
     }
 
     /// [`Pass::paint`] compiled for AVX2, where the lanes' positions and
@@ -454,11 +463,17 @@ impl Pass<'_> {
     /// The machine must have AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn paint_avx2<S: Sampling>(&self, sampling: &S, first: usize, lanes: &mut Lanes) {
-        self.paint(sampling, first, lanes);
+    unsafe fn paint_avx2<S: Sampling>(
+        &self,
+        segments: &[Segment<S>],
+        first: usize,
+        lanes: &mut Lanes,
+    ) {
+        self.paint(segments, first, lanes);
     }
 
-    /// March the lines of `lanes`, from line `first` on, into them.
+    /// March the lines of `lanes`, from line `first` on, into them, each
+    /// segment's slices through its terrain.
     ///
     /// Every slice samples all [`PACKET`] lanes (nearest samples without
     /// branching; lanes past `count`, or done, sample too and cover
@@ -466,7 +481,7 @@ impl Pass<'_> {
     /// metre its next unpainted row needs — and only the lanes whose sample
     /// covers a row paint.
     #[inline(always)]
-    fn paint<S: Sampling>(&self, sampling: &S, first: usize, lanes: &mut Lanes) {
+    fn paint<S: Sampling>(&self, segments: &[Segment<S>], first: usize, lanes: &mut Lanes) {
         let count = lanes.count;
         let slope = &self.screen.slope[..];
         let [depth_a, depth_b] = self.depth_terms;
@@ -485,111 +500,115 @@ impl Pass<'_> {
             }
         }
         let mut busy = horizon.iter().filter(|h| h.is_finite()).count();
-        let lane_sampling = sampling.lanes(&dirs);
         // Each slice's heights, and the vertices they came from: every
         // lane of `ground` is written for each slice (and `vertices` where
         // the sampling colours by vertex), so they are set up once.
         let mut ground = [0.0; PACKET];
         let mut vertices = [0u32; PACKET];
         let (first_dir, last_dir) = (self.directions[first], self.directions[first + count - 1]);
-        for chunk in self.slices.chunks(CHUNK) {
-            // Empty-space skipping: the packet's samples over this chunk lie
-            // between its outer lines and its nearest and farthest slices;
-            // if no terrain there rises above any lane's horizon, none of
-            // them paints (and the horizons stay as they are).
-            let (near, far) = (chunk[0].distance_m, chunk[chunk.len() - 1].distance_m);
-            let at = |dir: [f64; 2], s: f64| [self.eye[0] + dir[0] * s, self.eye[1] + dir[1] * s];
-            let highest_rise = self.terrain.highest_near(&[
-                at(first_dir, near),
-                at(last_dir, near),
-                at(first_dir, far),
-                at(last_dir, far),
-            ]) - self.eye_z;
-            if !(0..count).any(|k| highest_rise > (near * horizon[k]).min(far * horizon[k])) {
-                continue;
-            }
-            for slice in chunk {
-                let s = slice.distance_m;
-                let depth_over = depth_b / s;
-                // A NaN rise (no data) covers nothing.
-                if slice.subvoxel {
-                    heights_one_by_one(sampling, &dirs, s, true, &mut ground);
-                } else {
-                    sampling.nearest_heights(&lane_sampling, s, &mut ground, &mut vertices);
-                }
-                let mut covering = 0u64;
-                for k in 0..PACKET {
-                    covering |= u64::from(ground[k] - self.eye_z > s * horizon[k]) << k;
-                }
-                if covering == 0 {
+        'segments: for segment in segments {
+            let (sampling, terrain, eye) = (&segment.sampling, segment.terrain, segment.eye);
+            let lane_sampling = sampling.lanes(&dirs);
+            for chunk in self.slices[segment.slices.clone()].chunks(CHUNK) {
+                // Empty-space skipping: the packet's samples over this chunk lie
+                // between its outer lines and its nearest and farthest slices;
+                // if no terrain there rises above any lane's horizon, none of
+                // them paints (and the horizons stay as they are).
+                let (near, far) = (chunk[0].distance_m, chunk[chunk.len() - 1].distance_m);
+                let at = |dir: [f64; 2], s: f64| [eye[0] + dir[0] * s, eye[1] + dir[1] * s];
+                let highest_rise = terrain.highest_near(&[
+                    at(first_dir, near),
+                    at(last_dir, near),
+                    at(first_dir, far),
+                    at(last_dir, far),
+                ]) - self.eye_z;
+                if !(0..count).any(|k| highest_rise > (near * horizon[k]).min(far * horizon[k])) {
                     continue;
                 }
-                // The covering lanes' colours, all looked up before any
-                // paints so that their loads are in flight together; by the
-                // vertex the height came from where that gives the colour.
-                let mut colour = [0u32; PACKET];
-                for k in set_bits(covering) {
-                    let by_vertex = (!slice.subvoxel)
-                        .then(|| sampling.vertex_colour(vertices[k]))
-                        .flatten();
-                    colour[k] = by_vertex.unwrap_or_else(|| {
-                        let position = sampling.position([dirs[0][k], dirs[1][k]], s);
-                        let level = slice.level(self.terrain, self.eye_z, ground[k]);
-                        sampling.colour(position, slice.subvoxel, level)
-                    });
-                }
-                // Rows each lane paints: from its next unpainted row up
-                // while its rise clears the row's slope, below its end (seed
-                // 000, Algorithm 1, line 11A).
-                if self.screen.pitched {
-                    // Each row has its own depth and far-plane test: a
-                    // group of lanes goes together, a row at a time.
-                    let mut rise = [f64::NEG_INFINITY; PACKET];
-                    for k in set_bits(covering) {
-                        rise[k] = ground[k] - self.eye_z;
+                for slice in chunk {
+                    let s = slice.distance_m;
+                    let depth_over = depth_b / s;
+                    // A NaN rise (no data) covers nothing.
+                    if slice.subvoxel {
+                        heights_one_by_one(sampling, &dirs, s, true, &mut ground);
+                    } else {
+                        sampling.nearest_heights(&lane_sampling, s, &mut ground, &mut vertices);
                     }
-                    let groups = rise.as_chunks::<GROUP>().0.iter();
-                    let groups = groups.zip(colour.as_chunks::<GROUP>().0);
-                    for ((rise, colour), g) in groups.zip((0..PACKET).step_by(GROUP)) {
-                        let group_covering = (covering >> g) & ((1 << GROUP) - 1);
-                        if group_covering == 0 {
-                            continue;
+                    let mut covering = 0u64;
+                    for k in 0..PACKET {
+                        covering |= u64::from(ground[k] - self.eye_z > s * horizon[k]) << k;
+                    }
+                    if covering == 0 {
+                        continue;
+                    }
+                    // The covering lanes' colours, all looked up before any
+                    // paints so that their loads are in flight together; by the
+                    // vertex the height came from where that gives the colour.
+                    let mut colour = [0u32; PACKET];
+                    for k in set_bits(covering) {
+                        let by_vertex = (!slice.subvoxel)
+                            .then(|| sampling.vertex_colour(vertices[k]))
+                            .flatten();
+                        colour[k] = by_vertex.unwrap_or_else(|| {
+                            let position = sampling.position([dirs[0][k], dirs[1][k]], s);
+                            let level = slice.level(terrain, self.eye_z, ground[k]);
+                            sampling.colour(position, slice.subvoxel, level)
+                        });
+                    }
+                    // Rows each lane paints: from its next unpainted row up
+                    // while its rise clears the row's slope, below its end (seed
+                    // 000, Algorithm 1, line 11A).
+                    if self.screen.pitched {
+                        // Each row has its own depth and far-plane test: a
+                        // group of lanes goes together, a row at a time.
+                        let mut rise = [f64::NEG_INFINITY; PACKET];
+                        for k in set_bits(covering) {
+                            rise[k] = ground[k] - self.eye_z;
                         }
-                        let samples = GroupSamples {
-                            first: g,
-                            covering: group_covering,
-                            row: std::array::from_fn(|j| row[g + j] as u32),
-                            end: std::array::from_fn(|j| end[g + j] as u32),
-                            rise,
-                            colour,
-                        };
-                        let painted = self.paint_pitched_rows(lanes, s, depth_over, &samples);
-                        for j in set_bits(group_covering) {
-                            let k = g + j;
-                            row[k] += painted[j] as usize;
-                            if !next_horizon(row[k], &slope[..end[k]], &mut horizon[k]) {
+                        let groups = rise.as_chunks::<GROUP>().0.iter();
+                        let groups = groups.zip(colour.as_chunks::<GROUP>().0);
+                        for ((rise, colour), g) in groups.zip((0..PACKET).step_by(GROUP)) {
+                            let group_covering = (covering >> g) & ((1 << GROUP) - 1);
+                            if group_covering == 0 {
+                                continue;
+                            }
+                            let samples = GroupSamples {
+                                first: g,
+                                covering: group_covering,
+                                row: std::array::from_fn(|j| row[g + j] as u32),
+                                end: std::array::from_fn(|j| end[g + j] as u32),
+                                rise,
+                                colour,
+                            };
+                            let painted = self.paint_pitched_rows(lanes, s, depth_over, &samples);
+                            for j in set_bits(group_covering) {
+                                let k = g + j;
+                                row[k] += painted[j] as usize;
+                                if !next_horizon(row[k], &slope[..end[k]], &mut horizon[k]) {
+                                    busy -= 1;
+                                }
+                            }
+                        }
+                    } else {
+                        // Level: one depth for the slice, and the slices end
+                        // before the far plane; lane by lane.
+                        let depth = (depth_a - depth_over) as f32;
+                        for k in set_bits(covering) {
+                            let rise = ground[k] - self.eye_z;
+                            let slopes = &slope[..end[k]];
+                            row[k] =
+                                lanes.paint_run(k, row[k], slopes, colour[k], depth, |slope| {
+                                    rise > s * slope
+                                });
+                            if !next_horizon(row[k], slopes, &mut horizon[k]) {
                                 busy -= 1;
                             }
                         }
                     }
-                } else {
-                    // Level: one depth for the slice, and the slices end
-                    // before the far plane; lane by lane.
-                    let depth = (depth_a - depth_over) as f32;
-                    for k in set_bits(covering) {
-                        let rise = ground[k] - self.eye_z;
-                        let slopes = &slope[..end[k]];
-                        row[k] = lanes.paint_run(k, row[k], slopes, colour[k], depth, |slope| {
-                            rise > s * slope
-                        });
-                        if !next_horizon(row[k], slopes, &mut horizon[k]) {
-                            busy -= 1;
-                        }
-                    }
                 }
-            }
-            if busy == 0 {
-                break;
+                if busy == 0 {
+                    break 'segments;
+                }
             }
         }
         // Sky above each line's horizon: rows where every lane shows it

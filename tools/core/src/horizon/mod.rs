@@ -100,12 +100,37 @@ impl Default for RenderOptions {
     }
 }
 
+/// What the slices are laid out over: the whole level-0 grid, whether one
+/// terrain holds it or a pyramid's levels do.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GridExtent {
+    /// Vertices a side.
+    pub side: usize,
+    /// Vertex spacing, metres.
+    pub cell_m: f64,
+    /// The lowest and highest heights with data, metres.
+    pub lowest_m: f64,
+    pub highest_m: f64,
+}
+
+impl Terrain<'_> {
+    /// The grid this terrain holds, as the slices see it.
+    pub fn extent(&self) -> GridExtent {
+        GridExtent {
+            side: self.side,
+            cell_m: self.cell_m,
+            lowest_m: self.lowest_m,
+            highest_m: self.highest_m,
+        }
+    }
+}
+
 /// Horizontal forward distances of the slices (seed 000, Algorithm 2b
 /// generalised to bands), from the nearest that can show anything to the
 /// farthest.
 fn fill_slices(
     out: &mut Vec<Slice>,
-    terrain: &Terrain,
+    terrain: &GridExtent,
     camera: &Camera,
     screen: &Screen,
     opts: &RenderOptions,
@@ -201,6 +226,30 @@ pub fn render(terrain: &Terrain, camera: &Camera, opts: &RenderOptions) -> Resul
     Ok(renderer.frame)
 }
 
+/// A pyramid as the raycaster reads it: the whole grid's extent, and each
+/// level's terrain over a stretch of ground on request.
+pub struct Levels<'a> {
+    pub extent: GridExtent,
+    /// The terrain of `level` over the ground box `[x0, y0, x1, y1]`
+    /// (level-0 terrain frame, metres), or what keeps it from being read.
+    #[allow(clippy::type_complexity)]
+    pub load: &'a (dyn Fn(u32, [f64; 4]) -> Result<LevelTerrain> + Sync),
+}
+
+/// One level of a pyramid over a stretch of ground.
+pub struct LevelTerrain {
+    pub terrain: Terrain<'static>,
+    /// Where this terrain's frame origin lies in the level-0 terrain frame,
+    /// metres: a level-0 point (x, y) is (x, y) − `offset_m` in it.
+    pub offset_m: [f64; 2],
+}
+
+/// What a frame is rendered from.
+enum Terrains<'a> {
+    One(&'a Terrain<'a>),
+    Levels(&'a Levels<'a>),
+}
+
 /// Buffers reused from frame to frame: after the first frame of a size and
 /// pitch, rendering allocates nothing.
 #[derive(Debug, Default)]
@@ -222,11 +271,38 @@ impl Raycaster {
         &self.frame
     }
 
+    /// The last frame rendered, kept.
+    pub fn into_frame(self) -> RaycastFrame {
+        self.frame
+    }
+
     /// Render `terrain` seen from `camera`, pitched within
     /// [`pitch_range`] (the distorted mode only level).
     pub fn render(
         &mut self,
         terrain: &Terrain,
+        camera: &Camera,
+        opts: &RenderOptions,
+    ) -> Result<&RaycastFrame> {
+        self.render_with(&terrain.extent(), &Terrains::One(terrain), camera, opts)
+    }
+
+    /// Render a pyramid seen from `camera`: band i of `opts.bands` reads
+    /// level i (the last band reads on as far as it goes), each level over
+    /// the ground its band's slices reach, as [`Levels::load`] gives it.
+    pub fn render_levels(
+        &mut self,
+        levels: &Levels,
+        camera: &Camera,
+        opts: &RenderOptions,
+    ) -> Result<&RaycastFrame> {
+        self.render_with(&levels.extent, &Terrains::Levels(levels), camera, opts)
+    }
+
+    fn render_with(
+        &mut self,
+        extent: &GridExtent,
+        terrains: &Terrains,
         camera: &Camera,
         opts: &RenderOptions,
     ) -> Result<&RaycastFrame> {
@@ -243,7 +319,7 @@ impl Raycaster {
             return Ok(&self.frame);
         }
         self.screen.fill(camera)?;
-        fill_slices(&mut self.slices, terrain, camera, &self.screen, opts);
+        fill_slices(&mut self.slices, extent, camera, &self.screen, opts);
         let heading = camera.heading_deg.to_radians();
         let forward = [heading.sin(), heading.cos()];
         let right = [heading.cos(), -heading.sin()];
@@ -268,6 +344,11 @@ impl Raycaster {
                     ]
                 }
             }));
+        let eye = [camera.position.x, camera.position.y];
+        let bands = match terrains {
+            Terrains::One(_) => Vec::new(),
+            Terrains::Levels(levels) => self.load_levels(levels, extent, eye, opts)?,
+        };
         let setup_ms = start.elapsed().as_secs_f64() * 1e3;
 
         let start = Instant::now();
@@ -282,17 +363,26 @@ impl Raycaster {
             march::Target::new(&mut f.rgba, &mut f.depth, w, h)
         };
         let pass = march::Pass {
-            terrain,
             slices: &self.slices,
             screen,
             directions: &self.directions,
-            eye: [camera.position.x, camera.position.y],
             eye_z: camera.position.z,
             depth_terms: camera.depth_terms(),
             far_m: camera.far_m,
             sky: u32::from_le_bytes(opts.sky),
         };
-        let eye = pass.eye;
+        // Each segment's terrain, the eye in its frame, and its slices.
+        let parts: Vec<(&Terrain, [f64; 2], std::ops::Range<usize>)> = match terrains {
+            Terrains::One(terrain) => vec![(*terrain, eye, 0..self.slices.len())],
+            Terrains::Levels(_) => bands
+                .iter()
+                .map(|(l, range)| {
+                    let eye = [eye[0] - l.offset_m[0], eye[1] - l.offset_m[1]];
+                    (&l.terrain, eye, range.clone())
+                })
+                .collect(),
+        };
+        let segments = Segments::new(&parts, opts.arithmetic);
         let packets = screen.lines.div_ceil(march::PACKET);
         let march_packet = |p: usize| {
             let first = p * march::PACKET;
@@ -300,19 +390,9 @@ impl Raycaster {
             // SAFETY: each packet index comes once from the range, so each
             // line is marched by one task only.
             unsafe {
-                match opts.arithmetic {
-                    Arithmetic::Float => pass.march(
-                        &march::FloatSampling { terrain, eye },
-                        first,
-                        count,
-                        &target,
-                    ),
-                    Arithmetic::Fixed => pass.march(
-                        &march::FixedSampling::new(terrain, eye),
-                        first,
-                        count,
-                        &target,
-                    ),
+                match &segments {
+                    Segments::Float(s) => pass.march(s, first, count, &target),
+                    Segments::Fixed(s) => pass.march(s, first, count, &target),
                 }
             }
         };
@@ -345,6 +425,90 @@ impl Raycaster {
             output_ms,
         };
         Ok(&self.frame)
+    }
+}
+
+/// The segments of a frame in the arithmetic it is marched in.
+enum Segments<'a> {
+    Float(Vec<march::Segment<'a, march::FloatSampling<'a>>>),
+    Fixed(Vec<march::Segment<'a, march::FixedSampling<'a>>>),
+}
+
+impl<'a> Segments<'a> {
+    /// A segment for each (terrain, eye in its frame, slices).
+    fn new(
+        parts: &[(&'a Terrain<'a>, [f64; 2], std::ops::Range<usize>)],
+        arithmetic: Arithmetic,
+    ) -> Self {
+        match arithmetic {
+            Arithmetic::Float => Segments::Float(
+                parts
+                    .iter()
+                    .map(|&(terrain, eye, ref slices)| march::Segment {
+                        sampling: march::FloatSampling { terrain, eye },
+                        terrain,
+                        eye,
+                        slices: slices.clone(),
+                    })
+                    .collect(),
+            ),
+            Arithmetic::Fixed => Segments::Fixed(
+                parts
+                    .iter()
+                    .map(|&(terrain, eye, ref slices)| march::Segment {
+                        sampling: march::FixedSampling::new(terrain, eye),
+                        terrain,
+                        eye,
+                        slices: slices.clone(),
+                    })
+                    .collect(),
+            ),
+        }
+    }
+}
+
+impl Raycaster {
+    /// Each band's level over the ground its slices reach — every line's
+    /// ground from the band's nearest to its farthest slice, two of the
+    /// level's cells around for sub-voxel samples — with the slices it
+    /// serves. Band i reads level i; the last band takes the slices past
+    /// the others.
+    fn load_levels(
+        &self,
+        levels: &Levels,
+        extent: &GridExtent,
+        eye: [f64; 2],
+        opts: &RenderOptions,
+    ) -> Result<Vec<(LevelTerrain, std::ops::Range<usize>)>> {
+        let mut out = Vec::new();
+        let mut from = 0;
+        for (level, band) in opts.bands.iter().enumerate() {
+            let to = if level + 1 == opts.bands.len() {
+                self.slices.len()
+            } else {
+                from + self.slices[from..].partition_point(|s| s.distance_m <= band.until_m)
+            };
+            if to > from {
+                let (near, far) = (self.slices[from].distance_m, self.slices[to - 1].distance_m);
+                let margin = 2.0 * extent.cell_m * (1u64 << level) as f64;
+                let [mut x0, mut y0, mut x1, mut y1] = [
+                    f64::INFINITY,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                    f64::NEG_INFINITY,
+                ];
+                for dir in &self.directions {
+                    for s in [near, far] {
+                        let (x, y) = (eye[0] + dir[0] * s, eye[1] + dir[1] * s);
+                        (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
+                    }
+                }
+                let ground = [x0 - margin, y0 - margin, x1 + margin, y1 + margin];
+                out.push(((levels.load)(level as u32, ground)?, from..to));
+            }
+            from = to;
+        }
+        Ok(out)
     }
 }
 

@@ -9,7 +9,7 @@
 
 use super::layout::TileKey;
 use super::reader::{Pyramid, TileView};
-use crate::geo::{GeoTransform, TerrainFrame};
+use crate::geo::TerrainFrame;
 use crate::lp::export::{DrapeImage, MeshSource};
 use crate::lp::extract::VertexBits;
 use crate::lp::metric::triangle_deviation;
@@ -149,39 +149,19 @@ impl MeshSource for PyramidMesh<'_> {
         let (u0, v0) = (rect.c0 / s, rect.r0 / s);
         let u1 = (rect.c0 + rect.width - 1).div_ceil(s).min(lattice_last);
         let v1 = (rect.r0 + rect.height - 1).div_ceil(s).min(lattice_last);
-        let (w, h) = (u1 - u0 + 1, v1 - v0 + 1);
-        crate::memory::check(
-            &format!("the mesh's {w}×{h} texture"),
-            (w * h) as u64,
-            8,
-            "take a smaller window",
-        )?;
-        let mut rgba = Vec::with_capacity(w * h * 4);
-        for v in v0..=v1 {
-            for u in u0..=u1 {
-                let (tile, k) = self.sample(level, u, v);
-                rgba.extend_from_slice(&tile.drape[4 * k..4 * k + 4]);
-            }
-        }
+        let lattice = Rect {
+            c0: u0,
+            r0: v0,
+            width: u1 - u0 + 1,
+            height: v1 - v0 + 1,
+        };
+        let (rgba, geotransform) = self.pyramid.lattice_drape(level, lattice)?;
         self.pyramid.release_pages();
-        // Texel (i, j) is centred on level-0 vertex ((u0 + i)·s, (v0 + j)·s),
-        // whose centre the grid's geotransform puts at column + ½, row + ½.
-        let g = self.pyramid.manifest.grid.geotransform;
-        let at = |lattice: usize| ((lattice as f64) - 0.5) * s as f64 + 0.5;
-        let (ox, oy) = g.apply(at(u0), at(v0));
-        let scale = s as f64;
         Ok(Some(DrapeImage {
             rgba: Cow::Owned(rgba),
-            width: w,
-            height: h,
-            geotransform: GeoTransform([
-                ox,
-                g.0[1] * scale,
-                g.0[2] * scale,
-                oy,
-                g.0[4] * scale,
-                g.0[5] * scale,
-            ]),
+            width: lattice.width,
+            height: lattice.height,
+            geotransform,
         }))
     }
 

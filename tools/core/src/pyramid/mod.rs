@@ -13,11 +13,13 @@
 //!   tiles a camera sees, and the checks `relevo validate` runs.
 //! - [`mesh`]: the mesh of the region or of a window of it at a tolerance,
 //!   read through the tiles.
+//! - [`render`]: the raycast whose distance bands are the levels.
 
 pub mod build;
 pub mod layout;
 pub mod mesh;
 pub mod reader;
+pub mod render;
 pub mod store;
 
 pub use build::{BuildOptions, BuildReport, HeightSource, Progress};

@@ -7,7 +7,9 @@ use super::store::TileArray;
 use super::{PyramidManifest, FORMAT_VERSION};
 use crate::bundle::{sha256_file, MANIFEST_FILE, PYRAMID_FORMAT};
 use crate::camera::Camera;
+use crate::geo::GeoTransform;
 use crate::lp::terrain_position;
+use crate::lp::window::Rect;
 use crate::{Error, Result};
 use memmap2::Mmap;
 use std::path::{Path, PathBuf};
@@ -15,7 +17,7 @@ use std::path::{Path, PathBuf};
 /// Level 0 over a rectangle of the grid, row-major over it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GridWindow {
-    pub rect: crate::lp::window::Rect,
+    pub rect: Rect,
     pub heights: Vec<f32>,
     pub mask: Vec<u8>,
     /// `[error, radius]`.
@@ -220,10 +222,88 @@ impl Pyramid {
             .collect()
     }
 
+    /// Each sample of level `level`'s lattice over `rect` (lattice columns
+    /// and rows: level-0 vertex (u·2^level, v·2^level) is lattice vertex
+    /// (u, v)), row by row: `f(tile, its sample)`.
+    fn for_each_sample(&self, level: u32, rect: Rect, mut f: impl FnMut(&TileView, usize)) {
+        let (t, samples) = (self.layout.tile_cells, self.layout.samples());
+        let last = self.layout.across(level) - 1;
+        for v in rect.r0..rect.r0 + rect.height {
+            let y = (v / t).min(last);
+            let mut x = usize::MAX;
+            let mut tile = None;
+            for u in rect.c0..rect.c0 + rect.width {
+                if (u / t).min(last) != x {
+                    x = (u / t).min(last);
+                    tile = Some(self.tile_held(TileKey { level, x, y }));
+                }
+                if let Some(tile) = &tile {
+                    f(tile, (v - y * t) * samples + (u - x * t));
+                }
+            }
+        }
+    }
+
+    /// Level `level`'s drape over lattice rectangle `rect` (RGBA8, row by
+    /// row), and the geotransform that places its pixels: pixel (i, j) is
+    /// centred on the lattice vertex (c0 + i, r0 + j), as the grid's
+    /// geotransform centres level-0 pixels on vertices.
+    pub fn lattice_drape(&self, level: u32, rect: Rect) -> Result<(Vec<u8>, GeoTransform)> {
+        crate::memory::check(
+            &format!(
+                "a {}×{} window of level {level}'s drape",
+                rect.width, rect.height
+            ),
+            rect.len() as u64,
+            4,
+            "take a smaller window",
+        )?;
+        let mut rgba = Vec::with_capacity(rect.len() * 4);
+        self.for_each_sample(level, rect, |tile, k| {
+            rgba.extend_from_slice(&tile.drape[4 * k..4 * k + 4]);
+        });
+        Ok((rgba, self.lattice_geotransform(level, rect)))
+    }
+
+    /// Level `level`'s heights and mask over lattice rectangle `rect`, row
+    /// by row.
+    pub fn lattice_heights(&self, level: u32, rect: Rect) -> Result<(Vec<f32>, Vec<u8>)> {
+        crate::memory::check(
+            &format!(
+                "a {}×{} window of level {level}'s heights",
+                rect.width, rect.height
+            ),
+            rect.len() as u64,
+            5,
+            "take a smaller window",
+        )?;
+        let (mut heights, mut mask) = (
+            Vec::with_capacity(rect.len()),
+            Vec::with_capacity(rect.len()),
+        );
+        self.for_each_sample(level, rect, |tile, k| {
+            heights.push(tile.heights[k]);
+            mask.push(tile.mask[k]);
+        });
+        Ok((heights, mask))
+    }
+
+    /// The geotransform of level `level`'s lattice from lattice vertex
+    /// (`rect.c0`, `rect.r0`) on, a pixel a vertex: lattice pixel p (its
+    /// centre at p + ½) lies where the grid's puts level-0 column
+    /// (c0 + p − ½)·2^level + ½.
+    pub fn lattice_geotransform(&self, level: u32, rect: Rect) -> GeoTransform {
+        let g = self.manifest.grid.geotransform;
+        let s = self.layout.stride(level) as f64;
+        let at = |lattice: usize| (lattice as f64 - 0.5) * s + 0.5;
+        let (ox, oy) = g.apply(at(rect.c0), at(rect.r0));
+        GeoTransform([ox, g.0[1] * s, g.0[2] * s, oy, g.0[4] * s, g.0[5] * s])
+    }
+
     /// Level 0 over `rect` of the grid as whole arrays, assembled from the
     /// tiles — for callers that hold a window that fits in memory (the
     /// comparisons with a single grid).
-    pub fn level0_window(&self, rect: crate::lp::window::Rect) -> Result<GridWindow> {
+    pub fn level0_window(&self, rect: Rect) -> Result<GridWindow> {
         crate::memory::check(
             &format!("a {}×{} window of the pyramid", rect.width, rect.height),
             rect.len() as u64,
