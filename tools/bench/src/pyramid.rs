@@ -3,7 +3,9 @@
 //! fractal written as a GeoTIFF at 16385² and 32769², each run's wall time
 //! and peak resident memory beside GDAL doing less on the same file in the
 //! same run: overviews alone (`gdaladdo`, on a copy) and a cloud-optimised
-//! GeoTIFF with its overviews (`gdal_translate -of COG`).
+//! GeoTIFF with its overviews (`gdal_translate -of COG`); then the readers
+//! over each pyramid (`relevo mesh`, whole and a window; `relevo render`
+//! with the levels as bands).
 
 use crate::measure::{emit, median, run_measured, tempfile_dir};
 use anyhow::{bail, Context, Result};
@@ -61,6 +63,7 @@ pub fn run(repo: &Path, runs: usize, max_side: usize, json_lines: bool) -> Resul
             pyramid.manifest.tiling.tiles,
         );
         let pyramid_bytes: u64 = pyramid.manifest.files.values().map(|a| a.bytes).sum();
+        readers(&relevo, &pyramid, &out, &input.name, runs, json_lines)?;
         drop(pyramid);
         std::fs::remove_dir_all(&out)?;
         // GDAL: the same number of coarser levels as overviews of a copy.
@@ -130,6 +133,119 @@ pub fn run(repo: &Path, runs: usize, max_side: usize, json_lines: bool) -> Resul
         );
     }
     let _ = std::fs::remove_dir_all(&scratch);
+    Ok(())
+}
+
+/// The readers over the pyramid just built, each command's wall time and
+/// peak memory: the whole region's mesh at 5 m, a 1024-cell window's at
+/// 0.5 m at the data's centre, and 1280×720 raycasts whose bands are the
+/// levels (1 and 2 pixels a cell) from 500 m above the highest point over
+/// the data's south-west quarter, looking north-east.
+fn readers(
+    relevo: &Path,
+    pyramid: &Pyramid,
+    out: &Path,
+    name: &str,
+    runs: usize,
+    json_lines: bool,
+) -> Result<()> {
+    let grid = &pyramid.manifest.grid;
+    let cell = grid.cell_size_m;
+    // Within the data: its extent's centre, and its south-west quarter.
+    let [x0, y0, x1, y1] = grid.valid_extent;
+    let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
+    let half = 512.0 * cell;
+    let window = format!("{},{},{},{}", cx - half, cy - half, cx + half, cy + half);
+    let (ex, ey) = (x0 + (x1 - x0) / 4.0, y0 + (y1 - y0) / 4.0);
+    let eye_z = grid.height_range_m[1] as f64 + 500.0;
+    let camera = format!("{ex},{ey},{eye_z},45,-10deg");
+    let side = grid.side as f64;
+    let far = format!("{}", side);
+    let glb = out.with_extension("glb");
+    let png = out.with_extension("png");
+    let out_str = |p: &Path| p.to_string_lossy().to_string();
+    let commands: [(&str, Vec<String>); 4] = [
+        (
+            "mesh, whole region, 5 m",
+            vec![
+                "mesh".into(),
+                "--max-error".into(),
+                "5".into(),
+                "--out".into(),
+                out_str(&glb),
+            ],
+        ),
+        (
+            "mesh, 1024² window, 0.5 m",
+            vec![
+                "mesh".into(),
+                "--max-error".into(),
+                "0.5".into(),
+                "--window".into(),
+                window,
+                "--out".into(),
+                out_str(&glb),
+            ],
+        ),
+        (
+            "render 1280×720, 1 px a cell",
+            vec![
+                "render".into(),
+                "--camera".into(),
+                camera.clone(),
+                "--size".into(),
+                "1280x720".into(),
+                "--far".into(),
+                far.clone(),
+                "--max-cell-px".into(),
+                "1".into(),
+                "--out".into(),
+                out_str(&png),
+            ],
+        ),
+        (
+            "render 1280×720, 2 px a cell",
+            vec![
+                "render".into(),
+                "--camera".into(),
+                camera,
+                "--size".into(),
+                "1280x720".into(),
+                "--far".into(),
+                far,
+                "--max-cell-px".into(),
+                "2".into(),
+                "--out".into(),
+                out_str(&png),
+            ],
+        ),
+    ];
+    for (what, args) in commands {
+        let (mut times, mut peak) = (Vec::new(), 0.0f64);
+        for _ in 0..runs {
+            let (ms, mb) = run_measured(
+                Command::new(relevo)
+                    .arg(&args[0])
+                    .arg(out)
+                    .args(&args[1..])
+                    .args(["--force", "-q"]),
+            )?;
+            times.push(ms);
+            peak = peak.max(mb);
+        }
+        let ms = median(&times);
+        emit(
+            json_lines,
+            json!({"bench": "pyramid_reader", "input": name, "what": what, "runs": runs,
+                   "threads": rayon::current_num_threads(), "ms": ms, "peak_rss_mb": peak}),
+            format!(
+                "pyramid {name}: {what} {:.2} s, peak {peak:.0} MB",
+                ms / 1e3
+            ),
+        );
+    }
+    let _ = std::fs::remove_file(&glb);
+    let _ = std::fs::remove_file(&png);
     Ok(())
 }
 

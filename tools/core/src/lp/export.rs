@@ -201,24 +201,24 @@ pub fn build(
             -(p[1] - origin[1]) as f32,
         ]
     };
-    let positions: Vec<[f32; 3]> = grid
-        .vertices
-        .iter()
-        .map(|v| position(v[0] as usize, v[1] as usize))
-        .collect();
     // Normals of the full-resolution surface (central differences), so
-    // shading does not depend on the tolerance.
+    // shading does not depend on the tolerance. A chunk of vertices at a
+    // time, what the reads brought in released after each.
     let z = |c: usize, r: usize| source.height(c, r);
-    let normals = grid
-        .vertices
-        .iter()
-        .map(|v| {
-            let n = vertex_normal_of(&z, side, cell, v[0] as usize, v[1] as usize);
+    let (mut positions, mut normals) = (
+        Vec::with_capacity(grid.vertices.len()),
+        Vec::with_capacity(grid.vertices.len()),
+    );
+    for chunk in grid.vertices.chunks(RELEASE_CHUNK) {
+        for v in chunk {
+            let (c, r) = (v[0] as usize, v[1] as usize);
+            positions.push(position(c, r));
+            let n = vertex_normal_of(&z, side, cell, c, r);
             // z up → y up (x east, y up, z south).
-            [n[0] as f32, n[2] as f32, -n[1] as f32]
-        })
-        .collect();
-    source.release();
+            normals.push([n[0] as f32, n[2] as f32, -n[1] as f32]);
+        }
+        source.release();
+    }
     // Grid (col, row) triangles from martini's traversal are clockwise seen
     // from above with rows growing south; reorder to counter-clockwise y-up.
     let triangles = grid
@@ -270,14 +270,15 @@ pub fn build(
     })
 }
 
-/// Triangles measured between two releases of what the reads brought in.
-const DEVIATION_CHUNK: usize = 1 << 16;
+/// Vertices or triangles read between two releases of what the reads
+/// brought in.
+const RELEASE_CHUNK: usize = 1 << 16;
 
 /// The largest vertical distance between a grid point under `mesh` and
 /// the mesh, metres.
 fn largest_deviation(source: &dyn MeshSource, mesh: &GridMesh) -> f64 {
     let mut largest = 0.0f64;
-    for chunk in mesh.triangles.chunks(DEVIATION_CHUNK) {
+    for chunk in mesh.triangles.chunks(RELEASE_CHUNK) {
         let part = chunk
             .par_iter()
             .map(|t| {

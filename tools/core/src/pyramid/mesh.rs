@@ -33,7 +33,7 @@ pub struct PyramidMesh<'a> {
 }
 
 /// Error reads between two releases of the mapped pages.
-const ERRORS_BETWEEN_RELEASES: usize = 1 << 20;
+const ERRORS_BETWEEN_RELEASES: usize = 1 << 16;
 
 impl<'a> PyramidMesh<'a> {
     /// Gather `pyramid`'s mask (one bit a vertex, checked against the
