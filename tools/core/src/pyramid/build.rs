@@ -6,8 +6,8 @@
 //! 2. own errors: each level-0 tile's vertices (scale ≤ T/2) from the tile
 //!    ± T/2, and each tile's part of the own errors of the lattice of tile
 //!    corners (scale ≥ T), whose diamonds span many tiles;
-//! 3. saturation: each level-0 tile's errors and radii from the tile ± T
-//!    (the farthest a descendant of a tile's vertex lies);
+//! 3. saturation: level-0 tiles' errors and radii from blocks of up to
+//!    4×4 tiles ± T (the farthest a descendant of a tile's vertex lies);
 //! 4. the lattice: the corners' errors and radii, level by level, from the
 //!    parts and the tiles' centres, written into the tiles' corners;
 //! 5. the drape derived from the heights (tint and hillshade), each tile
@@ -155,10 +155,11 @@ pub fn build(
         })?,
     );
     let name = "errors and radii";
+    let blocks = saturation_blocks(&layout);
     spent(
         name,
-        each(store, &level0, Pass::Saturate, name, progress, &|key| {
-            saturate_pass(store, options, key)
+        each_group(store, &blocks, Pass::Saturate, name, progress, &|keys| {
+            saturate_pass(store, options, keys)
         })?,
     );
     let top = TileKey {
@@ -217,9 +218,24 @@ fn each(
     progress: &(dyn Fn(Progress) + Sync),
     work: &(dyn Fn(TileKey) -> Result<()> + Sync),
 ) -> Result<f64> {
+    let groups: Vec<Vec<TileKey>> = tiles.iter().map(|&key| vec![key]).collect();
+    each_group(store, &groups, pass, name, progress, &|keys| work(keys[0]))
+}
+
+/// Run `work` on every group of `groups` with a tile not yet done in
+/// `pass`, in parallel, on the group's tiles not yet done, marking them
+/// when it is; progress counts tiles.
+fn each_group(
+    store: &TileStore,
+    groups: &[Vec<TileKey>],
+    pass: Pass,
+    name: &'static str,
+    progress: &(dyn Fn(Progress) + Sync),
+    work: &(dyn Fn(&[TileKey]) -> Result<()> + Sync),
+) -> Result<f64> {
     let start = std::time::Instant::now();
     let done = AtomicUsize::new(0);
-    let total = tiles.len();
+    let total = groups.iter().map(Vec::len).sum();
     let report = |n| {
         progress(Progress {
             pass: name,
@@ -228,14 +244,22 @@ fn each(
         });
     };
     report(0);
-    let results: Vec<Result<usize>> = tiles
+    let results: Vec<Result<usize>> = groups
         .par_iter()
-        .map(|&key| {
-            if !store.done(pass, key)? {
-                work(key)?;
-                store.mark(pass, key)?;
+        .map(|group| {
+            let mut left = Vec::with_capacity(group.len());
+            for &key in group {
+                if !store.done(pass, key)? {
+                    left.push(key);
+                }
             }
-            let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+            if !left.is_empty() {
+                work(&left)?;
+                for &key in &left {
+                    store.mark(pass, key)?;
+                }
+            }
+            let n = done.fetch_add(group.len(), Ordering::Relaxed) + group.len();
             report(n);
             Ok(n)
         })
@@ -373,33 +397,81 @@ fn own_pass(
     store.write_partials(key, &partials)
 }
 
-/// Errors and radii of a level-0 tile's vertices below the lattice, from
-/// the tile and a tile's width around it. The margin is what the values
-/// need: from a tile's edge vertex of scale T/2 the chain of children runs
-/// outwards T/4 (to a square centre), T/4 (to its edge vertex), T/8, T/8,
-/// … — T in all. (A margin of T/2 gives different values on the crops.)
-/// This window, nine tiles' area, makes the pass the build's costliest.
-fn saturate_pass(store: &TileStore, options: &BuildOptions, key: TileKey) -> Result<()> {
+/// Errors and radii of level-0 tiles' vertices below the lattice, from a
+/// block of neighbouring tiles and a tile's width around it, saturated at
+/// once. The margin is what the values need: from a tile's edge vertex of
+/// scale T/2 the chain of children runs outwards T/4 (to a square centre),
+/// T/4 (to its edge vertex), T/8, T/8, … — T in all. (A margin of T/2
+/// gives different values on the crops.) Every vertex's value depends on
+/// its descendants only, so it is the same whatever block computes it:
+/// larger blocks share their margins between more tiles (a lone tile's
+/// window is nine tiles' area, a block of 4×4 tiles' 2.25 a tile).
+fn saturate_pass(store: &TileStore, options: &BuildOptions, keys: &[TileKey]) -> Result<()> {
     let layout = store.layout;
     let t = layout.tile_cells;
-    let tile = tile_rect(&layout, key, 0);
-    let wide = tile_rect(&layout, key, t);
+    let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+    for k in keys {
+        (x0, y0, x1, y1) = (x0.min(k.x), y0.min(k.y), x1.max(k.x), y1.max(k.y));
+    }
+    let side = layout.side;
+    let wide = Rect::around([x0 * t, y0 * t, (x1 + 1) * t, (y1 + 1) * t], t, side);
     let heights: Vec<f32> = store.window(TileArray::Height, 0, wide)?;
     let own = store.own_window(wide)?;
     let window = HeightWindow {
         heights: &heights,
         rect: wide,
-        side: layout.side,
+        side,
         cell_size_m: options.cell_size_m,
     };
     let out = saturate(&window, &own, t / 2);
+    drop((heights, own));
     let mut lp = vec![[0.0f32; 2]; layout.tile_len()];
-    for r in 0..tile.height {
-        for c in 0..tile.width {
-            lp[r * tile.width + c] = out[wide.index((tile.c0 + c, tile.r0 + r))];
+    for &key in keys {
+        let tile = tile_rect(&layout, key, 0);
+        for r in 0..tile.height {
+            for c in 0..tile.width {
+                lp[r * tile.width + c] = out[wide.index((tile.c0 + c, tile.r0 + r))];
+            }
+        }
+        store.write(TileArray::Lp, key, &lp)?;
+    }
+    Ok(())
+}
+
+/// Tiles a side of the largest saturation block tried: a 4×4 block's
+/// window is 36 tiles' area, 2.25 a tile.
+const MAX_SATURATION_BLOCK: usize = 4;
+
+/// Most bytes the saturation's windows take together, one a thread.
+const SATURATION_WINDOWS_BYTES: u64 = 768 << 20;
+
+/// The level-0 tiles in square blocks for the saturation, row by row: the
+/// largest side of [`MAX_SATURATION_BLOCK`], halving down to 1, whose
+/// windows, one per thread, stay within [`SATURATION_WINDOWS_BYTES`] and
+/// half the memory budget. The blocks change the memory and the time, not
+/// the values.
+fn saturation_blocks(layout: &TileLayout) -> Vec<Vec<TileKey>> {
+    let (t, across) = (layout.tile_cells as u64, layout.across(0));
+    let threads = rayon::current_num_threads() as u64;
+    let limit = SATURATION_WINDOWS_BYTES.min(crate::memory::budget() / 2);
+    let mut k = MAX_SATURATION_BLOCK.min(across);
+    while k > 1 && threads * ((k as u64 + 2) * t + 1).pow(2) * WORK_BYTES_PER_WINDOW_VERTEX > limit
+    {
+        k /= 2;
+    }
+    let mut blocks = Vec::new();
+    for by in (0..across).step_by(k) {
+        for bx in (0..across).step_by(k) {
+            let mut block = Vec::with_capacity(k * k);
+            for y in by..(by + k).min(across) {
+                for x in bx..(bx + k).min(across) {
+                    block.push(TileKey { level: 0, x, y });
+                }
+            }
+            blocks.push(block);
         }
     }
-    store.write(TileArray::Lp, key, &lp)
+    blocks
 }
 
 /// Errors and radii of the lattice of tile corners, coarsest scales last,
