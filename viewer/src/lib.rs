@@ -11,12 +11,14 @@
 //! - [`flight`]: the camera being flown and how input moves it.
 //! - [`gpu`]: offscreen targets, the mesh and raycast passes.
 //! - [`headless`]: `relevo-view render` and the GPU device without a window.
+//! - [`mod@bench`]: `relevo-view bench`, frame times of a scripted flight.
 //! - [`hud`]: the HUD's readings, painted in the window and headless.
 //! - [`samples`]: the samples tab — marking samples, detecting, accepting.
 //! - [`keys`]: the key list the handler, the help and the README share.
 //! - [`app`]: the window, side panel and keys.
 
 pub mod app;
+pub mod bench;
 pub mod flight;
 pub mod gpu;
 pub mod headless;

@@ -20,7 +20,8 @@ use std::process::ExitCode;
   relevo-view render olinda.relevo --mode raycast --size 1920x1080 --out shot.png
   relevo-view render olinda.relevo --mode mesh --tau 1 --wireframe --camera 289000,9111000,400,40,420 --out mesh.png
   relevo-view render alps.relevo --size 7680x4320 --depth depth.f32 --stats stats.json --out big.png
-  relevo-view render alps.relevo --max-memory 2G --size 3840x2160 --out shot.png   # refuse what needs more"
+  relevo-view render alps.relevo --max-memory 2G --size 3840x2160 --out shot.png   # refuse what needs more
+  relevo-view bench olinda.relevo --size 1920x1080 --json > gpu.jsonl    # frame times on this machine's GPU"
 )]
 struct Cli {
     /// The bundle to open in the window.
@@ -50,7 +51,11 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Render one frame without a window (PNG, depth, figures).
-    Render(relevo_view::headless::RenderArgs),
+    Render(Box<relevo_view::headless::RenderArgs>),
+    /// Time a scripted flight (takeoff, low pass, turn, climb) mode by mode
+    /// on this machine's GPU: frame-time percentiles, triangles, impostors,
+    /// uploads, the adapter.
+    Bench(relevo_view::bench::BenchArgs),
 }
 
 fn main() -> ExitCode {
@@ -66,7 +71,8 @@ fn main() -> ExitCode {
         relevo_core::memory::set_budget(bytes);
     }
     let result = match cli.command {
-        Some(Command::Render(args)) => relevo_view::headless::run(args),
+        Some(Command::Render(args)) => relevo_view::headless::run(*args),
+        Some(Command::Bench(args)) => relevo_view::bench::run(args),
         None => {
             let tour = cli
                 .tour
