@@ -555,7 +555,8 @@ fn infinite_and_absurd_heights() {
 /// with the size, the budget and what to change: a 300000×300000 sparse
 /// GeoTIFF (a few KB on disk) in every command that reads a DEM, and a
 /// resampling of a real 30 km DEM to 1 m cells; under a 4 GB address-space
-/// limit nothing reaches the allocator's abort.
+/// limit, or in a Slurm job's allocation, nothing reaches the allocator's
+/// abort.
 #[test]
 fn work_beyond_the_memory_budget_is_refused_before_it_starts() {
     let d = tempfile::tempdir().unwrap();
@@ -622,6 +623,18 @@ fn work_beyond_the_memory_budget_is_refused_before_it_starts() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("needs about"), "{stderr}");
+    // Inside a Slurm job given 1500 MB (--mem-per-cpu 750 on 2 CPUs).
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_relevo"))
+        .args(["stitch", "sparse.tif", "--out", "s.tif"])
+        .env("SLURM_MEM_PER_CPU", "750")
+        .env("SLURM_CPUS_PER_TASK", "2")
+        .current_dir(d.path())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("memory budget is 1.5 GiB"), "{stderr}");
+    assert!(!d.path().join("s.tif").exists());
 
     // A real 30 km DEM resampled to 1 m cells.
     let dem = shared("dem/luxembourg_elev.tif");

@@ -5,8 +5,11 @@
 //! the allocator's abort. The budget defaults to the memory the machine has
 //! available; `--max-memory` sets it. Either way it never exceeds what the
 //! process may still take under its own limits: the address-space limit
-//! (`ulimit -v`) less what it has mapped, and its cgroup's `memory.max`
-//! (a container's or a batch job's) less what the cgroup uses.
+//! (`ulimit -v`) less what it has mapped, its cgroup's limit (v2
+//! `memory.max`, v1 `memory.limit_in_bytes`; a container's or a batch
+//! job's) less what the cgroup uses, and the memory a Slurm job was given
+//! (`SLURM_MEM_PER_NODE`, or `SLURM_MEM_PER_CPU` times its CPUs), for
+//! clusters that do not enforce it with a cgroup.
 
 use crate::{Error, Result};
 use std::path::Path;
@@ -46,8 +49,9 @@ fn available_bytes() -> Option<u64> {
     kib_field(&text, "MemAvailable:")
 }
 
-/// What this process may still allocate under its address-space limit and
-/// its cgroup's memory limit, bytes (`u64::MAX` where neither is set).
+/// What this process may still allocate under its address-space limit, its
+/// cgroup's memory limit and its Slurm allocation, bytes (`u64::MAX` where
+/// none is set).
 fn process_headroom() -> u64 {
     let address_space = std::fs::read_to_string("/proc/self/limits")
         .ok()
@@ -63,7 +67,26 @@ fn process_headroom() -> u64 {
         .ok()
         .and_then(|text| cgroup_headroom(&text, Path::new("/sys/fs/cgroup")))
         .unwrap_or(u64::MAX);
-    address_space.min(cgroup)
+    let slurm = slurm_allocation(|name| std::env::var(name).ok()).unwrap_or(u64::MAX);
+    address_space.min(cgroup).min(slurm)
+}
+
+/// The memory a Slurm job step was given, bytes: `SLURM_MEM_PER_NODE`
+/// (MB), else `SLURM_MEM_PER_CPU` (MB) times the CPUs of the task
+/// (`SLURM_CPUS_PER_TASK`, else `SLURM_CPUS_ON_NODE`, else one); `None`
+/// outside Slurm or where the job has no memory limit (0).
+fn slurm_allocation(var: impl Fn(&str) -> Option<String>) -> Option<u64> {
+    let number = |name: &str| var(name).and_then(|v| v.trim().parse::<u64>().ok());
+    let mb = match number("SLURM_MEM_PER_NODE") {
+        Some(mb) => mb,
+        None => {
+            let cpus = number("SLURM_CPUS_PER_TASK")
+                .or_else(|| number("SLURM_CPUS_ON_NODE"))
+                .unwrap_or(1);
+            number("SLURM_MEM_PER_CPU")?.saturating_mul(cpus.max(1))
+        }
+    };
+    (mb > 0).then(|| mb.saturating_mul(1 << 20))
 }
 
 /// The soft "Max address space" of `/proc/self/limits`, bytes; `None` when
@@ -79,21 +102,45 @@ fn address_space_limit(limits: &str) -> Option<u64> {
         .ok()
 }
 
-/// The least headroom (`memory.max` − `memory.current`) over the cgroup v2
-/// folder named in `/proc/self/cgroup` (`0::/PATH`) and every folder above
-/// it, under `root`; `None` when no level sets a limit.
+/// The least headroom (limit − use) over the process's memory cgroup and
+/// every cgroup above it, under `root`: cgroup v2's folder named in
+/// `/proc/self/cgroup` (`0::/PATH`; `memory.max`, `memory.current`), else
+/// cgroup v1's memory controller (`N:memory:/PATH` under `root/memory`;
+/// `memory.limit_in_bytes`, `memory.usage_in_bytes`, where a limit near
+/// 2⁶³ means none). `None` when no level sets a limit.
 fn cgroup_headroom(proc_cgroup: &str, root: &Path) -> Option<u64> {
-    let relative = proc_cgroup.lines().find_map(|l| l.strip_prefix("0::"))?;
-    let mut dir = root.join(relative.trim_start_matches('/'));
+    let v2 = proc_cgroup.lines().find_map(|l| l.strip_prefix("0::"));
+    let v1 = || {
+        proc_cgroup.lines().find_map(|l| {
+            let mut fields = l.splitn(3, ':');
+            let (_, controllers, path) = (fields.next()?, fields.next()?, fields.next()?);
+            controllers
+                .split(',')
+                .any(|c| c == "memory")
+                .then_some(path)
+        })
+    };
+    let (top, relative, [limit_file, usage_file]) = match v2 {
+        Some(path) => (root.to_path_buf(), path, ["memory.max", "memory.current"]),
+        None => (
+            root.join("memory"),
+            v1()?,
+            ["memory.limit_in_bytes", "memory.usage_in_bytes"],
+        ),
+    };
+    let mut dir = top.join(relative.trim_start_matches('/'));
     let mut least: Option<u64> = None;
-    while dir.starts_with(root) {
+    while dir.starts_with(&top) {
         let read = |name: &str| std::fs::read_to_string(dir.join(name)).ok();
-        let max = read("memory.max").and_then(|t| t.trim().parse::<u64>().ok());
-        if let Some(max) = max {
-            let used = read("memory.current")
+        // cgroup v1 writes "no limit" as the largest page-aligned i64.
+        let limit = read(limit_file)
+            .and_then(|t| t.trim().parse::<u64>().ok())
+            .filter(|&l| l < 1 << 62);
+        if let Some(limit) = limit {
+            let used = read(usage_file)
                 .and_then(|t| t.trim().parse::<u64>().ok())
                 .unwrap_or(0);
-            least = Some(least.unwrap_or(u64::MAX).min(max.saturating_sub(used)));
+            least = Some(least.unwrap_or(u64::MAX).min(limit.saturating_sub(used)));
         }
         if !dir.pop() {
             break;
@@ -227,5 +274,55 @@ mod tests {
         assert_eq!(at("0::/slurm/job_7\n"), Some(8 << 30));
         assert_eq!(at("1:name=systemd:/\n"), None);
         assert!(process_headroom() > 0);
+    }
+
+    #[test]
+    fn cgroup_v1_and_slurm_allocations_bound_the_budget() {
+        // cgroup v1: the job's memory controller at 2 GiB using 512 MiB,
+        // its parent without a limit (v1's "none" value).
+        let root = tempfile::tempdir().unwrap();
+        let job = root.path().join("memory/slurm/uid_0/job_9");
+        std::fs::create_dir_all(&job).unwrap();
+        let parent = root.path().join("memory/slurm");
+        std::fs::write(
+            parent.join("memory.limit_in_bytes"),
+            "9223372036854771712\n",
+        )
+        .unwrap();
+        std::fs::write(job.join("memory.limit_in_bytes"), "2147483648\n").unwrap();
+        std::fs::write(job.join("memory.usage_in_bytes"), "536870912\n").unwrap();
+        let v1 = "12:pids:/slurm/uid_0/job_9\n4:cpuset,memory:/slurm/uid_0/job_9\n";
+        assert_eq!(cgroup_headroom(v1, root.path()), Some(3 << 29));
+        assert_eq!(cgroup_headroom("4:memory:/elsewhere\n", root.path()), None);
+
+        // Slurm: --mem (per node) wins; --mem-per-cpu times the task's CPUs.
+        let env = |pairs: &'static [(&'static str, &'static str)]| {
+            move |name: &str| {
+                pairs
+                    .iter()
+                    .find(|(k, _)| *k == name)
+                    .map(|(_, v)| v.to_string())
+            }
+        };
+        assert_eq!(
+            slurm_allocation(env(&[("SLURM_MEM_PER_NODE", "4000")])),
+            Some(4000 << 20)
+        );
+        assert_eq!(
+            slurm_allocation(env(&[
+                ("SLURM_MEM_PER_CPU", "1500"),
+                ("SLURM_CPUS_PER_TASK", "4")
+            ])),
+            Some(6000 << 20)
+        );
+        assert_eq!(
+            slurm_allocation(env(&[
+                ("SLURM_MEM_PER_CPU", "1500"),
+                ("SLURM_CPUS_ON_NODE", "2")
+            ])),
+            Some(3000 << 20)
+        );
+        assert_eq!(slurm_allocation(env(&[("SLURM_MEM_PER_NODE", "0")])), None);
+        assert_eq!(slurm_allocation(env(&[])), None);
     }
 }
