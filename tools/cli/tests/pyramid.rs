@@ -11,7 +11,7 @@
 
 mod common;
 
-use common::{gdal_tool, khronos_validate, relevo, relevo_ok, repo, sha256};
+use common::{gdal_tool, khronos_validate, relevo, relevo_ok, repo, set_cells, sha256};
 use relevo_core::bundle::Bundle;
 use relevo_core::lp::window::Rect;
 use relevo_core::pyramid::Pyramid;
@@ -328,28 +328,77 @@ fn a_pyramid_raycast_reads_coarser_levels_farther_away() {
 /// voids): a DEM already on the target grid, which `prep --tiled` reads
 /// window by window.
 fn projected_dem(dir: &Path) -> PathBuf {
-    let out = dir.join("grenoble_utm31n_30m.tif");
-    gdal_tool(
-        "gdalwarp",
-        &[
-            "-q",
-            "-t_srs",
-            "EPSG:32631",
-            "-tr",
-            "30",
-            "30",
-            "-r",
-            "bilinear",
-            "-te",
-            "660000",
-            "4990000",
-            "690000",
-            "5020000",
-            dem().to_str().unwrap(),
-            out.to_str().unwrap(),
-        ],
-    );
+    projected_dem_named(dir, "grenoble_utm31n_30m.tif", &[])
+}
+
+/// [`projected_dem`] written as `name` with gdalwarp's `extra` options.
+fn projected_dem_named(dir: &Path, name: &str, extra: &[&str]) -> PathBuf {
+    let out = dir.join(name);
+    let mut args = vec![
+        "-q",
+        "-t_srs",
+        "EPSG:32631",
+        "-tr",
+        "30",
+        "30",
+        "-r",
+        "bilinear",
+        "-te",
+        "660000",
+        "4990000",
+        "690000",
+        "5020000",
+    ];
+    args.extend(extra);
+    let input = dem();
+    args.extend([input.to_str().unwrap(), out.to_str().unwrap()]);
+    gdal_tool("gdalwarp", &args);
     out
+}
+
+/// Holes in the projected DEM — small ones, one across a tile border, one
+/// a single cell — are filled window by window exactly as the in-memory
+/// fill stage fills them (the pyramid equals the single grid bit for bit
+/// in a budget the grid exceeds); a void larger than the fill's limit
+/// sends the build through the in-memory stages.
+#[test]
+fn a_dem_with_holes_is_filled_window_by_window_as_in_memory() {
+    let d = tempfile::tempdir().unwrap();
+    let nodata = ["-dstnodata", "-32768"];
+    let dem = projected_dem_named(d.path(), "holes.tif", &nodata);
+    for cells in [
+        [100, 120, 6, 4],
+        [250, 250, 10, 10],
+        [497, 300, 30, 2],
+        [640, 700, 1, 1],
+    ] {
+        set_cells(&dem, 32631, cells, -32768.0);
+    }
+    let single = single_grid(d.path(), &dem);
+    let run = |dem: &Path, name: &str, budget: &str| {
+        let out = d.path().join(name);
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_relevo"))
+            .env("RAYON_NUM_THREADS", "2")
+            .args(["prep", "--dem", dem.to_str().unwrap(), "--tiled"])
+            .args(["--tile-size", "128", "--max-memory", budget, "--json", "-v"])
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr).to_string();
+        assert!(o.status.success(), "{stderr}");
+        let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        (out, summary, stderr)
+    };
+    let (p, summary, log) = run(&dem, "holes.relevo", "16M");
+    assert_eq!(summary["read_by_windows"], true, "{summary}");
+    assert!(log.contains("4 holes, filled window by window"), "{log}");
+    assert_same_as_single(&single, &p, "holes");
+    let big = projected_dem_named(d.path(), "big_void.tif", &nodata);
+    set_cells(&big, 32631, [300, 600, 120, 100], -32768.0);
+    let (_, summary, log) = run(&big, "big_void.relevo", "2G");
+    assert_eq!(summary["read_by_windows"], false, "{summary}");
+    assert!(log.contains("a void of 12000 cells"), "{log}");
 }
 
 #[test]

@@ -62,9 +62,10 @@ pub struct PrepArgs {
     pub error_metric: ErrorMetricArg,
     /// Write a pyramid bundle: tiles on the LP hierarchy, errors and radii
     /// computed tile by tile in bounded memory (see docs/guide.md, "Large
-    /// regions"). A single void-free DEM on a projected grid of square
-    /// cells is read window by window and never held whole; other inputs
-    /// are stitched and filled in memory first. The drape is derived from
+    /// regions"). A single DEM on a projected grid of square cells, whose
+    /// voids are holes the fill stage fills, is read window by window and
+    /// never held whole; other inputs are stitched and filled in memory
+    /// first. The drape is derived from
     /// the heights.
     #[arg(long)]
     pub tiled: bool,

@@ -1,5 +1,5 @@
 //! `relevo prep --tiled`: the heights read window by window (a single
-//! void-free DEM on the target grid, `direct`) or through the grid stages
+//! DEM on the target grid whose voids the fill stage fills, `direct`) or through the grid stages
 //! of `prep` (stitch, fill, square, in memory), then the pyramid bundle
 //! written tile by tile through relevo-core —
 //! errors and radii, the derived drape and the coarser levels computed in
@@ -109,8 +109,8 @@ pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Res
 }
 
 /// Where the pyramid's heights come from, its description, and whether the
-/// DEM is read window by window: a single void-free DEM on the target grid
-/// is (the tiling, memory and disk checked before the file is scanned);
+/// DEM is read window by window: a single DEM on the target grid whose
+/// voids are holes the fill stage fills is (the tiling, memory and disk checked before the file is scanned);
 /// anything else goes through the in-memory grid stages.
 fn height_source(
     region: &RegionSpec,
@@ -118,7 +118,7 @@ fn height_source(
     out: &Path,
     options: &TiledOptions,
 ) -> Result<(Box<dyn HeightSource>, PyramidDescription, bool)> {
-    if let Some(d) = DirectSource::open(region)? {
+    if let Some(mut d) = DirectSource::open(region)? {
         pyramid::preflight(out, d.grid.side, options.tile_cells, options.resume)?;
         if d.scan()? {
             let (inputs, parameters) = provenance_of(region)?;

@@ -186,7 +186,26 @@ pub fn region_copy(dir: &Path) -> PathBuf {
 
 /// Add `metres` to `raster` inside the rectangle of `cells` (column, row,
 /// columns, rows) of its grid, with GDAL's own tools.
-pub fn burn(raster: &Path, epsg: u32, [c, r, w, h]: [usize; 4], metres: f64, band: Option<u32>) {
+pub fn burn(raster: &Path, epsg: u32, cells: [usize; 4], metres: f64, band: Option<u32>) {
+    rasterize(raster, epsg, cells, metres, band, true);
+}
+
+/// Set `raster`'s cells inside the rectangle of `cells` (column, row,
+/// columns, rows) to `value` (its no-data value makes a void).
+pub fn set_cells(raster: &Path, epsg: u32, cells: [usize; 4], value: f64) {
+    rasterize(raster, epsg, cells, value, None, false);
+}
+
+/// `gdal_rasterize` of the rectangle of `cells` into `raster`: `value`
+/// added (`add`) or written, in `band` or all.
+fn rasterize(
+    raster: &Path,
+    epsg: u32,
+    [c, r, w, h]: [usize; 4],
+    value: f64,
+    band: Option<u32>,
+    add: bool,
+) {
     let info = Dataset::open(raster).unwrap().geo_transform().unwrap();
     let at = |col: usize, row: usize| {
         [
@@ -209,9 +228,12 @@ pub fn burn(raster: &Path, epsg: u32, [c, r, w, h]: [usize; 4], metres: f64, ban
         ),
     )
     .unwrap();
-    let burn = metres.to_string();
+    let burn = value.to_string();
     let band_arg = band.map(|b| b.to_string());
-    let mut args = vec!["-q", "-add", "-burn", &burn];
+    let mut args = vec!["-q", "-burn", &burn];
+    if add {
+        args.push("-add");
+    }
     if let Some(b) = &band_arg {
         args.extend(["-b", b]);
     }

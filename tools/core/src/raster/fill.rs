@@ -42,6 +42,21 @@ pub fn fill_holes(
     height: usize,
     max_hole_cells: usize,
 ) -> FillReport {
+    fill_holes_at(values, width, height, max_hole_cells, [0, 0])
+}
+
+/// [`fill_holes`] on a window of a larger raster whose first cell is
+/// column `origin[0]`, row `origin[1]` of it: positions are the raster's,
+/// so a hole and its ring inside the window are filled bit for bit as the
+/// whole raster fills them. Holes touching the window's edge are left, as
+/// holes at the raster's edge are.
+pub fn fill_holes_at(
+    values: &mut [f64],
+    width: usize,
+    height: usize,
+    max_hole_cells: usize,
+    origin: [usize; 2],
+) -> FillReport {
     assert_eq!(values.len(), width * height);
     let holes = find_holes(values, width, height);
     let mut report = FillReport::default();
@@ -54,7 +69,7 @@ pub fn fill_holes(
     let source: &[f64] = values;
     let filled: Vec<Vec<(usize, f64)>> = fillable
         .par_iter()
-        .map(|hole| interpolate_hole(source, width, height, &hole.cells))
+        .map(|hole| interpolate_hole(source, width, height, &hole.cells, origin))
         .collect();
     for cells in filled {
         report.holes_filled += 1;
@@ -105,13 +120,21 @@ fn find_holes(values: &[f64], width: usize, height: usize) -> Vec<Hole> {
     holes
 }
 
-/// Natural-neighbour heights for one interior hole.
+/// Natural-neighbour heights for one interior hole, at the positions of the
+/// raster `origin` places the window in.
 fn interpolate_hole(
     values: &[f64],
     width: usize,
     height: usize,
     cells: &[usize],
+    origin: [usize; 2],
 ) -> Vec<(usize, f64)> {
+    let position = |n: usize| {
+        Point2::new(
+            (origin[0] + n % width) as f64,
+            (origin[1] + n / width) as f64,
+        )
+    };
     let mut ring: Vec<usize> = Vec::new();
     for &i in cells {
         let (c, r) = ((i % width) as i64, (i / width) as i64);
@@ -133,7 +156,7 @@ fn interpolate_hole(
     let points: Vec<RingCell> = ring
         .iter()
         .map(|&n| RingCell {
-            position: Point2::new((n % width) as f64, (n / width) as f64),
+            position: position(n),
             height: values[n],
         })
         .collect();
@@ -144,8 +167,8 @@ fn interpolate_hole(
     cells
         .iter()
         .filter_map(|&i| {
-            let p = Point2::new((i % width) as f64, (i / width) as f64);
-            nn.interpolate(|v| v.data().height, p).map(|h| (i, h))
+            nn.interpolate(|v| v.data().height, position(i))
+                .map(|h| (i, h))
         })
         .collect()
 }
@@ -188,5 +211,37 @@ mod tests {
         assert_eq!(report.holes_left, 2);
         assert_eq!(report.cells_left, 17);
         assert!(v[0].is_nan() && v[4 * w + 4].is_nan());
+    }
+
+    /// A window holding a hole and its ring fills it bit for bit as the
+    /// whole raster does, on a real DEM with holes punched in it.
+    #[test]
+    fn a_window_fills_its_holes_as_the_whole_raster_does() {
+        let dem = crate::testdata::dem("gironde_257.f32");
+        let (w, h) = (dem.side, dem.side);
+        let mut whole: Vec<f64> = dem.heights.iter().map(|&z| z as f64).collect();
+        for (c0, r0, cw, rh) in [(40, 50, 7, 5), (120, 130, 1, 1), (200, 30, 12, 3)] {
+            for r in r0..r0 + rh {
+                for c in c0..c0 + cw {
+                    whole[r * w + c] = f64::NAN;
+                }
+            }
+        }
+        let original = whole.clone();
+        fill_holes(&mut whole, w, h, 1000);
+        // Windows around each hole, grown by 1 to 9 cells beyond its ring.
+        for (c0, r0, c1, r1) in [(37, 47, 49, 57), (110, 120, 131, 140), (195, 20, 220, 40)] {
+            let (ww, wh) = (c1 - c0, r1 - r0);
+            let mut window: Vec<f64> = (r0..r1)
+                .flat_map(|r| original[r * w + c0..r * w + c1].iter().copied())
+                .collect();
+            fill_holes_at(&mut window, ww, wh, 1000, [c0, r0]);
+            for r in r0..r1 {
+                for c in c0..c1 {
+                    let (a, b) = (window[(r - r0) * ww + c - c0], whole[r * w + c]);
+                    assert_eq!(a.to_bits(), b.to_bits(), "({c}, {r}): {a} vs {b}");
+                }
+            }
+        }
     }
 }
