@@ -307,6 +307,24 @@ fn a_pyramid_raycast_reads_coarser_levels_farther_away() {
         (32.0..60.0).contains(&levels_psnr) && (0.8..0.999).contains(&levels_depth),
         "coarser levels farther: {levels_psnr:.1} dB, depth equal at {levels_depth:.4}"
     );
+    // It says which levels the bands read.
+    let run = relevo([
+        "render",
+        pyramid.to_str().unwrap(),
+        "--camera",
+        &camera,
+        "--max-cell-px",
+        "8",
+        "--out",
+        d.path().join("said.png").to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        run.status.success()
+            && err.contains("the bands read level 0 ")
+            && err.contains(", level 1 "),
+        "{err}"
+    );
     let run = relevo([
         "render",
         pyramid.to_str().unwrap(),

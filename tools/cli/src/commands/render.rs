@@ -144,7 +144,21 @@ pub fn run(a: RenderArgs) -> Result<()> {
             max_cell_px: a.max_cell_px,
             hillshade,
         };
-        relevo_core::pyramid::render::render(&p, &camera, &options, levels)?
+        let (frame, read) = relevo_core::pyramid::render::render(&p, &camera, &options, levels)?;
+        let windows: Vec<String> = read
+            .iter()
+            .map(|l| format!("level {} {}×{}", l.level, l.width, l.height))
+            .collect();
+        eprintln!(
+            "{}: the bands read {}",
+            a.bundle.display(),
+            if windows.is_empty() {
+                "no level (nothing in view)".to_string()
+            } else {
+                windows.join(", ")
+            }
+        );
+        frame
     } else {
         let bundle = Bundle::open(&a.bundle)?;
         let options = scene::with_bands(options, a.bands)?;

@@ -53,14 +53,23 @@ pub fn level_bands(p: &Pyramid, camera: &Camera, max_cell_px: f64) -> Vec<Distan
         .collect()
 }
 
+/// A level a raycast read: its number and the lattice window, vertices.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LevelRead {
+    pub level: u32,
+    pub width: usize,
+    pub height: usize,
+}
+
 /// Raycast `p` from `camera` (in the level-0 terrain frame) with `opts`,
-/// whose bands are replaced by [`level_bands`].
+/// whose bands are replaced by [`level_bands`]; the frame and the levels
+/// it read, nearest first.
 pub fn render(
     p: &Pyramid,
     camera: &Camera,
     opts: &RenderOptions,
     levels: LevelOptions,
-) -> Result<RaycastFrame> {
+) -> Result<(RaycastFrame, Vec<LevelRead>)> {
     if !(levels.max_cell_px.is_finite() && levels.max_cell_px > 0.0) {
         return Err(crate::Error::Input(format!(
             "the largest cell on screen must be a positive number of pixels, got {}",
@@ -79,7 +88,14 @@ pub fn render(
         lowest_m: lowest,
         highest_m: highest,
     };
-    let load = |level: u32, ground: [f64; 4]| load_level(p, level, ground, levels.hillshade);
+    let read = std::sync::Mutex::new(Vec::new());
+    let load = |level: u32, ground: [f64; 4]| {
+        let (terrain, window) = load_level(p, level, ground, levels.hillshade)?;
+        if let Ok(mut read) = read.lock() {
+            read.push(window);
+        }
+        Ok(terrain)
+    };
     let mut raycaster = Raycaster::default();
     raycaster.render_levels(
         &Levels {
@@ -89,18 +105,19 @@ pub fn render(
         camera,
         &opts,
     )?;
-    Ok(raycaster.into_frame())
+    let read = read.into_inner().unwrap_or_default();
+    Ok((raycaster.into_frame(), read))
 }
 
 /// Level `level` under the ground box `[x0, y0, x1, y1]` (level-0 terrain
 /// frame, metres) as a square terrain with its drape, and where its frame
-/// lies in the level-0 frame.
+/// lies in the level-0 frame; with the window read.
 fn load_level(
     p: &Pyramid,
     level: u32,
     [x0, y0, x1, y1]: [f64; 4],
     hillshade: Option<[f64; 2]>,
-) -> Result<LevelTerrain> {
+) -> Result<(LevelTerrain, LevelRead)> {
     let (side, cell) = (p.layout.side, p.manifest.grid.cell_size_m);
     let s = p.layout.stride(level);
     let last = ((side - 1) / s) as f64;
@@ -147,5 +164,10 @@ fn load_level(
         (u0 * s) as f64 * cell,
         ((side - 1) as f64 - ((v0 + square - 1) * s) as f64) * cell,
     ];
-    Ok(LevelTerrain { terrain, offset_m })
+    let read = LevelRead {
+        level,
+        width: w,
+        height: h,
+    };
+    Ok((LevelTerrain { terrain, offset_m }, read))
 }
