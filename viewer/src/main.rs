@@ -51,10 +51,19 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Render one frame without a window (PNG, depth, figures).
+    #[command(after_help = "Examples:
+  relevo-view render olinda.relevo --mode raycast --size 1920x1080 --out shot.png
+  relevo-view render olinda.relevo --mode mesh --tau 1 --wireframe --camera 289000,9111000,400,40,420 --out mesh.png
+  relevo-view render olinda.relevo --objects data/olinda/objects.geojson --hud --stats stats.json --out hud.png
+  relevo-view render olinda.relevo --tab samples --samples marks.csv --out samples.png")]
     Render(Box<relevo_view::headless::RenderArgs>),
     /// Time a scripted flight (takeoff, low pass, turn, climb) mode by mode
     /// on this machine's GPU: frame-time percentiles, triangles, impostors,
     /// uploads, the adapter.
+    #[command(after_help = "Examples:
+  relevo-view bench olinda.relevo                                  # text, 1280×720, 60 frames a leg
+  relevo-view bench olinda.relevo --objects data/olinda/objects.geojson --size 1920x1080 --json > gpu.jsonl
+  VK_ICD_FILENAMES=/usr/share/vulkan/icd.d/lvp_icd.x86_64.json relevo-view bench alps.relevo --frames 20   # on lavapipe")]
     Bench(relevo_view::bench::BenchArgs),
 }
 

@@ -1,6 +1,7 @@
 //! `relevo-view bench` on lavapipe over the real Grenoble crop: one record
 //! a mode with consistent figures, the same flight (cameras) in every mode
-//! and every run, and bad requests refused by name.
+//! and every run, and bad requests refused by name; every subcommand's
+//! help shows examples.
 // Test code: a failed unwrap is a failed test.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
@@ -103,6 +104,25 @@ fn bad_requests_are_refused_by_name() {
         assert!(
             !out.status.success() && err.contains(needle),
             "{args:?}: {err}"
+        );
+    }
+}
+
+#[test]
+fn every_subcommand_shows_examples_in_its_help() {
+    for args in [
+        vec!["--help"],
+        vec!["render", "--help"],
+        vec!["bench", "--help"],
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_relevo-view"))
+            .args(&args)
+            .output()
+            .unwrap();
+        let help = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success() && help.contains("Examples:\n  relevo-view"),
+            "{args:?}: {help}"
         );
     }
 }
