@@ -130,7 +130,7 @@ impl Terrain<'_> {
 /// farthest.
 fn fill_slices(
     out: &mut Vec<Slice>,
-    terrain: &GridExtent,
+    grid: &GridExtent,
     camera: &Camera,
     screen: &Screen,
     opts: &RenderOptions,
@@ -143,7 +143,7 @@ fn fill_slices(
     // Slices off the terrain's square sample nothing: skip (in whole steps)
     // those nearer than the square and stop past its farthest corner, so the
     // slice count is bounded by the square's size whatever `far` is.
-    let extent = (terrain.side - 1) as f64 * terrain.cell_m;
+    let extent = (grid.side - 1) as f64 * grid.cell_m;
     let gap = |e: f64| (-e).max(e - extent).max(0.0);
     let reach = |e: f64| e.abs().max((e - extent).abs());
     let (x, y, z) = (camera.position.x, camera.position.y, camera.position.z);
@@ -151,8 +151,8 @@ fn fill_slices(
     // Nothing nearer than where the highest terrain would reach the bottom
     // row's rays can show (when they point down and the eye is above it).
     let lowest_slope = screen.slope.first().copied().unwrap_or(0.0);
-    if lowest_slope < 0.0 && z > terrain.highest_m {
-        nearest = nearest.max((z - terrain.highest_m) / -lowest_slope);
+    if lowest_slope < 0.0 && z > grid.highest_m {
+        nearest = nearest.max((z - grid.highest_m) / -lowest_slope);
     }
     let end = (camera.far_m * deepest).min(reach(x).hypot(reach(y)));
     // Growing steps: a point Δz below (or above) the eye at distance s sits
@@ -161,11 +161,9 @@ fn fill_slices(
     // largest |Δz|. (The vertical counterpart of the prefilter's footprint;
     // seed 000 §9.1 names multiresolution as the next step.) A level camera
     // is assumed for the bound; pitched, rows differ by at most α's spread.
-    let largest_rise = (z - terrain.lowest_m)
-        .abs()
-        .max((terrain.highest_m - z).abs());
+    let largest_rise = (z - grid.lowest_m).abs().max((grid.highest_m - z).abs());
     let growth =
-        (opts.grow_steps && largest_rise.is_finite()).then(|| d * largest_rise.max(terrain.cell_m));
+        (opts.grow_steps && largest_rise.is_finite()).then(|| d * largest_rise.max(grid.cell_m));
     let mut s = camera.near_m * deepest;
     let mut band = 0;
     while s <= end {
@@ -173,7 +171,7 @@ fn fill_slices(
             band += 1;
         }
         let b = opts.bands[band];
-        let base = terrain.cell_m / b.slices_per_cell;
+        let base = grid.cell_m / b.slices_per_cell;
         let step = growth.map_or(base, |g| base.max(s * s / g));
         if s + step < nearest {
             // Whole steps up to the square or the band's end.
@@ -441,30 +439,28 @@ impl<'a> Segments<'a> {
         arithmetic: Arithmetic,
     ) -> Self {
         match arithmetic {
-            Arithmetic::Float => Segments::Float(
-                parts
-                    .iter()
-                    .map(|&(terrain, eye, ref slices)| march::Segment {
-                        sampling: march::FloatSampling { terrain, eye },
-                        terrain,
-                        eye,
-                        slices: slices.clone(),
-                    })
-                    .collect(),
-            ),
-            Arithmetic::Fixed => Segments::Fixed(
-                parts
-                    .iter()
-                    .map(|&(terrain, eye, ref slices)| march::Segment {
-                        sampling: march::FixedSampling::new(terrain, eye),
-                        terrain,
-                        eye,
-                        slices: slices.clone(),
-                    })
-                    .collect(),
-            ),
+            Arithmetic::Float => Segments::Float(segments(parts, |terrain, eye| {
+                march::FloatSampling { terrain, eye }
+            })),
+            Arithmetic::Fixed => Segments::Fixed(segments(parts, march::FixedSampling::new)),
         }
     }
+}
+
+/// The segments of `parts` sampled as `sampling` makes them.
+fn segments<'a, S>(
+    parts: &[(&'a Terrain<'a>, [f64; 2], std::ops::Range<usize>)],
+    sampling: impl Fn(&'a Terrain<'a>, [f64; 2]) -> S,
+) -> Vec<march::Segment<'a, S>> {
+    parts
+        .iter()
+        .map(|&(terrain, eye, ref slices)| march::Segment {
+            sampling: sampling(terrain, eye),
+            terrain,
+            eye,
+            slices: slices.clone(),
+        })
+        .collect()
 }
 
 impl Raycaster {
@@ -490,7 +486,7 @@ impl Raycaster {
             };
             if to > from {
                 let (near, far) = (self.slices[from].distance_m, self.slices[to - 1].distance_m);
-                let margin = 2.0 * extent.cell_m * (1u64 << level) as f64;
+                let margin = 2.0 * extent.cell_m * 2f64.powi(level as i32);
                 let [mut x0, mut y0, mut x1, mut y1] = [
                     f64::INFINITY,
                     f64::INFINITY,

@@ -7,7 +7,7 @@
 //! south-west vertex so that f32 keeps centimetres; the world origin goes in
 //! the glTF node's translation and in an OBJ comment.
 
-use super::extract::{walk, GridMesh, MeshWalk};
+use super::extract::{walk, MeshWalk};
 use super::hierarchy::Hierarchy;
 use super::metric::triangle_deviation;
 use super::vertices::terrain_position;
@@ -16,7 +16,6 @@ use crate::geo::{GeoTransform, TerrainFrame};
 use crate::grid::vertex_normal_of;
 use crate::raster::png::encode_rgba;
 use crate::{Error, Result};
-use rayon::prelude::*;
 use serde_json::json;
 use std::borrow::Cow;
 use std::io::Write;
@@ -258,7 +257,11 @@ pub fn build(
         }
     };
     source.release();
-    let largest_deviation_m = largest_deviation(source, &grid);
+    let largest_deviation_m = grid.largest_deviation_of(
+        &|c, r| source.height(c, r),
+        &|corners, z| source.deviation(corners, z),
+        &|| source.release(),
+    );
     Ok(ExportMesh {
         positions,
         normals,
@@ -270,31 +273,8 @@ pub fn build(
     })
 }
 
-/// Vertices or triangles read between two releases of what the reads
-/// brought in.
+/// Vertices read between two releases of what the reads brought in.
 const RELEASE_CHUNK: usize = 1 << 16;
-
-/// The largest vertical distance between a grid point under `mesh` and
-/// the mesh, metres.
-fn largest_deviation(source: &dyn MeshSource, mesh: &GridMesh) -> f64 {
-    let mut largest = 0.0f64;
-    for chunk in mesh.triangles.chunks(RELEASE_CHUNK) {
-        let part = chunk
-            .par_iter()
-            .map(|t| {
-                let corners = t.map(|i| {
-                    let [c, r] = mesh.vertices[i as usize];
-                    (c as i64, r as i64)
-                });
-                let z = corners.map(|(c, r)| source.height(c as usize, r as usize));
-                source.deviation(corners, z)
-            })
-            .reduce(|| 0.0, f64::max);
-        largest = largest.max(part);
-        source.release();
-    }
-    largest
-}
 
 /// glTF 2.0 binary container.
 pub fn to_glb(mesh: &ExportMesh, crs_wkt: &str) -> Result<Vec<u8>> {

@@ -27,20 +27,46 @@ impl GridMesh {
     /// With errors of [`super::ErrorMetric::Bound`], at most the tolerance
     /// the mesh was extracted at.
     pub fn largest_deviation(&self, heights: &[f32], side: usize) -> f64 {
-        self.triangles
-            .par_iter()
-            .map(|t| {
-                let corner = |i: u32| {
-                    let [c, r] = self.vertices[i as usize];
-                    (c as i64, r as i64)
-                };
-                let corners = t.map(corner);
-                let z = corners.map(|(c, r)| heights[r as usize * side + c as usize]);
-                triangle_deviation(heights, side, corners, z, None)
-            })
-            .reduce(|| 0.0, f64::max)
+        self.largest_deviation_of(
+            &|c, r| heights[r * side + c],
+            &|corners, z| triangle_deviation(heights, side, corners, z, None),
+            &|| {},
+        )
+    }
+
+    /// [`GridMesh::largest_deviation`] with the heights read through
+    /// `height` (column, row) and each triangle's deviation measured by
+    /// `deviation` (its corners and their heights), `release` called after
+    /// each chunk of triangles — for a grid read tile by tile.
+    pub fn largest_deviation_of(
+        &self,
+        height: &(dyn Fn(usize, usize) -> f32 + Sync),
+        deviation: &(dyn Fn([(i64, i64); 3], [f32; 3]) -> f64 + Sync),
+        release: &dyn Fn(),
+    ) -> f64 {
+        let mut largest = 0.0f64;
+        for chunk in self.triangles.chunks(TRIANGLES_BETWEEN_RELEASES) {
+            let part = chunk
+                .par_iter()
+                .map(|t| {
+                    let corners = t.map(|i| {
+                        let [c, r] = self.vertices[i as usize];
+                        (c as i64, r as i64)
+                    });
+                    let z = corners.map(|(c, r)| height(c as usize, r as usize));
+                    deviation(corners, z)
+                })
+                .reduce(|| 0.0, f64::max);
+            largest = largest.max(part);
+            release();
+        }
+        largest
     }
 }
+
+/// Triangles measured between two calls of the release in
+/// [`GridMesh::largest_deviation_of`].
+const TRIANGLES_BETWEEN_RELEASES: usize = 1 << 16;
 
 /// Extract the mesh whose vertices all have error ≤ `max_error` metres left
 /// unsplit. With `mask`, triangles are also split wherever they would mix
