@@ -11,15 +11,14 @@
 
 mod common;
 
-use common::{gdal_tool, khronos_validate, relevo, relevo_ok, repo, set_cells, sha256};
+use common::{
+    grenoble_dem, khronos_validate, projected_dem, projected_dem_named, relevo, relevo_ok, repo,
+    set_cells, sha256,
+};
 use relevo_core::bundle::Bundle;
 use relevo_core::lp::window::Rect;
 use relevo_core::pyramid::Pyramid;
 use std::path::{Path, PathBuf};
-
-fn dem() -> PathBuf {
-    repo("data/grenoble/Copernicus_DSM_10_N45_00_E005_00_DEM.tif")
-}
 
 /// `relevo prep --dem DEM --tiled --tile-size T EXTRA… --out DIR/NAME`.
 fn tiled(dir: &Path, name: &str, tile: usize, extra: &[&str]) -> PathBuf {
@@ -27,7 +26,7 @@ fn tiled(dir: &Path, name: &str, tile: usize, extra: &[&str]) -> PathBuf {
     let mut args = vec![
         "prep".to_string(),
         "--dem".into(),
-        dem().display().to_string(),
+        grenoble_dem().display().to_string(),
         "--tiled".into(),
         "--tile-size".into(),
         tile.to_string(),
@@ -122,7 +121,7 @@ fn assert_same_as_single(single: &Path, pyramid: &Path, label: &str) {
 #[test]
 fn the_pyramid_holds_the_single_grid_at_any_tile_size_and_meshes_the_same() {
     let d = tempfile::tempdir().unwrap();
-    let single = single_grid(d.path(), &dem());
+    let single = single_grid(d.path(), &grenoble_dem());
     for tile in [32, 128] {
         let p = tiled(d.path(), &format!("t{tile}.relevo"), tile, &[]);
         assert_same_as_single(&single, &p, &format!("t{tile}"));
@@ -143,7 +142,7 @@ fn the_pyramid_holds_the_single_grid_at_any_tile_size_and_meshes_the_same() {
 #[test]
 fn a_window_of_the_pyramid_meshes_as_the_single_grids_window() {
     let d = tempfile::tempdir().unwrap();
-    let single = single_grid(d.path(), &dem());
+    let single = single_grid(d.path(), &grenoble_dem());
     let pyramid = tiled(d.path(), "t32.relevo", 32, &[]);
     let frame = Bundle::open(&single).unwrap().frame();
     // Corners between vertices, across several tiles' borders.
@@ -243,7 +242,7 @@ fn a_window_of_the_pyramid_meshes_as_the_single_grids_window() {
 #[test]
 fn a_pyramid_raycast_reads_coarser_levels_farther_away() {
     let d = tempfile::tempdir().unwrap();
-    let single = single_grid(d.path(), &dem());
+    let single = single_grid(d.path(), &grenoble_dem());
     let pyramid = tiled(d.path(), "t32.relevo", 32, &[]);
     let frame = Bundle::open(&single).unwrap().frame();
     let (x, y) = frame.world_from_vertex(100.0, 550.0);
@@ -340,38 +339,6 @@ fn a_pyramid_raycast_reads_coarser_levels_farther_away() {
         !run.status.success() && err.contains("--max-cell-px"),
         "{err}"
     );
-}
-
-/// The Grenoble DEM warped by GDAL to UTM 31N at 30 m (1000² cells, no
-/// voids): a DEM already on the target grid, which `prep --tiled` reads
-/// window by window.
-fn projected_dem(dir: &Path) -> PathBuf {
-    projected_dem_named(dir, "grenoble_utm31n_30m.tif", &[])
-}
-
-/// [`projected_dem`] written as `name` with gdalwarp's `extra` options.
-fn projected_dem_named(dir: &Path, name: &str, extra: &[&str]) -> PathBuf {
-    let out = dir.join(name);
-    let mut args = vec![
-        "-q",
-        "-t_srs",
-        "EPSG:32631",
-        "-tr",
-        "30",
-        "30",
-        "-r",
-        "bilinear",
-        "-te",
-        "660000",
-        "4990000",
-        "690000",
-        "5020000",
-    ];
-    args.extend(extra);
-    let input = dem();
-    args.extend([input.to_str().unwrap(), out.to_str().unwrap()]);
-    gdal_tool("gdalwarp", &args);
-    out
 }
 
 /// Holes in the projected DEM — small ones, one across a tile border, one
@@ -472,7 +439,11 @@ fn a_killed_build_resumes_to_the_same_bytes() {
     let out = d.path().join("killed.relevo");
     for delay_ms in [1500, 2500, 3500] {
         let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_relevo"))
-            .args(["prep".as_ref(), "--dem".as_ref(), dem().as_os_str()])
+            .args([
+                "prep".as_ref(),
+                "--dem".as_ref(),
+                grenoble_dem().as_os_str(),
+            ])
             .args([
                 "--tiled",
                 "--tile-size",
@@ -604,7 +575,7 @@ fn a_grid_beyond_the_memory_budget_and_bad_tile_sizes_are_refused() {
             "needs about",
         ),
     ] {
-        let dem = dem();
+        let dem = grenoble_dem();
         let mut all = vec!["prep", "--dem", dem.to_str().unwrap(), "--tiled", "--out"];
         let out = d.path().join("x.relevo");
         all.push(out.to_str().unwrap());

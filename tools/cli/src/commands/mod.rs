@@ -79,7 +79,11 @@ pub enum Command {
   relevo prep --dem alps.tif --terrain-drape --out alps.relevo   # drape tinted and lit from the heights
   relevo prep --dem country.vrt --tiled --out country.relevo      # a pyramid of 513² tiles
   relevo prep --dem county_utm.tif --tiled --out county.relevo    # a projected DEM, read window by window
-  relevo prep --dem country.vrt --tiled --resume --out country.relevo   # go on after a kill")]
+  relevo prep --dem country.vrt --tiled --resume --out country.relevo   # go on after a kill
+  relevo prep --dem county_utm.tif --tiled --plan /shared/plan --jobs 16 --out /shared/county.relevo
+  relevo prep --plan /shared/plan --job 3        # one job of the plan, on any machine
+  relevo prep --plan /shared/plan --submit slurm --mem 4G --cpus-per-task 4 --time 1:00:00
+  relevo prep --plan /shared/plan --finish       # check every job, move the pyramid into place")]
     Prep(prep::PrepArgs),
     /// Export the mesh at an object-space tolerance as glTF (.glb) or OBJ,
     /// of the whole region or a window of it (single grid or pyramid).

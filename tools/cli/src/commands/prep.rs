@@ -3,25 +3,27 @@
 use super::args::{parse_percentiles, EncodingArg, ErrorMetricArg};
 use crate::ingest::gdalio::Resampling;
 use crate::output;
+use crate::prep::plan::{self, PlanOptions};
 use crate::prep::prep;
 use crate::prep::region::{
     parse_nodata, DemSection, FillSection, GridSection, ImageSection, NoData, RegionSpec,
     VegetationSection,
 };
-use crate::prep::tiled::{prep_tiled, TiledOptions};
-use anyhow::{bail, Result};
+use crate::prep::slurm::{self, SlurmOptions};
+use crate::prep::tiled::{prep_tiled, TiledOptions, TiledSummary};
+use anyhow::{bail, Context, Result};
 use clap::Args;
 use relevo_core::raster::mosaic::Overlap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
 pub struct PrepArgs {
     /// REGION.toml describing the inputs (or give --dem instead).
-    #[arg(required_unless_present = "dem", conflicts_with_all = ["dem", "image"])]
+    #[arg(required_unless_present_any = ["dem", "plan"], conflicts_with_all = ["dem", "image"])]
     pub region: Option<PathBuf>,
     /// Output bundle directory, conventionally NAME.relevo.
-    #[arg(long, short)]
-    pub out: PathBuf,
+    #[arg(long, short, required_unless_present = "plan")]
+    pub out: Option<PathBuf>,
     /// DEM tiles (quick form, without a REGION.toml).
     #[arg(long, num_args = 1..)]
     pub dem: Vec<PathBuf>,
@@ -76,7 +78,41 @@ pub struct PrepArgs {
     /// With --tiled: go on from the build a killed `prep` left beside --out.
     #[arg(long, requires = "tiled")]
     pub resume: bool,
-    /// Replace an existing bundle.
+    /// Split the pyramid's build into jobs for several machines sharing a
+    /// file system (see docs/guide.md, "Running on a Slurm cluster"): with
+    /// the inputs and --jobs, write the plan in this folder; alone, act on
+    /// the plan there (--job, --finish, --submit).
+    #[arg(long, value_name = "DIR")]
+    pub plan: Option<PathBuf>,
+    /// With --plan and the inputs: cut each step of the build into at most
+    /// N jobs.
+    #[arg(long, value_name = "N", requires = "plan", default_value_t = 1)]
+    pub jobs: usize,
+    /// With --plan: run job K (idempotent; skips the tiles it finds done).
+    #[arg(long, value_name = "K", requires = "plan", conflicts_with_all = ["finish", "submit"])]
+    pub job: Option<usize>,
+    /// With --plan: check every job is done, write the manifest, move the
+    /// pyramid into place.
+    #[arg(long, requires = "plan", conflicts_with = "submit")]
+    pub finish: bool,
+    /// With --plan: submit the jobs not done, step after step, then the
+    /// finish, to a scheduler (Slurm's sbatch); prints the job ids.
+    #[arg(long, value_enum, requires = "plan")]
+    pub submit: Option<Scheduler>,
+    /// With --submit: the Slurm partition.
+    #[arg(long, requires = "submit")]
+    pub partition: Option<String>,
+    /// With --submit: memory a task, as sbatch takes it (e.g. 4G; default
+    /// twice the build's working estimate and 256M).
+    #[arg(long, requires = "submit")]
+    pub mem: Option<String>,
+    /// With --submit: CPUs a task, the threads each job runs.
+    #[arg(long, requires = "submit", default_value_t = 1)]
+    pub cpus_per_task: usize,
+    /// With --submit: time limit a task, as sbatch takes it (e.g. 2:00:00).
+    #[arg(long, requires = "submit")]
+    pub time: Option<String>,
+    /// Replace an existing bundle (and, with --plan, an existing plan).
     #[arg(long)]
     pub force: bool,
     /// Print a JSON summary on stdout.
@@ -84,7 +120,16 @@ pub struct PrepArgs {
     pub json: bool,
 }
 
+/// Schedulers `--submit` sends a plan's jobs to.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum Scheduler {
+    Slurm,
+}
+
 pub fn run(a: PrepArgs) -> Result<()> {
+    if let (Some(dir), None, true) = (&a.plan, &a.region, a.dem.is_empty()) {
+        return run_plan(dir, &a);
+    }
     if a.bands.as_ref().is_some_and(|b| b.len() != 3) {
         bail!("--bands takes three bands R,G,B, e.g. 3,2,1");
     }
@@ -93,11 +138,11 @@ pub fn run(a: PrepArgs) -> Result<()> {
         None => {
             let region = RegionSpec {
                 name: None,
-                crs: a.crs,
+                crs: a.crs.clone(),
                 cell_size_m: a.cell_size,
                 z_scale: a.z_scale,
                 dem: DemSection {
-                    files: a.dem,
+                    files: a.dem.clone(),
                     encoding: a.encoding.into(),
                     src_nodata: a.src_nodata.map(NoData::Value),
                     overlap: Overlap::Blend,
@@ -109,15 +154,15 @@ pub fn run(a: PrepArgs) -> Result<()> {
                     ..GridSection::default()
                 },
                 image: (!a.image.is_empty()).then(|| ImageSection {
-                    files: a.image,
-                    bands: a.bands.map(|b| [b[0], b[1], b[2]]),
+                    files: a.image.clone(),
+                    bands: a.bands.clone().map(|b| [b[0], b[1], b[2]]),
                     src_nodata: None,
                     overlap: Overlap::Blend,
                     resampling: Resampling::Bilinear,
                     stretch: a.stretch,
                 }),
                 terrain_drape: a.terrain_drape,
-                vegetation: a.samples.map(|samples| VegetationSection {
+                vegetation: a.samples.clone().map(|samples| VegetationSection {
                     samples,
                     options: Default::default(),
                 }),
@@ -127,38 +172,65 @@ pub fn run(a: PrepArgs) -> Result<()> {
             region
         }
     };
+    let out = a.out.clone().context("--out is required")?;
     // Only the folder is checked here: the bundle writer decides what an
     // existing bundle at `--out` needs (`--force`).
-    output::check(&[&a.out], true)?;
+    output::check(&[&out], true)?;
+    if let Some(dir) = &a.plan {
+        if !a.tiled {
+            bail!("--plan builds a pyramid: add --tiled");
+        }
+        if a.job.is_some() || a.finish || a.resume {
+            bail!("--job, --finish and --resume act on a plan already made: give --plan alone");
+        }
+        let options = PlanOptions {
+            tile_cells: a.tile_size,
+            jobs_per_step: a.jobs,
+            force: a.force,
+        };
+        let p = plan::create(&region, &out, dir, options)?;
+        let jobs: usize = p.steps.iter().map(|s| s.jobs[1] - s.jobs[0] + 1).sum();
+        if !a.json {
+            println!(
+                "{}: a plan of {jobs} jobs in {} steps building {} ({}×{} grid, tiles of {} cells)",
+                dir.display(),
+                p.steps.len(),
+                p.out.display(),
+                p.description.grid.side,
+                p.description.grid.side,
+                p.write.tile_cells
+            );
+            for s in &p.steps {
+                println!(
+                    "  {:>18}: jobs {:>4}–{:<4} tiles: {}",
+                    s.name, s.jobs[0], s.jobs[1], s.tiles
+                );
+            }
+        }
+        if a.submit.is_some() {
+            return run_plan(dir, &a);
+        }
+        if a.json {
+            println!("{}", serde_json::to_string(&p.steps)?);
+        } else {
+            println!(
+                "run each job with `relevo prep --plan {0} --job K`, step after step, or \
+                 `relevo prep --plan {0} --submit slurm`; then `relevo prep --plan {0} --finish`",
+                dir.display()
+            );
+        }
+        return Ok(());
+    }
     if a.tiled {
         let options = TiledOptions {
             tile_cells: a.tile_size,
             force: a.force,
             resume: a.resume,
         };
-        let s = prep_tiled(&region, &a.out, options)?;
-        if a.json {
-            println!("{}", serde_json::to_string(&s)?);
-        } else {
-            println!(
-                "{}: pyramid of a {}×{} grid, {:.2} m cells, {} levels of tiles of {} cells ({} tiles), \
-                 {} vertices with data, heights {:.1}..{:.1} m, {:.0} ms",
-                s.bundle.display(),
-                s.side,
-                s.side,
-                s.cell_size_m,
-                s.levels,
-                s.tile_cells,
-                s.tiles,
-                s.valid_vertices,
-                s.height_range_m[0],
-                s.height_range_m[1],
-                s.grid_ms + s.pyramid_ms
-            );
-        }
-        return Ok(());
+        let s = prep_tiled(&region, &out, options)?;
+        return print_tiled(&s, a.json);
     }
-    let summary = prep(&region, &a.out, a.force)?;
+    let summary = prep(&region, &out, a.force)?;
     if a.json {
         println!("{}", serde_json::to_string(&summary)?);
     } else {
@@ -176,4 +248,84 @@ pub fn run(a: PrepArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// Print what a pyramid build reports.
+fn print_tiled(s: &TiledSummary, json: bool) -> Result<()> {
+    if json {
+        println!("{}", serde_json::to_string(s)?);
+    } else {
+        println!(
+            "{}: pyramid of a {}×{} grid, {:.2} m cells, {} levels of tiles of {} cells ({} tiles), \
+             {} vertices with data, heights {:.1}..{:.1} m, {:.0} ms",
+            s.bundle.display(),
+            s.side,
+            s.side,
+            s.cell_size_m,
+            s.levels,
+            s.tile_cells,
+            s.tiles,
+            s.valid_vertices,
+            s.height_range_m[0],
+            s.height_range_m[1],
+            s.grid_ms + s.pyramid_ms
+        );
+    }
+    Ok(())
+}
+
+/// `--plan DIR` with `--job`, `--finish` or `--submit`.
+fn run_plan(dir: &Path, a: &PrepArgs) -> Result<()> {
+    if let Some(k) = a.job {
+        let r = plan::run_job(dir, k)?;
+        if a.json {
+            println!("{}", serde_json::to_string(&r)?);
+        } else {
+            println!(
+                "job {} ({}): {} of its {} tiles computed in {:.1} s",
+                r.job,
+                r.step,
+                r.computed,
+                r.tiles,
+                r.ms / 1e3
+            );
+        }
+        return Ok(());
+    }
+    if a.finish {
+        return print_tiled(&plan::finish(dir)?, a.json);
+    }
+    if let Some(Scheduler::Slurm) = a.submit {
+        let given =
+            a.partition.is_some() || a.mem.is_some() || a.time.is_some() || a.cpus_per_task != 1;
+        let options = SlurmOptions {
+            partition: a.partition.clone(),
+            mem: a.mem.clone(),
+            cpus_per_task: a.cpus_per_task,
+            time: a.time.clone(),
+        };
+        let submitted = slurm::submit(dir, given.then_some(&options))?;
+        if a.json {
+            println!("{}", serde_json::to_string(&submitted)?);
+        } else {
+            for s in &submitted {
+                let jobs: Vec<String> = s.jobs.iter().map(|j| j.to_string()).collect();
+                println!(
+                    "Slurm job {:>8}: {}{}",
+                    s.slurm_job_id,
+                    s.step,
+                    if jobs.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" (jobs {})", jobs.join(" "))
+                    }
+                );
+            }
+        }
+        return Ok(());
+    }
+    bail!(
+        "{}: say what to do with the plan: --job K, --finish or --submit slurm",
+        dir.display()
+    )
 }

@@ -159,6 +159,19 @@ impl DirectSource {
         Ok(true)
     }
 
+    /// The holes [`DirectSource::scan`] found, each `[c0, r0, c1, r1]`
+    /// inclusive.
+    pub fn holes(&self) -> &[[usize; 4]] {
+        &self.holes
+    }
+
+    /// The source with the holes an earlier scan of the same file found
+    /// (a plan's jobs read the file without scanning it again).
+    pub fn with_holes(mut self, holes: Vec<[usize; 4]>) -> DirectSource {
+        self.holes = holes;
+        self
+    }
+
     /// The file's cells a window of `[c0, r0, c1, r1]` (inclusive, inside
     /// the file) must read so that every hole meeting it lies inside with
     /// its ring.

@@ -5,7 +5,9 @@
 //! writing one such function and listing it.
 
 mod direct;
+pub mod plan;
 pub mod region;
+pub mod slurm;
 pub mod tiled;
 
 use crate::clusters::{bake_with_progress, ClustersSummary};

@@ -69,7 +69,9 @@ pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Res
             .unwrap_or_else(|| "region".into())
     });
     let start = Instant::now();
-    let (source, description, read_by_windows) = height_source(region, &name, out, &options)?;
+    let (heights, description) =
+        height_source(region, &name, out, options.tile_cells, options.resume)?;
+    let read_by_windows = matches!(heights, Heights::Windows(_));
     let grid_ms = start.elapsed().as_secs_f64() * 1e3;
     let write = WriteOptions {
         tile_cells: options.tile_cells,
@@ -83,7 +85,7 @@ pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Res
     };
     let start = Instant::now();
     let bar = crate::progress::pass_bar();
-    let bundle = pyramid::write_pyramid(out, source.as_ref(), description, write, &|p| {
+    let bundle = pyramid::write_pyramid(out, heights.source(), description, write, &|p| {
         bar.set_message(p.pass);
         bar.set_length(p.total as u64);
         bar.set_position(p.done as u64);
@@ -108,18 +110,36 @@ pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Res
     })
 }
 
-/// Where the pyramid's heights come from, its description, and whether the
-/// DEM is read window by window: a single DEM on the target grid whose
-/// voids are holes the fill stage fills is (the tiling, memory and disk checked before the file is scanned);
-/// anything else goes through the in-memory grid stages.
-fn height_source(
+/// Where a pyramid's heights come from.
+pub enum Heights {
+    /// The DEM read window by window.
+    Windows(DirectSource),
+    /// The grid built in memory by the grid stages.
+    Grid(HeightGrid),
+}
+
+impl Heights {
+    pub fn source(&self) -> &dyn HeightSource {
+        match self {
+            Heights::Windows(d) => d,
+            Heights::Grid(g) => g,
+        }
+    }
+}
+
+/// Where the pyramid's heights come from, and its description: a single
+/// DEM on the target grid whose voids are holes the fill stage fills is
+/// read window by window (the tiling, memory and disk checked before the
+/// file is scanned); anything else goes through the in-memory grid stages.
+pub fn height_source(
     region: &RegionSpec,
     name: &str,
     out: &Path,
-    options: &TiledOptions,
-) -> Result<(Box<dyn HeightSource>, PyramidDescription, bool)> {
+    tile_cells: usize,
+    resume: bool,
+) -> Result<(Heights, PyramidDescription)> {
     if let Some(mut d) = DirectSource::open(region)? {
-        pyramid::preflight(out, d.grid.side, options.tile_cells, options.resume)?;
+        pyramid::preflight(out, d.grid.side, tile_cells, resume)?;
         if d.scan()? {
             let (inputs, parameters) = provenance_of(region)?;
             let description = PyramidDescription {
@@ -129,7 +149,7 @@ fn height_source(
                 inputs,
                 parameters,
             };
-            return Ok((Box::new(d), description, true));
+            return Ok((Heights::Windows(d), description));
         }
     }
     let mut b = Build::new(region, name.to_string(), None);
@@ -152,5 +172,5 @@ fn height_source(
         inputs,
         parameters,
     };
-    Ok((Box::new(grid), description, false))
+    Ok((Heights::Grid(grid), description))
 }

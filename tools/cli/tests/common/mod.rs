@@ -258,3 +258,40 @@ pub fn khronos_validate(path: &Path) -> serde_json::Value {
     );
     report
 }
+
+/// The real Grenoble DEM (Copernicus GLO-30, geographic).
+pub fn grenoble_dem() -> PathBuf {
+    repo("data/grenoble/Copernicus_DSM_10_N45_00_E005_00_DEM.tif")
+}
+
+/// The Grenoble DEM warped by GDAL to UTM 31N at 30 m (1000² cells, no
+/// voids): a DEM already on the target grid, which `prep --tiled` reads
+/// window by window.
+pub fn projected_dem(dir: &Path) -> PathBuf {
+    projected_dem_named(dir, "grenoble_utm31n_30m.tif", &[])
+}
+
+/// [`projected_dem`] written as `name` with gdalwarp's `extra` options.
+pub fn projected_dem_named(dir: &Path, name: &str, extra: &[&str]) -> PathBuf {
+    let out = dir.join(name);
+    let mut args = vec![
+        "-q",
+        "-t_srs",
+        "EPSG:32631",
+        "-tr",
+        "30",
+        "30",
+        "-r",
+        "bilinear",
+        "-te",
+        "660000",
+        "4990000",
+        "690000",
+        "5020000",
+    ];
+    args.extend(extra);
+    let input = grenoble_dem();
+    args.extend([input.to_str().unwrap(), out.to_str().unwrap()]);
+    gdal_tool("gdalwarp", &args);
+    out
+}

@@ -117,6 +117,12 @@ impl Staging {
         self.resumed
     }
 
+    /// Leave the staging folder as it is, for a later writer to resume
+    /// (the jobs of a plan, `relevo prep --plan`), releasing the lock.
+    pub fn keep(mut self) {
+        self.keep_on_failure = true;
+    }
+
     /// Move the staged bundle into place (its manifest written and checked
     /// by the caller).
     pub fn commit(mut self) -> Result<PathBuf> {
@@ -274,7 +280,7 @@ fn unused_path(target: &Path, suffix: &str) -> PathBuf {
 const STAGING_MARK: &str = ".relevo-staging";
 
 /// `TARGET.tmp` beside the target.
-pub(crate) fn staging_path(target: &Path) -> PathBuf {
+pub fn staging_path(target: &Path) -> PathBuf {
     let mut name = target.file_name().unwrap_or_default().to_os_string();
     name.push(".tmp");
     target.with_file_name(name)

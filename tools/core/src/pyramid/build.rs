@@ -28,6 +28,7 @@ use crate::lp::{vertex_kind, ErrorMetric};
 use crate::raster::tint::drape_pixel;
 use crate::{Error, Result};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -62,7 +63,7 @@ impl HeightSource for HeightGrid {
 }
 
 /// What a build computes.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct BuildOptions {
     pub metric: ErrorMetric,
     /// Vertex spacing at level 0, metres.
@@ -119,6 +120,114 @@ pub fn check_working_memory(layout: &TileLayout) -> Result<()> {
     )
 }
 
+/// One pass of a build over its tiles, in the order [`steps`] lists them.
+/// A step's tiles are independent of each other; each step reads only
+/// what the steps before it wrote, so the tiles of one step may be split
+/// among processes (see `relevo prep --plan`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "step")]
+pub enum Step {
+    /// Level-0 heights and mask from the source.
+    Heights,
+    /// Level-0 own errors and the lattice's partial errors.
+    OwnErrors,
+    /// Level-0 errors and radii below the lattice.
+    Saturate,
+    /// The lattice of tile corners: one item, the whole lattice.
+    Lattice,
+    /// Level-0 drape.
+    Drape,
+    /// Level `level` (≥ 1) from its children.
+    Coarse { level: u32 },
+    /// Level `level`'s drape.
+    CoarseDrape { level: u32 },
+}
+
+impl Step {
+    /// What progress bars and messages call it.
+    pub fn name(self) -> String {
+        match self {
+            Step::Heights => "heights".into(),
+            Step::OwnErrors => "own errors".into(),
+            Step::Saturate => "errors and radii".into(),
+            Step::Lattice => "lattice".into(),
+            Step::Drape => "drape".into(),
+            Step::Coarse { level } => format!("level {level}"),
+            Step::CoarseDrape { level } => format!("level {level} drape"),
+        }
+    }
+
+    /// The stage its wall time is recorded under in the manifest.
+    pub fn timing_name(self) -> &'static str {
+        match self {
+            Step::Heights => "heights",
+            Step::OwnErrors => "own errors",
+            Step::Saturate => "errors and radii",
+            Step::Lattice => "lattice",
+            Step::Drape => "drape",
+            Step::Coarse { .. } => "coarser levels",
+            Step::CoarseDrape { .. } => "coarser drapes",
+        }
+    }
+
+    fn pass(self) -> Pass {
+        match self {
+            Step::Heights => Pass::Heights,
+            Step::OwnErrors => Pass::OwnErrors,
+            Step::Saturate => Pass::Saturate,
+            Step::Lattice => Pass::Lattice,
+            Step::Drape => Pass::Drape,
+            Step::Coarse { .. } => Pass::Coarse,
+            Step::CoarseDrape { .. } => Pass::CoarseDrape,
+        }
+    }
+
+    /// The tiles it computes, row by row (the lattice: the level-0 tile
+    /// (0, 0), under which its one mark is kept).
+    pub fn tiles(self, layout: &TileLayout) -> Vec<TileKey> {
+        match self {
+            Step::Lattice => vec![TileKey {
+                level: 0,
+                x: 0,
+                y: 0,
+            }],
+            Step::Coarse { level } | Step::CoarseDrape { level } => layout.tiles(level).collect(),
+            _ => layout.tiles(0).collect(),
+        }
+    }
+
+    /// Those of `tiles` not yet done.
+    pub fn missing(self, store: &TileStore, tiles: &[TileKey]) -> Result<Vec<TileKey>> {
+        let mut left = Vec::new();
+        for &key in tiles {
+            if !store.done(self.pass(), key)? {
+                left.push(key);
+            }
+        }
+        Ok(left)
+    }
+}
+
+/// The steps of a build of `layout`, in order.
+pub fn steps(layout: &TileLayout, drape: bool) -> Vec<Step> {
+    let mut steps = vec![
+        Step::Heights,
+        Step::OwnErrors,
+        Step::Saturate,
+        Step::Lattice,
+    ];
+    if drape {
+        steps.push(Step::Drape);
+    }
+    for level in 1..layout.levels() {
+        steps.push(Step::Coarse { level });
+        if drape {
+            steps.push(Step::CoarseDrape { level });
+        }
+    }
+    steps
+}
+
 /// Build every tile of `store` from `source`, reporting progress.
 pub fn build(
     source: &dyn HeightSource,
@@ -127,7 +236,6 @@ pub fn build(
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<BuildReport> {
     let layout = store.layout;
-    let level0: Vec<TileKey> = layout.tiles(0).collect();
     let mut timings: Vec<StageTiming> = Vec::new();
     let mut spent = |stage: &str, ms: f64| match timings.iter_mut().find(|t| t.stage == stage) {
         Some(t) => t.ms += ms,
@@ -136,76 +244,79 @@ pub fn build(
             ms,
         }),
     };
-    let name = "heights";
-    spent(
-        name,
-        each(store, &level0, Pass::Heights, name, progress, &|key| {
-            heights(source, store, key)
-        })?,
-    );
+    for step in steps(&layout, options.drape) {
+        let ms = run_step(
+            Some(source),
+            store,
+            options,
+            step,
+            &step.tiles(&layout),
+            progress,
+        )?;
+        spent(step.timing_name(), ms);
+    }
     let start = std::time::Instant::now();
-    let (height_range_m, valid_vertices) = statistics(store, &level0)?;
-    let lattice_z = lattice_heights(store)?;
+    let (height_range_m, valid_vertices) = statistics(store)?;
     spent("statistics", start.elapsed().as_secs_f64() * 1e3);
-    let name = "own errors";
-    spent(
-        name,
-        each(store, &level0, Pass::OwnErrors, name, progress, &|key| {
-            own_pass(store, options, &lattice_z, key)
-        })?,
-    );
-    let name = "errors and radii";
-    let blocks = saturation_blocks(&layout);
-    spent(
-        name,
-        each_group(store, &blocks, Pass::Saturate, name, progress, &|keys| {
-            saturate_pass(store, options, keys)
-        })?,
-    );
-    let top = TileKey {
-        level: 0,
-        x: 0,
-        y: 0,
-    };
-    let start = std::time::Instant::now();
-    if !store.done(Pass::Lattice, top)? {
-        lattice_pass(store, options, &lattice_z, &level0)?;
-        store.mark(Pass::Lattice, top)?;
-    }
-    spent("lattice", start.elapsed().as_secs_f64() * 1e3);
-    if options.drape {
-        let name = "drape";
-        spent(
-            name,
-            each(store, &level0, Pass::Drape, name, progress, &|key| {
-                drape_pass(store, options, height_range_m, key)
-            })?,
-        );
-    }
-    for level in 1..layout.levels() {
-        let tiles: Vec<TileKey> = layout.tiles(level).collect();
-        let name = "coarser levels";
-        spent(
-            name,
-            each(store, &tiles, Pass::Coarse, name, progress, &|key| {
-                coarse_pass(store, key)
-            })?,
-        );
-        if options.drape {
-            let name = "coarser drapes";
-            spent(
-                name,
-                each(store, &tiles, Pass::CoarseDrape, name, progress, &|key| {
-                    drape_pass(store, options, height_range_m, key)
-                })?,
-            );
-        }
-    }
     Ok(BuildReport {
         height_range_m,
         valid_vertices,
         timings,
     })
+}
+
+/// Compute `tiles` of `step` (those not done yet), in parallel, marking
+/// each when it is; the steps before must be complete. `source` is read
+/// by [`Step::Heights`] alone. Returns the wall time, ms.
+pub fn run_step(
+    source: Option<&dyn HeightSource>,
+    store: &TileStore,
+    options: &BuildOptions,
+    step: Step,
+    tiles: &[TileKey],
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<f64> {
+    let name = step.timing_name();
+    let pass = step.pass();
+    match step {
+        Step::Heights => each(store, tiles, pass, name, progress, &|key| {
+            let source = source
+                .ok_or_else(|| Error::Input("the heights step needs the region's DEM".into()))?;
+            heights(source, store, key)
+        }),
+        Step::OwnErrors => {
+            let lattice_z = lattice_heights(store)?;
+            each(store, tiles, pass, name, progress, &|key| {
+                own_pass(store, options, &lattice_z, key)
+            })
+        }
+        Step::Saturate => {
+            let blocks = saturation_blocks(&store.layout, tiles);
+            each_group(store, &blocks, pass, name, progress, &|keys| {
+                saturate_pass(store, options, keys)
+            })
+        }
+        Step::Lattice => {
+            let start = std::time::Instant::now();
+            let lattice_z = lattice_heights(store)?;
+            for &key in tiles {
+                if !store.done(pass, key)? {
+                    lattice_pass(store, options, &lattice_z)?;
+                    store.mark(pass, key)?;
+                }
+            }
+            Ok(start.elapsed().as_secs_f64() * 1e3)
+        }
+        Step::Drape | Step::CoarseDrape { .. } => {
+            let range = height_range(store)?;
+            each(store, tiles, pass, name, progress, &|key| {
+                drape_pass(store, options, range, key)
+            })
+        }
+        Step::Coarse { .. } => each(store, tiles, pass, name, progress, &|key| {
+            coarse_pass(store, key)
+        }),
+    }
 }
 
 /// Run `work` on every tile of `tiles` not yet done in `pass`, in parallel,
@@ -306,21 +417,28 @@ fn heights(source: &dyn HeightSource, store: &TileStore, key: TileKey) -> Result
     store.write_stats(key, (lo, hi, count))
 }
 
-/// The grid's height range and vertices with data, from the tiles' own
-/// (border vertices counted once).
-fn statistics(store: &TileStore, level0: &[TileKey]) -> Result<([f32; 2], u64)> {
+/// The grid's lowest and highest height with data, from the level-0
+/// tiles' statistics.
+fn height_range(store: &TileStore) -> Result<[f32; 2]> {
     let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-    for &key in level0 {
+    for key in store.layout.tiles(0) {
         let (l, h, _) = store.read_stats(key)?;
         lo = lo.min(l);
         hi = hi.max(h);
     }
+    Ok([lo, hi])
+}
+
+/// The grid's height range and vertices with data, from the level-0
+/// tiles (border vertices counted once); an error when it has none.
+pub fn statistics(store: &TileStore) -> Result<([f32; 2], u64)> {
+    let range = height_range(store)?;
     // Count each vertex once: a tile's own are all but its last row and
     // column, except along the grid's far edges.
     let layout = store.layout;
     let (t, across) = (layout.tile_cells, layout.across(0));
     let mut valid = 0u64;
-    for &key in level0 {
+    for key in layout.tiles(0) {
         let mask: Vec<u8> = store.read(TileArray::Mask, key)?;
         let rows = if key.y + 1 == across { t + 1 } else { t };
         let cols = if key.x + 1 == across { t + 1 } else { t };
@@ -334,7 +452,7 @@ fn statistics(store: &TileStore, level0: &[TileKey]) -> Result<([f32; 2], u64)> 
     if valid == 0 {
         return Err(Error::Input("the grid holds no data".into()));
     }
-    Ok(([lo, hi], valid))
+    Ok((range, valid))
 }
 
 /// Heights of the lattice of tile corners (every T-th vertex), row-major.
@@ -343,9 +461,9 @@ fn lattice_heights(store: &TileStore) -> Result<Vec<f32>> {
     let (t, n) = (layout.tile_cells, layout.across(0) + 1);
     let mut z = vec![0.0f32; n * n];
     for key in layout.tiles(0) {
-        let heights: Vec<f32> = store.read(TileArray::Height, key)?;
         for (dy, dx) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
-            z[(key.y + dy) * n + key.x + dx] = heights[dy * t * (t + 1) + dx * t];
+            z[(key.y + dy) * n + key.x + dx] =
+                store.read_one(TileArray::Height, key, dy * t * (t + 1) + dx * t)?;
         }
     }
     Ok(z)
@@ -445,12 +563,12 @@ const MAX_SATURATION_BLOCK: usize = 4;
 /// Most bytes the saturation's windows take together, one a thread.
 const SATURATION_WINDOWS_BYTES: u64 = 768 << 20;
 
-/// The level-0 tiles in square blocks for the saturation, row by row: the
-/// largest side of [`MAX_SATURATION_BLOCK`], halving down to 1, whose
+/// `tiles` (of level 0) in square blocks for the saturation, row by row:
+/// the largest side of [`MAX_SATURATION_BLOCK`], halving down to 1, whose
 /// windows, one per thread, stay within [`SATURATION_WINDOWS_BYTES`] and
-/// half the memory budget. The blocks change the memory and the time, not
-/// the values.
-fn saturation_blocks(layout: &TileLayout) -> Vec<Vec<TileKey>> {
+/// half the memory budget; a block holds those of `tiles` it covers. The
+/// blocks change the memory and the time, not the values.
+fn saturation_blocks(layout: &TileLayout, tiles: &[TileKey]) -> Vec<Vec<TileKey>> {
     let (t, across) = (layout.tile_cells as u64, layout.across(0));
     let threads = rayon::current_num_threads() as u64;
     let limit = SATURATION_WINDOWS_BYTES.min(crate::memory::budget() / 2);
@@ -459,6 +577,7 @@ fn saturation_blocks(layout: &TileLayout) -> Vec<Vec<TileKey>> {
     {
         k /= 2;
     }
+    let wanted: std::collections::HashSet<TileKey> = tiles.iter().copied().collect();
     let mut blocks = Vec::new();
     for by in (0..across).step_by(k) {
         for bx in (0..across).step_by(k) {
@@ -468,7 +587,10 @@ fn saturation_blocks(layout: &TileLayout) -> Vec<Vec<TileKey>> {
                     block.push(TileKey { level: 0, x, y });
                 }
             }
-            blocks.push(block);
+            block.retain(|key| wanted.contains(key));
+            if !block.is_empty() {
+                blocks.push(block);
+            }
         }
     }
     blocks
@@ -476,19 +598,15 @@ fn saturation_blocks(layout: &TileLayout) -> Vec<Vec<TileKey>> {
 
 /// Errors and radii of the lattice of tile corners, coarsest scales last,
 /// written into every tile corner they are.
-fn lattice_pass(
-    store: &TileStore,
-    options: &BuildOptions,
-    lattice_z: &[f32],
-    level0: &[TileKey],
-) -> Result<()> {
+fn lattice_pass(store: &TileStore, options: &BuildOptions, lattice_z: &[f32]) -> Result<()> {
     let layout = store.layout;
+    let level0: Vec<TileKey> = layout.tiles(0).collect();
     let (t, n, side) = (layout.tile_cells, layout.across(0) + 1, layout.side);
     // Own errors: the largest of the tiles' parts (Bound), else from the
     // vertex and its hypotenuse alone.
     let mut own = vec![0.0f32; n * n];
     if options.metric == ErrorMetric::Bound {
-        for &key in level0 {
+        for &key in &level0 {
             for (i, e) in store.read_partials(key)? {
                 let i = i as usize;
                 own[i] = own[i].max(e);
@@ -505,7 +623,7 @@ fn lattice_pass(
     // The tiles' centres (the scale-T edges' children), with their heights.
     let mut centres: HashMap<Vertex, ([f32; 2], f32)> = HashMap::new();
     let middle = (t / 2) * (t + 1) + t / 2;
-    for &key in level0 {
+    for &key in &level0 {
         let lp: Vec<[f32; 2]> = store.read(TileArray::Lp, key)?;
         let z: Vec<f32> = store.read(TileArray::Height, key)?;
         centres.insert(
@@ -544,7 +662,7 @@ fn lattice_pass(
         }
         h *= 2;
     }
-    for &key in level0 {
+    for &key in &level0 {
         for (dy, dx) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
             let value = values[(key.y + dy) * n + key.x + dx];
             store.write_one(TileArray::Lp, key, dy * t * (t + 1) + dx * t, value)?;

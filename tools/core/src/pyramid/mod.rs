@@ -9,6 +9,8 @@
 //!   progress.
 //! - [`build`]: the tiles computed pass by pass in bounded memory, equal
 //!   bit for bit to the single grid.
+//! - [`jobs`]: a build split into jobs that processes on several machines
+//!   run side by side.
 //! - [`reader`]: a pyramid opened, its tiles mapped without copying, the
 //!   tiles a camera sees, and the checks `relevo validate` runs.
 //! - [`mesh`]: the mesh of the region or of a window of it at a tolerance,
@@ -16,13 +18,14 @@
 //! - [`render`]: the raycast whose distance bands are the levels.
 
 pub mod build;
+pub mod jobs;
 pub mod layout;
 pub mod mesh;
 pub mod reader;
 pub mod render;
 pub mod store;
 
-pub use build::{BuildOptions, BuildReport, HeightSource, Progress};
+pub use build::{BuildOptions, BuildReport, HeightSource, Progress, Step};
 pub use layout::{TileKey, TileLayout, DEFAULT_TILE_CELLS};
 pub use reader::Pyramid;
 
@@ -74,7 +77,7 @@ pub struct Tiling {
 }
 
 /// What a pyramid's manifest says besides its tiling and files.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PyramidDescription {
     pub region: String,
     pub crs: Crs,
@@ -85,7 +88,7 @@ pub struct PyramidDescription {
 }
 
 /// How a pyramid is written.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct WriteOptions {
     pub tile_cells: usize,
     pub build: BuildOptions,
@@ -119,8 +122,21 @@ pub fn write_pyramid(
     options: WriteOptions,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<PathBuf> {
+    let (staging, store) = start_build(target, &description, &options)?;
+    let report = build::build(source, &store, &options.build, progress)?;
+    seal_build(staging, store, report, description, &options)
+}
+
+/// Start (or, with `options.resume`, go on with) the build of a pyramid
+/// at `target`: the checks of [`preflight`], the staging folder beside the
+/// target holding the build's plan, and its tile files opened. A resumed
+/// build must be of the same inputs and options.
+pub fn start_build(
+    target: &Path,
+    description: &PyramidDescription,
+    options: &WriteOptions,
+) -> Result<(Staging, TileStore)> {
     let layout = TileLayout::new(description.grid.side, options.tile_cells)?;
-    let capacity = build::partials_capacity(&layout);
     preflight(target, layout.side, layout.tile_cells, options.resume)?;
     if let Some(parent) = target.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
@@ -161,8 +177,49 @@ pub fn write_pyramid(
             .map_err(|e| Error::Input(format!("cannot write the build plan ({e})")))?;
         std::fs::write(&plan_path, text).map_err(|e| Error::io(&plan_path, e))?;
     }
-    let store = TileStore::open(&dir, layout, capacity)?;
-    let report = build::build(source, &store, &options.build, progress)?;
+    let store = TileStore::open(&dir, layout, build::partials_capacity(&layout))?;
+    Ok((staging, store))
+}
+
+/// The tile files of the build staged for `target` (see [`start_build`]),
+/// opened without the bundle's lock, for one of the jobs that share the
+/// build; an error when there is no such build.
+pub fn open_build(target: &Path, layout: TileLayout) -> Result<TileStore> {
+    let dir = crate::bundle::staging_path(target);
+    if !dir.join(PLAN_FILE).is_file() {
+        return Err(Error::invalid(
+            &dir,
+            "holds no pyramid build (finished and moved into place, or removed)",
+        ));
+    }
+    Ok(TileStore::open(&dir, layout, build::partials_capacity(&layout))?.durable())
+}
+
+/// Finish a build whose every step is done: the manifest written with
+/// the report's figures and the files' hashes, the pyramid validated,
+/// moved into place, its scratch removed.
+pub fn seal_build(
+    staging: Staging,
+    store: TileStore,
+    report: BuildReport,
+    description: PyramidDescription,
+    options: &WriteOptions,
+) -> Result<PathBuf> {
+    let layout = store.layout;
+    let dir = staging.dir().to_path_buf();
+    for step in build::steps(&layout, options.build.drape) {
+        let left = step.missing(&store, &step.tiles(&layout))?;
+        if let Some(first) = left.first() {
+            return Err(Error::invalid(
+                &dir,
+                format!(
+                    "the build is not complete: step {} has {} tiles left (first {first:?})",
+                    step.name(),
+                    left.len()
+                ),
+            ));
+        }
+    }
     store.remove_scratch()?;
     let start = std::time::Instant::now();
     let mut files = BTreeMap::new();
@@ -225,11 +282,12 @@ pub fn write_pyramid(
     })?;
     json.push('\n');
     std::fs::write(&path, json).map_err(|e| Error::io(&path, e))?;
+    let plan_path = dir.join(PLAN_FILE);
     std::fs::remove_file(&plan_path).map_err(|e| Error::io(&plan_path, e))?;
     let problems = reader::validate(&Pyramid::open(&dir)?, false);
     if !problems.is_empty() {
         return Err(Error::invalid(
-            target,
+            staging.target(),
             format!(
                 "the pyramid written does not pass validation, so it was not kept: {}",
                 problems.join("; ")

@@ -87,6 +87,8 @@ pub struct TileStore {
     progress: File,
     /// Entries a tile's partials slot holds.
     pub partials_capacity: usize,
+    /// Whether a mark waits for the data before it to reach the disk.
+    durable: bool,
 }
 
 fn open(path: &Path, len: u64) -> Result<File> {
@@ -134,7 +136,18 @@ impl TileStore {
             layout,
             dir: dir.to_path_buf(),
             partials_capacity,
+            durable: false,
         })
+    }
+
+    /// Make every [`TileStore::mark`] wait until the data written before it
+    /// is on the disk (`fdatasync`): a mark then survives only with its
+    /// tile, even when the machine fails — what jobs on a cluster's shared
+    /// file system need. A killed process needs none of it (the kernel
+    /// keeps what it wrote), so a local build does without.
+    pub fn durable(mut self) -> TileStore {
+        self.durable = true;
+        self
     }
 
     /// Bytes the tile files and the scratch take for `layout`.
@@ -178,6 +191,17 @@ impl TileStore {
             .read_exact_at(bytemuck::cast_slice_mut(&mut values), at)
             .map_err(|e| self.io(a.name().1, e))?;
         Ok(values)
+    }
+
+    /// One element of tile `key`'s `a`, at sample index `i`.
+    pub fn read_one<T: bytemuck::Pod>(&self, a: TileArray, key: TileKey, i: usize) -> Result<T> {
+        let mut value = T::zeroed();
+        let at =
+            ((self.layout.slot(key) * self.layout.tile_len() + i) * a.bytes_per_vertex()) as u64;
+        self.file(a)
+            .read_exact_at(bytemuck::bytes_of_mut(&mut value), at)
+            .map_err(|e| self.io(a.name().1, e))?;
+        Ok(value)
     }
 
     /// Write one element of tile `key`'s `a` at sample index `i`.
@@ -337,6 +361,21 @@ impl TileStore {
 
     /// Record that `pass` finished for `key` (after its data is written).
     pub fn mark(&self, pass: Pass, key: TileKey) -> Result<()> {
+        if self.durable {
+            let scratch = [
+                (&self.own, "scratch/own.f32"),
+                (&self.partials, "scratch/partials.bin"),
+                (&self.stats, "scratch/stats.bin"),
+            ];
+            for a in TileArray::ALL {
+                self.file(a)
+                    .sync_data()
+                    .map_err(|e| self.io(a.name().1, e))?;
+            }
+            for (file, name) in scratch {
+                file.sync_data().map_err(|e| self.io(name, e))?;
+            }
+        }
         self.progress
             .write_all_at(&[1], self.progress_at(pass, key))
             .map_err(|e| self.io("scratch/progress.bin", e))

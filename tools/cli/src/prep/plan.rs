@@ -1,0 +1,458 @@
+//! `relevo prep --plan DIR`: a pyramid build split into jobs that run on
+//! several machines sharing a file system — by hand, or as Slurm array
+//! jobs (`slurm`).
+//!
+//! - `relevo prep REGION --tiled --plan DIR --jobs N --out OUT` reads the
+//!   input once (the scan for voids, or the in-memory grid stages, which
+//!   then write the heights themselves), starts the build in OUT's staging
+//!   folder and writes `DIR/plan.json`: the region, the pyramid's
+//!   description, how the heights are read, and the build's steps, each
+//!   cut into at most N jobs ([`relevo_core::pyramid::jobs`]).
+//! - `relevo prep --plan DIR --job K` runs job K: its tiles not yet done,
+//!   each marked once its data is on the disk; refused while a step before
+//!   its own is incomplete. Run again, it finishes what a killed run left.
+//! - `relevo prep --plan DIR --finish` checks that every job is done
+//!   (naming those that are not, and the commands that run them), writes
+//!   the manifest, validates the pyramid and moves it to OUT: the bytes of
+//!   `relevo prep REGION --tiled --out OUT` on one machine.
+//!
+//! Every job records what it did in `DIR/jobs/K.json`; the manifest's
+//! timings are their sums.
+
+use super::direct::DirectSource;
+use super::region::RegionSpec;
+use super::tiled::{height_source, Heights, TiledSummary};
+use anyhow::{bail, Context, Result};
+use relevo_core::bundle::{staging_path, StageTiming};
+use relevo_core::pyramid::jobs::{self, Job};
+use relevo_core::pyramid::{
+    self, build, BuildOptions, BuildReport, PyramidDescription, Step, TileLayout, WriteOptions,
+};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// `format` of a plan's `plan.json`.
+pub const PLAN_FORMAT: &str = "relevo-plan";
+const PLAN_VERSION: u32 = 1;
+const PLAN_FILE: &str = "plan.json";
+
+/// `DIR/plan.json`: everything a job needs to run without the user's
+/// command line.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Plan {
+    pub format: String,
+    pub format_version: u32,
+    /// The bundle the plan writes (absolute).
+    pub out: PathBuf,
+    pub region: RegionSpec,
+    pub description: PyramidDescription,
+    pub write: WriteOptions,
+    /// Most jobs a step is cut into.
+    pub jobs_per_step: usize,
+    pub heights: PlannedHeights,
+    /// The jobs of each step, for people reading the plan.
+    pub steps: Vec<PlannedStep>,
+}
+
+/// How the heights step gets the DEM.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PlannedHeights {
+    /// The jobs read the DEM window by window, filling these holes
+    /// (`[c0, r0, c1, r1]`, inclusive), which the plan's scan found.
+    Windows { holes: Vec<[usize; 4]> },
+    /// The plan wrote the heights (the grid stages ran in memory).
+    Written,
+}
+
+/// A step and the jobs it is cut into.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PlannedStep {
+    pub step: Step,
+    pub name: String,
+    /// First and last job.
+    pub jobs: [usize; 2],
+    pub tiles: usize,
+}
+
+/// What a job did (`DIR/jobs/K.json`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct JobRecord {
+    pub job: usize,
+    pub step: String,
+    pub tiles: usize,
+    /// Tiles this run computed (the others were done before it).
+    pub computed: usize,
+    pub ms: f64,
+    pub host: String,
+    pub threads: usize,
+    /// The memory budget the job ran under (`--max-memory`, cgroup,
+    /// Slurm's `--mem`, available memory: the smallest), bytes.
+    pub memory_budget_bytes: u64,
+    /// Slurm's job and array task ids, when Slurm ran it.
+    pub slurm: Option<String>,
+}
+
+impl Plan {
+    /// Read `dir/plan.json`.
+    pub fn load(dir: &Path) -> Result<Plan> {
+        let path = dir.join(PLAN_FILE);
+        let text = relevo_core::files::read_to_string(&path)
+            .with_context(|| format!("{}: no plan here (make one with --jobs)", dir.display()))?;
+        let plan: Plan = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a Relevo plan", path.display()))?;
+        if plan.format != PLAN_FORMAT || plan.format_version != PLAN_VERSION {
+            bail!(
+                "{}: a plan of format {} version {}; this relevo reads {PLAN_FORMAT} version \
+                 {PLAN_VERSION}",
+                path.display(),
+                plan.format,
+                plan.format_version
+            );
+        }
+        Ok(plan)
+    }
+
+    pub fn layout(&self) -> Result<TileLayout> {
+        Ok(TileLayout::new(
+            self.description.grid.side,
+            self.write.tile_cells,
+        )?)
+    }
+
+    /// The plan's jobs, numbered as `--job` takes them.
+    pub fn jobs(&self) -> Result<Vec<Job>> {
+        Ok(jobs::jobs(
+            &self.layout()?,
+            self.write.build.drape,
+            self.jobs_per_step,
+        ))
+    }
+
+    /// The build's tile files, shared by the jobs.
+    pub fn store(&self) -> Result<pyramid::store::TileStore> {
+        Ok(pyramid::open_build(&self.out, self.layout()?)?)
+    }
+}
+
+/// How a plan is made.
+#[derive(Debug, Clone, Copy)]
+pub struct PlanOptions {
+    pub tile_cells: usize,
+    pub jobs_per_step: usize,
+    /// Replace an existing plan in DIR and, at the finish, the bundle.
+    pub force: bool,
+}
+
+/// Plan the pyramid of `region` at `out` in `dir`: the input read once,
+/// the build started in `out`'s staging folder, `dir/plan.json` written.
+pub fn create(region: &RegionSpec, out: &Path, dir: &Path, options: PlanOptions) -> Result<Plan> {
+    if region.image.is_some() || region.vegetation.is_some() || region.clusters.is_some() {
+        bail!(
+            "a plan builds a pyramid, which derives its drape from the heights; drop [image], \
+             [vegetation] and [clusters]"
+        );
+    }
+    if options.jobs_per_step == 0 {
+        bail!("--jobs must be at least 1");
+    }
+    prepare_dir(dir, options.force)?;
+    let absolute = |p: &Path| -> Result<PathBuf> {
+        Ok(if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            std::env::current_dir()?.join(p)
+        })
+    };
+    let out = absolute(out)?;
+    if out.symlink_metadata().is_ok() && !options.force {
+        bail!(
+            "{}: already exists (pass --force to replace it at the finish)",
+            out.display()
+        );
+    }
+    let name = region.name.clone().unwrap_or_else(|| {
+        out.file_stem()
+            .map(|s| s.to_string_lossy().to_string())
+            .unwrap_or_else(|| "region".into())
+    });
+    // The manifest names the inputs as given, as `prep` does; the jobs,
+    // which may run in another folder, read them by absolute paths.
+    let (source, description) = height_source(region, &name, &out, options.tile_cells, false)?;
+    let mut region = region.clone();
+    for f in &mut region.dem.files {
+        *f = absolute(f)?;
+    }
+    let write = WriteOptions {
+        tile_cells: options.tile_cells,
+        build: BuildOptions {
+            metric: region.grid.error_metric,
+            cell_size_m: description.grid.cell_size_m,
+            drape: true,
+        },
+        force: options.force,
+        resume: false,
+    };
+    let (staging, store) = pyramid::start_build(&out, &description, &write)?;
+    let heights = match &source {
+        Heights::Windows(d) => PlannedHeights::Windows {
+            holes: d.holes().to_vec(),
+        },
+        Heights::Grid(_) => {
+            // The grid is in memory now and in no job's: write its tiles here.
+            let bar = crate::progress::pass_bar();
+            let layout = store.layout;
+            build::run_step(
+                Some(source.source()),
+                &store,
+                &write.build,
+                Step::Heights,
+                &Step::Heights.tiles(&layout),
+                &|p| {
+                    bar.set_message(p.pass);
+                    bar.set_length(p.total as u64);
+                    bar.set_position(p.done as u64);
+                },
+            )?;
+            bar.finish_and_clear();
+            PlannedHeights::Written
+        }
+    };
+    drop(store);
+    staging.keep();
+    let layout = TileLayout::new(description.grid.side, options.tile_cells)?;
+    let all = jobs::jobs(&layout, true, options.jobs_per_step);
+    let steps = build::steps(&layout, true)
+        .into_iter()
+        .map(|step| {
+            let of: Vec<&Job> = all.iter().filter(|j| j.step == step).collect();
+            PlannedStep {
+                step,
+                name: step.name(),
+                jobs: [of[0].index, of[of.len() - 1].index],
+                tiles: of.iter().map(|j| j.tiles.len()).sum(),
+            }
+        })
+        .collect();
+    let plan = Plan {
+        format: PLAN_FORMAT.into(),
+        format_version: PLAN_VERSION,
+        out,
+        region,
+        description,
+        write,
+        jobs_per_step: options.jobs_per_step,
+        heights,
+        steps,
+    };
+    write_json(&dir.join(PLAN_FILE), &plan)?;
+    Ok(plan)
+}
+
+/// Make `dir` ready for a new plan: created, or emptied of an earlier
+/// plan's files with `force`; a folder holding anything else is refused.
+fn prepare_dir(dir: &Path, force: bool) -> Result<()> {
+    if dir.join(PLAN_FILE).is_file() {
+        if !force {
+            bail!(
+                "{}: already holds a plan (pass --force to replace it)",
+                dir.display()
+            );
+        }
+        for sub in ["jobs", "logs", "slurm"] {
+            let p = dir.join(sub);
+            if p.exists() {
+                std::fs::remove_dir_all(&p).with_context(|| p.display().to_string())?;
+            }
+        }
+        std::fs::remove_file(dir.join(PLAN_FILE))?;
+    } else if dir.read_dir().is_ok_and(|mut d| d.next().is_some()) {
+        bail!(
+            "{}: not empty and not a plan; give --plan a new or empty folder",
+            dir.display()
+        );
+    }
+    for sub in ["jobs", "logs"] {
+        let p = dir.join(sub);
+        std::fs::create_dir_all(&p).with_context(|| p.display().to_string())?;
+    }
+    Ok(())
+}
+
+/// Write `value` as JSON at `path` atomically (a reader sees the old file
+/// or the whole new one).
+pub fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
+    let mut text = serde_json::to_string_pretty(value)?;
+    text.push('\n');
+    let tmp = path.with_extension("json.tmp");
+    std::fs::write(&tmp, text).with_context(|| tmp.display().to_string())?;
+    std::fs::rename(&tmp, path).with_context(|| path.display().to_string())
+}
+
+/// Run job `index` of the plan in `dir`.
+pub fn run_job(dir: &Path, index: usize) -> Result<JobRecord> {
+    let plan = Plan::load(dir)?;
+    let layout = plan.layout()?;
+    let all = plan.jobs()?;
+    let job = all.get(index).with_context(|| {
+        format!(
+            "{}: no job {index}; the plan has jobs 0–{}",
+            dir.display(),
+            all.len() - 1
+        )
+    })?;
+    build::check_working_memory(&layout)?;
+    let store = plan.store()?;
+    let before = job.step.missing(&store, &job.tiles)?.len();
+    let source = match (&plan.heights, job.step) {
+        (PlannedHeights::Windows { holes }, Step::Heights) => Some(
+            DirectSource::open(&plan.region)?
+                .context("the plan's DEM no longer reads as it did when planned")?
+                .with_holes(holes.clone()),
+        ),
+        _ => None,
+    };
+    let bar = crate::progress::pass_bar();
+    let ms = jobs::run_job(
+        source.as_ref().map(|s| s as &dyn pyramid::HeightSource),
+        &store,
+        &plan.write.build,
+        &all,
+        index,
+        &|p| {
+            bar.set_message(p.pass);
+            bar.set_length(p.total as u64);
+            bar.set_position(p.done as u64);
+        },
+    )?;
+    bar.finish_and_clear();
+    let slurm = std::env::var("SLURM_ARRAY_JOB_ID")
+        .ok()
+        .map(|id| {
+            let task = std::env::var("SLURM_ARRAY_TASK_ID").unwrap_or_default();
+            format!("{id}_{task}")
+        })
+        .or_else(|| std::env::var("SLURM_JOB_ID").ok());
+    let record = JobRecord {
+        job: index,
+        step: job.step.name(),
+        tiles: job.tiles.len(),
+        computed: before,
+        ms,
+        host: hostname(),
+        threads: rayon::current_num_threads(),
+        memory_budget_bytes: relevo_core::memory::budget(),
+        slurm,
+    };
+    let jobs_dir = dir.join("jobs");
+    std::fs::create_dir_all(&jobs_dir)?;
+    write_json(&jobs_dir.join(format!("{index}.json")), &record)?;
+    Ok(record)
+}
+
+fn hostname() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .map(|h| h.trim().to_string())
+        .unwrap_or_default()
+}
+
+/// The plan's jobs not done, each with its step and tiles left, in order.
+pub fn unfinished(plan: &Plan) -> Result<Vec<(Job, usize)>> {
+    let all = plan.jobs()?;
+    let store = plan.store()?;
+    Ok(jobs::unfinished(&store, &all)?
+        .into_iter()
+        .map(|(i, left)| (all[i].clone(), left.len()))
+        .collect())
+}
+
+/// Finish the plan in `dir`: refused, naming the jobs left and how to run
+/// them, unless every job is done; else the pyramid sealed and moved to
+/// its place.
+pub fn finish(dir: &Path) -> Result<TiledSummary> {
+    let plan = Plan::load(dir)?;
+    if !staging_path(&plan.out).exists() && pyramid::Pyramid::open(&plan.out).is_ok() {
+        bail!(
+            "{}: this plan is already finished; its pyramid is {}",
+            dir.display(),
+            plan.out.display()
+        );
+    }
+    let left = unfinished(&plan)?;
+    if !left.is_empty() {
+        let names: Vec<String> = left
+            .iter()
+            .map(|(job, n)| format!("{} ({}, {n} tiles)", job.index, job.step.name()))
+            .collect();
+        let indices: Vec<String> = left.iter().map(|(j, _)| j.index.to_string()).collect();
+        bail!(
+            "{}: {} jobs are not done: {}. Run each with `relevo prep --plan {} --job K` \
+             (K = {}), in step order, or resubmit them all with `relevo prep --plan {} \
+             --submit slurm`; then finish again",
+            dir.display(),
+            left.len(),
+            names.join(", "),
+            dir.display(),
+            indices.join(" "),
+            dir.display()
+        );
+    }
+    let start = Instant::now();
+    let options = WriteOptions {
+        resume: true,
+        ..plan.write
+    };
+    let (staging, store) = pyramid::start_build(&plan.out, &plan.description, &options)?;
+    let (height_range_m, valid_vertices) = build::statistics(&store)?;
+    let mut timings = job_timings(dir, &plan)?;
+    timings.push(StageTiming {
+        stage: "statistics".into(),
+        ms: start.elapsed().as_secs_f64() * 1e3,
+    });
+    let report = BuildReport {
+        height_range_m,
+        valid_vertices,
+        timings,
+    };
+    let bundle = pyramid::seal_build(staging, store, report, plan.description.clone(), &options)?;
+    let opened = pyramid::Pyramid::open(&bundle)?;
+    let m = &opened.manifest;
+    Ok(TiledSummary {
+        bundle,
+        region: m.region.clone(),
+        side: m.grid.side,
+        cell_size_m: m.grid.cell_size_m,
+        tile_cells: m.tiling.tile_cells,
+        levels: m.tiling.levels,
+        tiles: m.tiling.tiles,
+        valid_vertices: m.grid.valid_vertices,
+        height_range_m: m.grid.height_range_m,
+        read_by_windows: matches!(plan.heights, PlannedHeights::Windows { .. }),
+        grid_ms: 0.0,
+        pyramid_ms: m.timings.iter().map(|t| t.ms).sum(),
+    })
+}
+
+/// The jobs' wall times summed by the stage the manifest records them
+/// under (a job run twice counts its last run).
+fn job_timings(dir: &Path, plan: &Plan) -> Result<Vec<StageTiming>> {
+    let mut timings: Vec<StageTiming> = Vec::new();
+    for job in plan.jobs()? {
+        let path = dir.join("jobs").join(format!("{}.json", job.index));
+        let Ok(text) = std::fs::read_to_string(&path) else {
+            continue; // done by a run that left no record (killed after its last mark)
+        };
+        let record: JobRecord =
+            serde_json::from_str(&text).with_context(|| path.display().to_string())?;
+        let stage = job.step.timing_name();
+        match timings.iter_mut().find(|t| t.stage == stage) {
+            Some(t) => t.ms += record.ms,
+            None => timings.push(StageTiming {
+                stage: stage.into(),
+                ms: record.ms,
+            }),
+        }
+    }
+    Ok(timings)
+}
