@@ -121,7 +121,7 @@ fn a_plan_run_as_jobs_gives_the_single_machine_pyramid_for_any_job_count() {
                     assert_eq!(o.status.code(), Some(1), "{e}");
                     assert!(
                         e.contains("jobs are not done")
-                            && e.contains(&format!("{first} (lattice, 1 tiles)"))
+                            && e.contains(&format!("{first} (lattice, 1 tile)"))
                             && e.contains("--submit slurm")
                             && !out.exists(),
                         "{e}"

@@ -383,7 +383,10 @@ pub fn finish(dir: &Path) -> Result<TiledSummary> {
     if !left.is_empty() {
         let names: Vec<String> = left
             .iter()
-            .map(|(job, n)| format!("{} ({}, {n} tiles)", job.index, job.step.name()))
+            .map(|(job, n)| {
+                let tiles = if *n == 1 { "tile" } else { "tiles" };
+                format!("{} ({}, {n} {tiles})", job.index, job.step.name())
+            })
             .collect();
         let indices: Vec<String> = left.iter().map(|(j, _)| j.index.to_string()).collect();
         bail!(
