@@ -10,6 +10,7 @@ mod clusters;
 mod measure;
 mod pyramid;
 mod render;
+mod slurm;
 mod veg_protocol;
 mod view;
 mod view_vegetation;
@@ -41,6 +42,21 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum BenchCommand {
+    /// A pyramid (the real 8193² Grenoble input of `pyramid`) built as
+    /// Slurm array jobs on a single-node cluster it starts, beside `prep
+    /// --tiled`; Slurm's cost per task. Needs Slurm and munge
+    /// (scripts/setup-test) and the `relevo` binary built beside this one.
+    #[command(after_help = "Examples:
+  cargo build --release -p relevo
+  relevo-bench slurm --json
+  relevo-bench slurm --jobs 16")]
+    Slurm {
+        #[command(flatten)]
+        common: BenchArgs,
+        /// Most jobs a step.
+        #[arg(long, default_value_t = 8)]
+        jobs: usize,
+    },
     /// `prep` on the sample region; `stitch` on the Landsat overlap beside gdalwarp.
     #[command(after_help = "Examples:
   relevo-bench ingest
@@ -243,6 +259,7 @@ fn main() -> ExitCode {
             Some(dir) => pyramid::picture(&a.repo, &dir),
             None => pyramid::run(&a.repo, a.runs.max(1), max_side, a.json),
         },
+        BenchCommand::Slurm { common: a, jobs } => slurm::run(&a.repo, jobs, a.json),
         BenchCommand::Check(a) => check::run(&a.repo, a.runs.max(1), a.json),
         BenchCommand::Render {
             common: a,

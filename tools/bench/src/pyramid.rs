@@ -250,7 +250,7 @@ fn readers(
 }
 
 /// The `relevo` binary built beside this one.
-fn relevo_exe() -> Result<PathBuf> {
+pub fn relevo_exe() -> Result<PathBuf> {
     let exe = std::env::current_exe()?.with_file_name("relevo");
     if !exe.is_file() {
         bail!(
@@ -263,7 +263,7 @@ fn relevo_exe() -> Result<PathBuf> {
 
 /// The committed Grenoble DEM warped to UTM 31N at `cell_m` over `extent`
 /// (`[xmin, ymin, xmax, ymax]`, inside the tile: no voids).
-fn grenoble_utm(repo: &Path, dir: &Path, cell_m: f64, extent: [f64; 4]) -> Result<PathBuf> {
+pub fn grenoble_utm(repo: &Path, dir: &Path, cell_m: f64, extent: [f64; 4]) -> Result<PathBuf> {
     let out = dir.join(format!("grenoble_utm31n_{cell_m}m.tif"));
     let dem = repo.join("data/grenoble/Copernicus_DSM_10_N45_00_E005_00_DEM.tif");
     let cell = cell_m.to_string();
