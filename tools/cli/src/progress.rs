@@ -27,3 +27,10 @@ pub fn pass_bar() -> ProgressBar {
     );
     bar
 }
+
+/// Show a build's progress on a [`pass_bar`].
+pub fn show_pass(bar: &ProgressBar, p: relevo_core::pyramid::Progress) {
+    bar.set_message(p.pass);
+    bar.set_length(p.total as u64);
+    bar.set_position(p.done as u64);
+}

@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::{grenoble_dem, projected_dem_named, relevo, relevo_ok, set_cells, sha256};
+use common::{grenoble_dem, projected_dem_named, pyramid_contents, relevo, relevo_ok, set_cells};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -22,19 +22,6 @@ fn prep_tiled(dem: &Path, out: &Path, tile: usize, extra: &[&str]) {
     args.extend(extra.iter().map(|s| s.to_string()));
     args.extend(["--out".into(), out.display().to_string()]);
     relevo_ok(&args);
-}
-
-/// What must be equal between two pyramids: the tile files' hashes and
-/// the manifest without its wall times.
-fn contents(p: &Path) -> (Vec<String>, serde_json::Value) {
-    let tiles = ["height.f32", "mask.u8", "lp.f32x2", "drape.rgba8"]
-        .iter()
-        .map(|f| sha256(&p.join("tiles").join(f)))
-        .collect();
-    let mut manifest: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(p.join("manifest.json")).unwrap()).unwrap();
-    manifest.as_object_mut().unwrap().remove("timings");
-    (tiles, manifest)
 }
 
 /// The plan's steps: (name, first job, last job).
@@ -88,7 +75,7 @@ fn a_plan_run_as_jobs_gives_the_single_machine_pyramid_for_any_job_count() {
         let local = d.path().join(format!("local-{}", label.len()));
         std::fs::create_dir(&local).unwrap();
         prep_tiled(&dem, &local.join("g.relevo"), 128, &[]);
-        let expected = contents(&local.join("g.relevo"));
+        let expected = pyramid_contents(&local.join("g.relevo"));
         for jobs in [1, 4, 16] {
             let here = d.path().join(format!("{}-{jobs}", label.len()));
             std::fs::create_dir(&here).unwrap();
@@ -138,7 +125,7 @@ fn a_plan_run_as_jobs_gives_the_single_machine_pyramid_for_any_job_count() {
             }
             relevo_ok(["prep", "--plan", plan.to_str().unwrap(), "--finish", "-q"]);
             assert_eq!(
-                contents(&out),
+                pyramid_contents(&out),
                 expected,
                 "{label}, {jobs} jobs a step: not the single machine's pyramid"
             );
@@ -200,7 +187,10 @@ fn a_job_killed_mid_tile_runs_again_to_the_same_bytes() {
     }
     assert!(killed > 0, "no job was still running when killed");
     relevo_ok(["prep", "--plan", plan.to_str().unwrap(), "--finish", "-q"]);
-    assert_eq!(contents(&out), contents(&whole.join("g.relevo")));
+    assert_eq!(
+        pyramid_contents(&out),
+        pyramid_contents(&whole.join("g.relevo"))
+    );
 }
 
 #[test]

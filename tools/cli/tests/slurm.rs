@@ -12,8 +12,7 @@
 
 mod common;
 
-use common::{projected_dem_named, relevo_ok, set_cells, sha256};
-use std::path::Path;
+use common::{projected_dem_named, pyramid_contents, relevo_ok, set_cells};
 use std::process::Output;
 use std::time::Duration;
 
@@ -32,17 +31,6 @@ fn relevo(cluster: &Cluster, args: &[&str]) -> Output {
 }
 
 const LIMIT: Duration = Duration::from_secs(240);
-
-fn contents(p: &Path) -> (Vec<String>, serde_json::Value) {
-    let tiles = ["height.f32", "mask.u8", "lp.f32x2", "drape.rgba8"]
-        .iter()
-        .map(|f| sha256(&p.join("tiles").join(f)))
-        .collect();
-    let mut manifest: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(p.join("manifest.json")).unwrap()).unwrap();
-    manifest.as_object_mut().unwrap().remove("timings");
-    (tiles, manifest)
-}
 
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).to_string()
@@ -83,25 +71,38 @@ fn a_plan_runs_as_slurm_array_jobs_to_the_single_machine_pyramid_and_survives_a_
     let prep = ["prep", "--dem", &dem, "--tiled", "--tile-size", "256", "-q"];
     let out = local.join("g.relevo");
     relevo_ok([&prep[..], &["--out", out.to_str().unwrap()]].concat());
-    let expected = contents(&out);
+    let expected = pyramid_contents(&out);
 
     let slurm_dir = tempfile::tempdir().unwrap();
     let cluster = Cluster::start(slurm_dir.path()).unwrap();
     // The whole plan, 4 jobs a step, 300 MB a task.
-    let here = d.path().join("whole");
-    std::fs::create_dir(&here).unwrap();
-    let (plan, out) = (here.join("plan"), here.join("g.relevo"));
-    let (plan_s, out_s) = (plan.to_str().unwrap(), out.to_str().unwrap());
-    let o = relevo(
-        &cluster,
-        &[
-            &prep[..],
-            &["--plan", plan_s, "--jobs", "4", "--out", out_s],
-            &["--submit", "slurm", "--mem", "300M", "--json"],
-        ]
-        .concat(),
-    );
-    let ids = submitted(&o);
+    // Plan `name` (4 jobs a step) and submit it with `extra`: the plan,
+    // the pyramid's path, what was submitted.
+    let plan_and_submit = |name: &str, extra: &[&str]| {
+        let here = d.path().join(name);
+        std::fs::create_dir(&here).unwrap();
+        let (plan, out) = (here.join("plan"), here.join("g.relevo"));
+        let o = relevo(
+            &cluster,
+            &[
+                &prep[..],
+                &["--plan", plan.to_str().unwrap(), "--jobs", "4"],
+                &[
+                    "--out",
+                    out.to_str().unwrap(),
+                    "--submit",
+                    "slurm",
+                    "--json",
+                ],
+                extra,
+            ]
+            .concat(),
+        );
+        let ids = submitted(&o);
+        (plan, out, ids)
+    };
+    let (plan, out, ids) = plan_and_submit("whole", &["--mem", "300M"]);
+    let plan_s = plan.to_str().unwrap();
     let steps: Vec<&str> = ids.iter().map(|(s, _, _)| s.as_str()).collect();
     assert_eq!(
         steps,
@@ -132,7 +133,7 @@ fn a_plan_runs_as_slurm_array_jobs_to_the_single_machine_pyramid_and_survives_a_
         "the finish job did not move the pyramid into place: {:?}",
         std::fs::read_to_string(plan.join("logs/10-finish.log"))
     );
-    assert_eq!(contents(&out), expected, "Slurm's pyramid differs");
+    assert_eq!(pyramid_contents(&out), expected, "Slurm's pyramid differs");
     // Every task ran under Slurm with the memory it was given.
     for k in 0..=ids[8].1[0] {
         let record: serde_json::Value = serde_json::from_str(
@@ -144,20 +145,8 @@ fn a_plan_runs_as_slurm_array_jobs_to_the_single_machine_pyramid_and_survives_a_
     }
 
     // A task cancelled: the steps after it never run.
-    let here = d.path().join("cancelled");
-    std::fs::create_dir(&here).unwrap();
-    let (plan, out) = (here.join("plan"), here.join("g.relevo"));
-    let (plan_s, out_s) = (plan.to_str().unwrap(), out.to_str().unwrap());
-    let o = relevo(
-        &cluster,
-        &[
-            &prep[..],
-            &["--plan", plan_s, "--jobs", "4", "--out", out_s],
-            &["--submit", "slurm", "--json"],
-        ]
-        .concat(),
-    );
-    let ids = submitted(&o);
+    let (plan, out, ids) = plan_and_submit("cancelled", &[]);
+    let plan_s = plan.to_str().unwrap();
     let (_, own_jobs, own_id) = &ids[1];
     run(cluster.command("scancel").arg(format!("{own_id}_2"))).unwrap();
     cluster.drain(LIMIT).unwrap();
@@ -179,7 +168,7 @@ fn a_plan_runs_as_slurm_array_jobs_to_the_single_machine_pyramid_and_survives_a_
     assert_eq!(ids[0].1, [cancelled]);
     cluster.drain(LIMIT).unwrap();
     assert_eq!(
-        contents(&out),
+        pyramid_contents(&out),
         expected,
         "the resubmitted plan's pyramid differs"
     );

@@ -21,12 +21,14 @@
 
 use super::direct::DirectSource;
 use super::region::RegionSpec;
-use super::tiled::{height_source, Heights, TiledSummary};
+use super::tiled::{
+    height_source, region_name, write_options, Heights, TiledOptions, TiledSummary,
+};
 use anyhow::{bail, Context, Result};
 use relevo_core::bundle::{staging_path, StageTiming};
 use relevo_core::pyramid::jobs::{self, Job};
 use relevo_core::pyramid::{
-    self, build, BuildOptions, BuildReport, PyramidDescription, Step, TileLayout, WriteOptions,
+    self, build, BuildReport, PyramidDescription, Step, TileLayout, WriteOptions,
 };
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -172,11 +174,7 @@ pub fn create(region: &RegionSpec, out: &Path, dir: &Path, options: PlanOptions)
             out.display()
         );
     }
-    let name = region.name.clone().unwrap_or_else(|| {
-        out.file_stem()
-            .map(|s| s.to_string_lossy().to_string())
-            .unwrap_or_else(|| "region".into())
-    });
+    let name = region_name(region, &out);
     // The manifest names the inputs as given, as `prep` does; the jobs,
     // which may run in another folder, read them by absolute paths.
     let (source, description) = height_source(region, &name, &out, options.tile_cells, false)?;
@@ -184,16 +182,12 @@ pub fn create(region: &RegionSpec, out: &Path, dir: &Path, options: PlanOptions)
     for f in &mut region.dem.files {
         *f = absolute(f)?;
     }
-    let write = WriteOptions {
+    let tiled = TiledOptions {
         tile_cells: options.tile_cells,
-        build: BuildOptions {
-            metric: region.grid.error_metric,
-            cell_size_m: description.grid.cell_size_m,
-            drape: true,
-        },
         force: options.force,
         resume: false,
     };
+    let write = write_options(&region, &description, tiled);
     let (staging, store) = pyramid::start_build(&out, &description, &write)?;
     let heights = match &source {
         Heights::Windows(d) => PlannedHeights::Windows {
@@ -209,11 +203,7 @@ pub fn create(region: &RegionSpec, out: &Path, dir: &Path, options: PlanOptions)
                 &write.build,
                 Step::Heights,
                 &Step::Heights.tiles(&layout),
-                &|p| {
-                    bar.set_message(p.pass);
-                    bar.set_length(p.total as u64);
-                    bar.set_position(p.done as u64);
-                },
+                &|p| crate::progress::show_pass(&bar, p),
             )?;
             bar.finish_and_clear();
             PlannedHeights::Written
@@ -320,11 +310,7 @@ pub fn run_job(dir: &Path, index: usize) -> Result<JobRecord> {
         &plan.write.build,
         &all,
         index,
-        &|p| {
-            bar.set_message(p.pass);
-            bar.set_length(p.total as u64);
-            bar.set_position(p.done as u64);
-        },
+        &|p| crate::progress::show_pass(&bar, p),
     )?;
     bar.finish_and_clear();
     let slurm = std::env::var("SLURM_ARRAY_JOB_ID")

@@ -63,32 +63,17 @@ pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Res
             out.display()
         );
     }
-    let name = region.name.clone().unwrap_or_else(|| {
-        out.file_stem()
-            .map(|s| s.to_string_lossy().to_string())
-            .unwrap_or_else(|| "region".into())
-    });
+    let name = region_name(region, out);
     let start = Instant::now();
     let (heights, description) =
         height_source(region, &name, out, options.tile_cells, options.resume)?;
     let read_by_windows = matches!(heights, Heights::Windows(_));
     let grid_ms = start.elapsed().as_secs_f64() * 1e3;
-    let write = WriteOptions {
-        tile_cells: options.tile_cells,
-        build: BuildOptions {
-            metric: region.grid.error_metric,
-            cell_size_m: description.grid.cell_size_m,
-            drape: true,
-        },
-        force: options.force,
-        resume: options.resume,
-    };
+    let write = write_options(region, &description, options);
     let start = Instant::now();
     let bar = crate::progress::pass_bar();
     let bundle = pyramid::write_pyramid(out, heights.source(), description, write, &|p| {
-        bar.set_message(p.pass);
-        bar.set_length(p.total as u64);
-        bar.set_position(p.done as u64);
+        crate::progress::show_pass(&bar, p);
     })?;
     bar.finish_and_clear();
     let pyramid_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -108,6 +93,33 @@ pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Res
         grid_ms,
         pyramid_ms,
     })
+}
+
+/// The region's name: its own, else the output's file stem.
+pub fn region_name(region: &RegionSpec, out: &Path) -> String {
+    region.name.clone().unwrap_or_else(|| {
+        out.file_stem()
+            .map(|s| s.to_string_lossy().to_string())
+            .unwrap_or_else(|| "region".into())
+    })
+}
+
+/// How the pyramid of `region` described by `description` is written.
+pub fn write_options(
+    region: &RegionSpec,
+    description: &PyramidDescription,
+    options: TiledOptions,
+) -> WriteOptions {
+    WriteOptions {
+        tile_cells: options.tile_cells,
+        build: BuildOptions {
+            metric: region.grid.error_metric,
+            cell_size_m: description.grid.cell_size_m,
+            drape: true,
+        },
+        force: options.force,
+        resume: options.resume,
+    }
 }
 
 /// Where a pyramid's heights come from.

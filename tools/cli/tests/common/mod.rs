@@ -295,3 +295,16 @@ pub fn projected_dem_named(dir: &Path, name: &str, extra: &[&str]) -> PathBuf {
     gdal_tool("gdalwarp", &args);
     out
 }
+
+/// What must be equal between two pyramids built alike: the tile files'
+/// hashes and the manifest without its wall times.
+pub fn pyramid_contents(p: &Path) -> (Vec<String>, serde_json::Value) {
+    let tiles = ["height.f32", "mask.u8", "lp.f32x2", "drape.rgba8"]
+        .iter()
+        .map(|f| sha256(&p.join("tiles").join(f)))
+        .collect();
+    let mut manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(p.join("manifest.json")).unwrap()).unwrap();
+    manifest.as_object_mut().unwrap().remove("timings");
+    (tiles, manifest)
+}

@@ -850,12 +850,7 @@ mod tests {
         let dem = testdata::dem("fuji_257.f32");
         let g = grid(&dem);
         let layout = TileLayout::new(g.side, 32).unwrap();
-        let files = |dir: &std::path::Path| -> Vec<Vec<u8>> {
-            TileArray::ALL
-                .iter()
-                .map(|a| std::fs::read(dir.join(a.name().1)).unwrap())
-                .collect()
-        };
+        let files = TileStore::file_bytes;
         let run = |threads: usize, source: &dyn HeightSource, dir: &std::path::Path| {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)

@@ -107,7 +107,6 @@ mod tests {
     use crate::grid::HeightGrid;
     use crate::lp::ErrorMetric;
     use crate::pyramid::build::{build, partials_capacity};
-    use crate::pyramid::store::TileArray;
     use crate::testdata;
 
     #[test]
@@ -155,12 +154,7 @@ mod tests {
             drape: true,
         };
         let layout = TileLayout::new(g.side, 32).unwrap();
-        let files = |dir: &std::path::Path| -> Vec<Vec<u8>> {
-            TileArray::ALL
-                .iter()
-                .map(|a| std::fs::read(dir.join(a.name().1)).unwrap())
-                .collect()
-        };
+        let files = TileStore::file_bytes;
         let whole = tempfile::tempdir().unwrap();
         let store = TileStore::open(whole.path(), layout, partials_capacity(&layout)).unwrap();
         build(&g, &store, &options, &|_| {}).unwrap();

@@ -385,6 +385,16 @@ impl TileStore {
         (self.layout.slot(key) * PASSES + pass as usize) as u64
     }
 
+    /// The tile files' bytes in `dir`, array by array (for tests that
+    /// compare builds).
+    #[cfg(test)]
+    pub fn file_bytes(dir: &Path) -> Vec<Vec<u8>> {
+        TileArray::ALL
+            .iter()
+            .map(|a| std::fs::read(dir.join(a.name().1)).unwrap_or_default())
+            .collect()
+    }
+
     /// Remove the scratch once the pyramid is complete.
     pub fn remove_scratch(self) -> Result<()> {
         let scratch = self.dir.join("scratch");
