@@ -18,3 +18,4 @@ pub mod output;
 pub mod prep;
 pub mod progress;
 pub mod veg_io;
+pub mod veg_plan;

@@ -16,7 +16,7 @@ use relevo_core::geo::GeoTransform;
 use relevo_core::raster::stretch::{stretch_or_default, stretch_ranges, to_u8};
 use relevo_core::raster::Raster;
 use relevo_core::veg::db::VegObject;
-use relevo_core::veg::pipeline::{Extraction, VegImage};
+use relevo_core::veg::pipeline::{Extraction, PixelSource, TileImage, VegImage};
 use relevo_core::veg::samples::Sample;
 use relevo_core::veg::Image;
 use std::path::Path;
@@ -27,175 +27,262 @@ const STRIP_ROWS: usize = 256;
 /// Most cells of the view stretch percentiles are taken from.
 const STRETCH_VIEW_CELLS: usize = 1 << 22;
 
-/// Read `bands` (1-based) of `path`; 8-bit data is kept, deeper data is
-/// stretched between the `stretch` percentiles (default 2, 98) to 8 bits
-/// (percentiles of the whole image, or of a view decimated to about 4 M
-/// cells when it is larger).
-/// `pixel_m` sets the pixel size of an image that is not georeferenced.
+/// Read `bands` (1-based) of `path` whole; see [`ImageReader`].
 pub fn read_image(
     path: &Path,
     bands: Option<&[usize]>,
     stretch: Option<[f64; 2]>,
     pixel_m: Option<f64>,
 ) -> Result<VegImage> {
-    let source = gdalio::open(path)?;
-    let bands: Vec<usize> = match bands {
-        Some(b) => b.to_vec(),
-        None => (1..=source.bands.min(3)).collect(),
-    };
-    if bands.is_empty() || bands.len() > relevo_core::veg::MAX_BANDS {
-        bail!(
-            "{}: choose 1 to {} bands, got {}",
-            path.display(),
-            relevo_core::veg::MAX_BANDS,
-            bands.len()
-        );
-    }
-    if let Some(&b) = bands.iter().find(|&&b| b == 0 || b > source.bands) {
-        bail!(
-            "{}: has {} band(s), no band {b}",
-            path.display(),
-            source.bands
-        );
-    }
-    // Kept whole: the 8-bit bands, the valid mask and the region label of
-    // every pixel; the extraction checks its tiles' working memory itself.
-    let (w, h) = (source.width, source.height);
-    relevo_core::memory::check(
-        &format!(
-            "{}: vegetation extraction on {w}×{h} pixels",
-            path.display()
-        ),
-        (w as u64).saturating_mul(h as u64),
-        bands.len() as u64 + 5,
-        "crop the image first (gdal_translate -srcwin)",
-    )?;
-    // Stretch ranges from a view of the whole image decimated to at most
-    // STRETCH_VIEW_CELLS (the whole image when smaller); then the pixels in
-    // strips of rows, so the f64 copies hold a strip per thread at most.
-    let stretch = stretch_or_default(stretch, source.band_type == GdalDataType::UInt8);
-    let ranges = match stretch {
-        None => vec![(0.0, 255.0); bands.len()],
-        Some(_) => {
-            let factor = ((w * h) as f64 / STRETCH_VIEW_CELLS as f64).sqrt().max(1.0);
-            let view = (
-                ((w as f64 / factor).ceil() as usize).max(1),
-                ((h as f64 / factor).ceil() as usize).max(1),
-            );
-            let decimated = source.read_window_as(0, 0, w, h, view, Some(&bands), source.nodata)?;
-            stretch_ranges(&decimated, stretch)
-        }
-    };
-    // Strips of rows read in parallel, each worker through its own handle
-    // on the file (a GDAL dataset is not shared between threads). 8-bit
-    // bands without a stretch are copied as they are, without a detour
-    // through f64; then only a no-data value asks for the validity mask, so
-    // a large image pays no mask it does not need.
-    let as_bytes = stretch.is_none()
-        && bands.iter().all(|&b| {
-            source
-                .dataset
-                .rasterband(b)
-                .is_ok_and(|band| band.band_type() == GdalDataType::UInt8)
-        });
-    let byte_nodata = source
-        .nodata
-        .filter(|v| (0.0..=255.0).contains(v) && v.fract() == 0.0);
-    let masked = !as_bytes || byte_nodata.is_some();
-    let mut pixels = vec![0u8; w * h * bands.len()];
-    let mut valid = if masked {
-        vec![true; w * h]
-    } else {
-        Vec::new()
-    };
-    let strip_cells = STRIP_ROWS * w;
-    let valid_strips: Vec<Option<&mut [bool]>> = if masked {
-        valid.chunks_mut(strip_cells).map(Some).collect()
-    } else {
-        (0..h.div_ceil(STRIP_ROWS)).map(|_| None).collect()
-    };
-    pixels
-        .par_chunks_mut(strip_cells * bands.len())
-        .zip(valid_strips)
-        .enumerate()
-        .try_for_each_init(
-            || gdalio::open(path),
-            |handle, (k, (strip, valid))| -> Result<()> {
-                let source = handle.as_ref().map_err(|e| anyhow!("{e:#}"))?;
-                let (row, rows) = (k * STRIP_ROWS, strip.len() / (w * bands.len()));
-                if as_bytes {
-                    return read_byte_strip(source, row, rows, &bands, byte_nodata, strip, valid);
-                }
-                let values = source.read_window(0, row, w, rows, Some(&bands), source.nodata)?;
-                let valid = valid.context("a mask for every strip read through f64")?;
-                for (i, (px, ok)) in strip.chunks_exact_mut(bands.len()).zip(valid).enumerate() {
-                    for (b, v) in px.iter_mut().enumerate() {
-                        *v = to_u8(values.band(b)[i], ranges[b]);
-                    }
-                    *ok = values.is_valid(i);
-                }
-                Ok(())
-            },
-        )?;
-    let valid = (masked && valid.contains(&false)).then_some(valid);
-    let image =
-        Image::new(w, h, bands.len(), pixels).map_err(|e| anyhow!("{}: {e}", path.display()))?;
-    let crs_wkt = match &source.srs {
-        Some(srs) => crs::to_wkt(srs)?,
-        None => String::new(),
-    };
-    let ground = source.geotransform.map(|g| {
-        let (w, h) = g.cell_size();
-        let cell = w.abs().min(h.abs());
-        // Geographic CRS: degrees to metres along a meridian.
-        match &source.srs {
-            Some(srs) if srs.is_geographic() => cell * 111_320.0,
-            _ => cell,
-        }
-    });
-    let pixel_m = match (pixel_m, ground) {
-        (Some(p), _) if p.is_finite() && p > 0.0 => p,
-        (Some(p), _) => bail!("--pixel-size must be positive, got {p}"),
-        (None, Some(g)) => g,
-        (None, None) => {
-            tracing::warn!(
-                "{}: not georeferenced; taking 1 m pixels (set --pixel-size)",
-                path.display()
-            );
-            1.0
-        }
-    };
-    Ok(VegImage {
-        image,
-        crs_wkt,
-        geotransform: source.geotransform,
-        pixel_m,
-        valid,
-    })
+    ImageReader::open(path, bands, stretch, pixel_m)?.whole()
 }
 
-/// Read `rows` rows from `row` of 8-bit `bands` into `strip`
-/// (interleaved) and, with a no-data value, their validity (every band
+/// An image opened for vegetation extraction, read whole or window by
+/// window (each window as the whole image holds it): `bands` (1-based);
+/// 8-bit data kept, deeper data stretched between the `stretch`
+/// percentiles (default 2, 98) to 8 bits (percentiles of the whole image,
+/// or of a view decimated to about 4 M cells when it is larger); `pixel_m`
+/// the pixel size of an image that is not georeferenced.
+pub struct ImageReader {
+    path: std::path::PathBuf,
+    bands: Vec<usize>,
+    /// Per band, the values stretched to 0 and 255.
+    ranges: Vec<(f64, f64)>,
+    /// 8-bit bands copied as they are.
+    as_bytes: bool,
+    /// The no-data value of 8-bit bands, when one is set.
+    byte_nodata: Option<f64>,
+    /// Whether pixels are checked for data.
+    masked: bool,
+    nodata: Option<f64>,
+    pub width: usize,
+    pub height: usize,
+    pub crs_wkt: String,
+    pub geotransform: Option<GeoTransform>,
+    pub pixel_m: f64,
+}
+
+impl ImageReader {
+    pub fn open(
+        path: &Path,
+        bands: Option<&[usize]>,
+        stretch: Option<[f64; 2]>,
+        pixel_m: Option<f64>,
+    ) -> Result<ImageReader> {
+        let source = gdalio::open(path)?;
+        let bands: Vec<usize> = match bands {
+            Some(b) => b.to_vec(),
+            None => (1..=source.bands.min(3)).collect(),
+        };
+        if bands.is_empty() || bands.len() > relevo_core::veg::MAX_BANDS {
+            bail!(
+                "{}: choose 1 to {} bands, got {}",
+                path.display(),
+                relevo_core::veg::MAX_BANDS,
+                bands.len()
+            );
+        }
+        if let Some(&b) = bands.iter().find(|&&b| b == 0 || b > source.bands) {
+            bail!(
+                "{}: has {} band(s), no band {b}",
+                path.display(),
+                source.bands
+            );
+        }
+        let (w, h) = (source.width, source.height);
+        // Stretch ranges from a view of the whole image decimated to at
+        // most STRETCH_VIEW_CELLS (the whole image when smaller).
+        let stretch = stretch_or_default(stretch, source.band_type == GdalDataType::UInt8);
+        let ranges = match stretch {
+            None => vec![(0.0, 255.0); bands.len()],
+            Some(_) => {
+                let factor = ((w * h) as f64 / STRETCH_VIEW_CELLS as f64).sqrt().max(1.0);
+                let view = (
+                    ((w as f64 / factor).ceil() as usize).max(1),
+                    ((h as f64 / factor).ceil() as usize).max(1),
+                );
+                let decimated =
+                    source.read_window_as(0, 0, w, h, view, Some(&bands), source.nodata)?;
+                stretch_ranges(&decimated, stretch)
+            }
+        };
+        // 8-bit bands without a stretch are copied as they are, without a
+        // detour through f64; then only a no-data value asks for the
+        // validity mask, so a large image pays no mask it does not need.
+        let as_bytes = stretch.is_none()
+            && bands.iter().all(|&b| {
+                source
+                    .dataset
+                    .rasterband(b)
+                    .is_ok_and(|band| band.band_type() == GdalDataType::UInt8)
+            });
+        let byte_nodata = source
+            .nodata
+            .filter(|v| (0.0..=255.0).contains(v) && v.fract() == 0.0);
+        let crs_wkt = match &source.srs {
+            Some(srs) => crs::to_wkt(srs)?,
+            None => String::new(),
+        };
+        let ground = source.geotransform.map(|g| {
+            let (w, h) = g.cell_size();
+            let cell = w.abs().min(h.abs());
+            // Geographic CRS: degrees to metres along a meridian.
+            match &source.srs {
+                Some(srs) if srs.is_geographic() => cell * 111_320.0,
+                _ => cell,
+            }
+        });
+        let pixel_m = match (pixel_m, ground) {
+            (Some(p), _) if p.is_finite() && p > 0.0 => p,
+            (Some(p), _) => bail!("--pixel-size must be positive, got {p}"),
+            (None, Some(g)) => g,
+            (None, None) => {
+                tracing::warn!(
+                    "{}: not georeferenced; taking 1 m pixels (set --pixel-size)",
+                    path.display()
+                );
+                1.0
+            }
+        };
+        Ok(ImageReader {
+            path: path.to_path_buf(),
+            bands,
+            ranges,
+            as_bytes,
+            byte_nodata,
+            masked: !as_bytes || byte_nodata.is_some(),
+            nodata: source.nodata,
+            width: w,
+            height: h,
+            crs_wkt,
+            geotransform: source.geotransform,
+            pixel_m,
+        })
+    }
+
+    /// The whole image, its pixels and validity held in memory (checked
+    /// against the budget first).
+    pub fn whole(self) -> Result<VegImage> {
+        let (w, h) = (self.width, self.height);
+        // Kept whole: the 8-bit bands, the valid mask and the region label
+        // of every pixel; the extraction checks its tiles' working memory.
+        relevo_core::memory::check(
+            &format!(
+                "{}: vegetation extraction on {w}×{h} pixels",
+                self.path.display()
+            ),
+            (w as u64).saturating_mul(h as u64),
+            self.bands.len() as u64 + 5,
+            "crop the image first (gdal_translate -srcwin), or split it across jobs (--plan)",
+        )?;
+        let (pixels, valid) = self.read([0, 0, w, h])?;
+        let image = Image::new(w, h, self.bands.len(), pixels)
+            .map_err(|e| anyhow!("{}: {e}", self.path.display()))?;
+        Ok(VegImage {
+            image,
+            crs_wkt: self.crs_wkt,
+            geotransform: self.geotransform,
+            pixel_m: self.pixel_m,
+            valid,
+        })
+    }
+
+    /// The pixels of `rect` (`[x0, y0, x1, y1)`), interleaved, and which
+    /// have data (`None`: all): strips of rows read in parallel, each
+    /// worker through its own handle on the file (a GDAL dataset is not
+    /// shared between threads), so the f64 copies hold a strip per thread.
+    pub fn read(&self, [x0, y0, x1, y1]: [usize; 4]) -> Result<(Vec<u8>, Option<Vec<bool>>)> {
+        let (w, h, n) = (x1 - x0, y1 - y0, self.bands.len());
+        let mut pixels = vec![0u8; w * h * n];
+        let mut valid = if self.masked {
+            vec![true; w * h]
+        } else {
+            Vec::new()
+        };
+        let strip_cells = STRIP_ROWS * w;
+        let valid_strips: Vec<Option<&mut [bool]>> = if self.masked {
+            valid.chunks_mut(strip_cells).map(Some).collect()
+        } else {
+            (0..h.div_ceil(STRIP_ROWS)).map(|_| None).collect()
+        };
+        pixels
+            .par_chunks_mut(strip_cells * n)
+            .zip(valid_strips)
+            .enumerate()
+            .try_for_each_init(
+                || gdalio::open(&self.path),
+                |handle, (k, (strip, valid))| -> Result<()> {
+                    let source = handle.as_ref().map_err(|e| anyhow!("{e:#}"))?;
+                    let (row, rows) = (y0 + k * STRIP_ROWS, strip.len() / (w * n));
+                    if self.as_bytes {
+                        return read_byte_strip(
+                            source,
+                            [x0, row, w, rows],
+                            &self.bands,
+                            self.byte_nodata,
+                            strip,
+                            valid,
+                        );
+                    }
+                    let values =
+                        source.read_window(x0, row, w, rows, Some(&self.bands), self.nodata)?;
+                    let valid = valid.context("a mask for every strip read through f64")?;
+                    for (i, (px, ok)) in strip.chunks_exact_mut(n).zip(valid).enumerate() {
+                        for (b, v) in px.iter_mut().enumerate() {
+                            *v = to_u8(values.band(b)[i], self.ranges[b]);
+                        }
+                        *ok = values.is_valid(i);
+                    }
+                    Ok(())
+                },
+            )?;
+        Ok((
+            pixels,
+            (self.masked && valid.contains(&false)).then_some(valid),
+        ))
+    }
+}
+
+impl PixelSource for ImageReader {
+    fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
+    fn window(&self, rect: [usize; 4], _: Vec<u8>) -> relevo_core::Result<TileImage<'_>> {
+        let (pixels, valid) = self
+            .read(rect)
+            .map_err(|e| relevo_core::Error::Input(format!("{e:#}")))?;
+        let image = Image::new(
+            rect[2] - rect[0],
+            rect[3] - rect[1],
+            self.bands.len(),
+            pixels,
+        )?;
+        Ok(TileImage::Window(image, valid))
+    }
+}
+
+/// Read the window `[x, row, width, rows]` of 8-bit `bands` into `strip`
+/// (interleaved) and, with a no-data value, its validity (every band
 /// differs from it) into `valid`.
 fn read_byte_strip(
     source: &gdalio::Source,
-    row: usize,
-    rows: usize,
+    [x, row, width, rows]: [usize; 4],
     bands: &[usize],
     nodata: Option<f64>,
     strip: &mut [u8],
     mut valid: Option<&mut [bool]>,
 ) -> Result<()> {
-    let mut band_values = vec![0u8; source.width * rows];
+    let mut band_values = vec![0u8; width * rows];
     gdalio::clear_errors();
     for (k, &b) in bands.iter().enumerate() {
         source
             .dataset
             .rasterband(b)?
             .read_into_slice(
-                (0, row as isize),
-                (source.width, rows),
-                (source.width, rows),
+                (x as isize, row as isize),
+                (width, rows),
+                (width, rows),
                 &mut band_values,
                 None,
             )

@@ -7,12 +7,14 @@
 //! it; a second submission while the first is queued is refused; a
 //! cancelled task leaves the plan incomplete, `--finish` names what is
 //! missing, and submitting again sends only that and completes the same
-//! bytes.
+//! bytes. A vegetation detection on real imagery, split into array tasks,
+//! writes the database one machine writes.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
 
-use common::{projected_dem_named, pyramid_contents, relevo_ok, set_cells};
+use common::{projected_dem_named, pyramid_contents, relevo_ok, repo, set_cells, shared};
+use std::path::Path;
 use std::process::Output;
 use std::time::Duration;
 
@@ -171,5 +173,52 @@ fn a_plan_runs_as_slurm_array_jobs_to_the_single_machine_pyramid_and_survives_a_
         pyramid_contents(&out),
         expected,
         "the resubmitted plan's pyramid differs"
+    );
+
+    vegetation_as_array_jobs(&cluster, d.path());
+}
+
+/// Vegetation on real imagery (the NEON Yellowstone crop, tiles of 256
+/// pixels) planned in `dir`: 3 array tasks, then the finish, write the
+/// database one machine writes.
+fn vegetation_as_array_jobs(cluster: &Cluster, dir: &Path) {
+    let image = shared("trees/2019_YELL_2_541000_4977000_image_crop.png");
+    let samples = repo("data/trees/yellowstone_samples.csv");
+    let veg = [
+        "veg",
+        "detect",
+        image.to_str().unwrap(),
+        "--samples",
+        samples.to_str().unwrap(),
+        "--pixel-size",
+        "0.1",
+        "--tile",
+        "256",
+    ];
+    let single = dir.join("single.csv");
+    relevo_ok([&veg[..], &["--out", single.to_str().unwrap()]].concat());
+    let (plan, out) = (dir.join("veg-plan"), dir.join("trees.csv"));
+    let ids = submitted(&relevo(
+        cluster,
+        &[
+            &veg[..],
+            &["--plan", plan.to_str().unwrap(), "--jobs", "3"],
+            &[
+                "--out",
+                out.to_str().unwrap(),
+                "--submit",
+                "slurm",
+                "--json",
+            ],
+        ]
+        .concat(),
+    ));
+    assert_eq!(ids.len(), 2, "{ids:?}");
+    assert_eq!(ids[0].1, [0, 1, 2]);
+    cluster.drain(LIMIT).unwrap();
+    assert!(
+        std::fs::read(&out).ok() == std::fs::read(&single).ok(),
+        "Slurm's vegetation database differs: {:?}",
+        std::fs::read_to_string(plan.join("logs/01-finish.log"))
     );
 }

@@ -105,3 +105,91 @@ fn named_camera(spec: &str, size: [u32; 2]) -> anyhow::Result<relevo_core::golde
         file: String::new(),
     })
 }
+
+/// Schedulers `--submit` sends a plan's jobs to.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum Scheduler {
+    Slurm,
+}
+
+/// A plan's flags (`prep` and `veg detect`): make one, run one of its
+/// jobs, finish it, or submit it to a scheduler.
+#[derive(clap::Args, Debug)]
+pub struct PlanArgs {
+    /// Split the work into jobs for several machines sharing a file
+    /// system (see docs/guide.md, "Running on a Slurm cluster"): with the
+    /// inputs and --jobs, write the plan in this folder; alone, act on the
+    /// plan there (--job, --finish, --submit).
+    #[arg(long, value_name = "DIR")]
+    pub plan: Option<std::path::PathBuf>,
+    /// With --plan and the inputs: cut each step of the work into at most
+    /// N jobs.
+    #[arg(long, value_name = "N", requires = "plan", default_value_t = 1)]
+    pub jobs: usize,
+    /// With --plan: run job K (idempotent: what it finds done is kept).
+    #[arg(long, value_name = "K", requires = "plan", conflicts_with_all = ["finish", "submit"])]
+    pub job: Option<usize>,
+    /// With --plan: check every job is done and write the result.
+    #[arg(long, requires = "plan", conflicts_with = "submit")]
+    pub finish: bool,
+    /// With --plan: submit the jobs not done, step after step, then the
+    /// finish, to a scheduler (Slurm's sbatch); prints the job ids.
+    #[arg(long, value_enum, requires = "plan")]
+    pub submit: Option<Scheduler>,
+    /// With --submit: the Slurm partition.
+    #[arg(long, requires = "submit")]
+    pub partition: Option<String>,
+    /// With --submit: memory a task, as sbatch takes it (e.g. 4G; default
+    /// twice the working estimate and 256M).
+    #[arg(long, requires = "submit")]
+    pub mem: Option<String>,
+    /// With --submit: CPUs a task, the threads each job runs.
+    #[arg(long, requires = "submit", default_value_t = 1)]
+    pub cpus_per_task: usize,
+    /// With --submit: time limit a task, as sbatch takes it (e.g. 2:00:00).
+    #[arg(long, requires = "submit")]
+    pub time: Option<String>,
+}
+
+impl PlanArgs {
+    /// `--submit`: the jobs of `plan` (in `dir`) not done, then its finish;
+    /// the ids printed (as JSON with `json`).
+    pub fn submit_to(
+        &self,
+        dir: &std::path::Path,
+        plan: &dyn crate::prep::slurm::Jobs,
+        json: bool,
+    ) -> anyhow::Result<()> {
+        let Some(Scheduler::Slurm) = self.submit else {
+            anyhow::bail!(
+                "{}: say what to do with the plan: --job K, --finish or --submit slurm",
+                dir.display()
+            );
+        };
+        let given = self.partition.is_some()
+            || self.mem.is_some()
+            || self.time.is_some()
+            || self.cpus_per_task != 1;
+        let options = crate::prep::slurm::SlurmOptions {
+            partition: self.partition.clone(),
+            mem: self.mem.clone(),
+            cpus_per_task: self.cpus_per_task,
+            time: self.time.clone(),
+        };
+        let submitted = crate::prep::slurm::submit(dir, plan, given.then_some(&options))?;
+        if json {
+            println!("{}", serde_json::to_string(&submitted)?);
+        } else {
+            for s in &submitted {
+                let jobs: Vec<String> = s.jobs.iter().map(|j| j.to_string()).collect();
+                let jobs = if jobs.is_empty() {
+                    String::new()
+                } else {
+                    format!(" (jobs {})", jobs.join(" "))
+                };
+                println!("Slurm job {:>8}: {}{jobs}", s.slurm_job_id, s.step);
+            }
+        }
+        Ok(())
+    }
+}

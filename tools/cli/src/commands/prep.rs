@@ -1,6 +1,6 @@
 //! `relevo prep`: build a bundle from a REGION.toml or straight from rasters.
 
-use super::args::{parse_percentiles, EncodingArg, ErrorMetricArg};
+use super::args::{parse_percentiles, EncodingArg, ErrorMetricArg, PlanArgs};
 use crate::ingest::gdalio::Resampling;
 use crate::output;
 use crate::prep::plan::{self, PlanOptions};
@@ -9,7 +9,6 @@ use crate::prep::region::{
     parse_nodata, DemSection, FillSection, GridSection, ImageSection, NoData, RegionSpec,
     VegetationSection,
 };
-use crate::prep::slurm::{self, SlurmOptions};
 use crate::prep::tiled::{prep_tiled, TiledOptions, TiledSummary};
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -78,40 +77,8 @@ pub struct PrepArgs {
     /// With --tiled: go on from the build a killed `prep` left beside --out.
     #[arg(long, requires = "tiled")]
     pub resume: bool,
-    /// Split the pyramid's build into jobs for several machines sharing a
-    /// file system (see docs/guide.md, "Running on a Slurm cluster"): with
-    /// the inputs and --jobs, write the plan in this folder; alone, act on
-    /// the plan there (--job, --finish, --submit).
-    #[arg(long, value_name = "DIR")]
-    pub plan: Option<PathBuf>,
-    /// With --plan and the inputs: cut each step of the build into at most
-    /// N jobs.
-    #[arg(long, value_name = "N", requires = "plan", default_value_t = 1)]
-    pub jobs: usize,
-    /// With --plan: run job K (idempotent; skips the tiles it finds done).
-    #[arg(long, value_name = "K", requires = "plan", conflicts_with_all = ["finish", "submit"])]
-    pub job: Option<usize>,
-    /// With --plan: check every job is done, write the manifest, move the
-    /// pyramid into place.
-    #[arg(long, requires = "plan", conflicts_with = "submit")]
-    pub finish: bool,
-    /// With --plan: submit the jobs not done, step after step, then the
-    /// finish, to a scheduler (Slurm's sbatch); prints the job ids.
-    #[arg(long, value_enum, requires = "plan")]
-    pub submit: Option<Scheduler>,
-    /// With --submit: the Slurm partition.
-    #[arg(long, requires = "submit")]
-    pub partition: Option<String>,
-    /// With --submit: memory a task, as sbatch takes it (e.g. 4G; default
-    /// twice the build's working estimate and 256M).
-    #[arg(long, requires = "submit")]
-    pub mem: Option<String>,
-    /// With --submit: CPUs a task, the threads each job runs.
-    #[arg(long, requires = "submit", default_value_t = 1)]
-    pub cpus_per_task: usize,
-    /// With --submit: time limit a task, as sbatch takes it (e.g. 2:00:00).
-    #[arg(long, requires = "submit")]
-    pub time: Option<String>,
+    #[command(flatten)]
+    pub plan: PlanArgs,
     /// Replace an existing bundle (and, with --plan, an existing plan).
     #[arg(long)]
     pub force: bool,
@@ -120,14 +87,8 @@ pub struct PrepArgs {
     pub json: bool,
 }
 
-/// Schedulers `--submit` sends a plan's jobs to.
-#[derive(Debug, Clone, Copy, clap::ValueEnum)]
-pub enum Scheduler {
-    Slurm,
-}
-
 pub fn run(a: PrepArgs) -> Result<()> {
-    if let (Some(dir), None, true) = (&a.plan, &a.region, a.dem.is_empty()) {
+    if let (Some(dir), None, true) = (&a.plan.plan, &a.region, a.dem.is_empty()) {
         return run_plan(dir, &a);
     }
     if a.bands.as_ref().is_some_and(|b| b.len() != 3) {
@@ -176,16 +137,16 @@ pub fn run(a: PrepArgs) -> Result<()> {
     // Only the folder is checked here: the bundle writer decides what an
     // existing bundle at `--out` needs (`--force`).
     output::check(&[&out], true)?;
-    if let Some(dir) = &a.plan {
+    if let Some(dir) = &a.plan.plan {
         if !a.tiled {
             bail!("--plan builds a pyramid: add --tiled");
         }
-        if a.job.is_some() || a.finish || a.resume {
+        if a.plan.job.is_some() || a.plan.finish || a.resume {
             bail!("--job, --finish and --resume act on a plan already made: give --plan alone");
         }
         let options = PlanOptions {
             tile_cells: a.tile_size,
-            jobs_per_step: a.jobs,
+            jobs_per_step: a.plan.jobs,
             force: a.force,
         };
         let p = plan::create(&region, &out, dir, options)?;
@@ -207,7 +168,7 @@ pub fn run(a: PrepArgs) -> Result<()> {
                 );
             }
         }
-        if a.submit.is_some() {
+        if a.plan.submit.is_some() {
             return run_plan(dir, &a);
         }
         if a.json {
@@ -276,7 +237,8 @@ fn print_tiled(s: &TiledSummary, json: bool) -> Result<()> {
 
 /// `--plan DIR` with `--job`, `--finish` or `--submit`.
 fn run_plan(dir: &Path, a: &PrepArgs) -> Result<()> {
-    if let Some(k) = a.job {
+    let p = &a.plan;
+    if let Some(k) = p.job {
         let r = plan::run_job(dir, k)?;
         if a.json {
             println!("{}", serde_json::to_string(&r)?);
@@ -292,40 +254,8 @@ fn run_plan(dir: &Path, a: &PrepArgs) -> Result<()> {
         }
         return Ok(());
     }
-    if a.finish {
+    if p.finish {
         return print_tiled(&plan::finish(dir)?, a.json);
     }
-    if let Some(Scheduler::Slurm) = a.submit {
-        let given =
-            a.partition.is_some() || a.mem.is_some() || a.time.is_some() || a.cpus_per_task != 1;
-        let options = SlurmOptions {
-            partition: a.partition.clone(),
-            mem: a.mem.clone(),
-            cpus_per_task: a.cpus_per_task,
-            time: a.time.clone(),
-        };
-        let submitted = slurm::submit(dir, given.then_some(&options))?;
-        if a.json {
-            println!("{}", serde_json::to_string(&submitted)?);
-        } else {
-            for s in &submitted {
-                let jobs: Vec<String> = s.jobs.iter().map(|j| j.to_string()).collect();
-                println!(
-                    "Slurm job {:>8}: {}{}",
-                    s.slurm_job_id,
-                    s.step,
-                    if jobs.is_empty() {
-                        String::new()
-                    } else {
-                        format!(" (jobs {})", jobs.join(" "))
-                    }
-                );
-            }
-        }
-        return Ok(());
-    }
-    bail!(
-        "{}: say what to do with the plan: --job K, --finish or --submit slurm",
-        dir.display()
-    )
+    p.submit_to(dir, &plan::Plan::load(dir)?, a.json)
 }

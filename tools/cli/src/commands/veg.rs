@@ -1,10 +1,11 @@
 //! `relevo veg detect | eval`: vegetation from marked samples, and its score
 //! against truth boxes.
 
-use super::args::parse_percentiles;
+use super::args::{parse_percentiles, PlanArgs};
 use crate::output;
 use crate::veg_io;
-use anyhow::{Context, Result};
+use crate::veg_plan::{ImageSpec, VegPlan, VegPlanRequest};
+use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use relevo_core::raster::png::encode_rgba;
 use relevo_core::veg::pipeline::{self, Contrast, DetectionMode, VegOptions};
@@ -27,7 +28,11 @@ Examples:
   relevo veg detect landsat.tif --bands 3,2,1 --stretch 1,99 --samples forest.geojson \\
       --density 150 --labels regions.tif --out forest.csv
   relevo veg detect dull.tif --pixel-size 0.1 --contrast samples --samples marks.csv --out trees.csv
-  relevo veg detect rgb.vrt --samples marks.csv --out forest.csv --land-cover labels.gpkg"
+  relevo veg detect rgb.vrt --samples marks.csv --out forest.csv --land-cover labels.gpkg
+  relevo veg detect state_naip.vrt --samples marks.csv --plan /shared/veg --jobs 64 \\
+      --out /shared/trees.csv --submit slurm --mem 8G   # as Slurm array jobs
+  relevo veg detect --plan /shared/veg --job 3      # one job, on any machine
+  relevo veg detect --plan /shared/veg --finish     # gather the jobs' objects"
     )]
     Detect(Box<VegDetectArgs>),
     /// Precision, recall and F1 of detections against truth boxes (pixels).
@@ -64,10 +69,11 @@ Examples:
 #[derive(Args, Debug)]
 pub struct VegDetectArgs {
     /// The image (anything GDAL reads).
-    pub image: PathBuf,
+    #[arg(required_unless_present = "plan")]
+    pub image: Option<PathBuf>,
     /// Marked samples: .csv (pixel rectangles) or .geojson (polygons).
-    #[arg(long)]
-    pub samples: PathBuf,
+    #[arg(long, required_unless_present = "plan")]
+    pub samples: Option<PathBuf>,
     /// Bands to analyse, 1-based (1 to 4), e.g. 3,2,1 or 1,2,3,4. Default: the first three.
     #[arg(long, value_delimiter = ',')]
     pub bands: Option<Vec<usize>>,
@@ -122,8 +128,8 @@ pub struct VegDetectArgs {
     #[arg(long, value_enum)]
     pub contrast: Option<ContrastArg>,
     /// The database (semicolon CSV).
-    #[arg(long, short)]
-    pub out: PathBuf,
+    #[arg(long, short, required_unless_present = "plan")]
+    pub out: Option<PathBuf>,
     /// Also write the objects as a GeoPackage.
     #[arg(long)]
     pub gpkg: Option<PathBuf>,
@@ -141,10 +147,12 @@ pub struct VegDetectArgs {
     /// The field of --land-cover that names each feature's class.
     #[arg(long, default_value = "name")]
     pub land_cover_field: String,
+    #[command(flatten)]
+    pub plan: PlanArgs,
     /// Print a JSON report.
     #[arg(long)]
     pub json: bool,
-    /// Replace existing outputs.
+    /// Replace existing outputs (and, with --plan, an existing plan).
     #[arg(long)]
     pub force: bool,
 }
@@ -218,14 +226,20 @@ pub fn run(command: VegCommand) -> Result<()> {
 }
 
 fn detect(a: Box<VegDetectArgs>) -> Result<()> {
-    let outputs = std::iter::once(&a.out)
+    if let Some(dir) = &a.plan.plan {
+        return detect_plan(dir, &a);
+    }
+    let (Some(image_path), Some(samples_path), Some(out)) = (&a.image, &a.samples, &a.out) else {
+        bail!("give the image, --samples and --out");
+    };
+    let outputs = std::iter::once(out)
         .chain(a.gpkg.iter())
         .chain(a.labels.iter())
         .chain(a.overlay.iter());
     output::check(&outputs.map(PathBuf::as_path).collect::<Vec<_>>(), a.force)?;
-    let image = veg_io::read_image(&a.image, a.bands.as_deref(), a.stretch, a.pixel_size)?;
+    let image = veg_io::read_image(image_path, a.bands.as_deref(), a.stretch, a.pixel_size)?;
     let samples = samples::read_file(
-        &a.samples,
+        samples_path,
         image.geotransform,
         image.image.width,
         image.image.height,
@@ -245,11 +259,11 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
         pipeline::RegionMap::Skip
     };
     let extraction = extract_with_progress(&image, &samples, &options, region_map)
-        .with_context(|| format!("{}", a.image.display()))?;
+        .with_context(|| format!("{}", image_path.display()))?;
     // All outputs are made whole first, then moved into place together.
     let mut outputs = relevo_core::atomic::Outputs::default();
     let csv = db::to_csv(&extraction.objects);
-    output::write_atomic(&outputs.pending(&a.out), csv.as_bytes())?;
+    output::write_atomic(&outputs.pending(out), csv.as_bytes())?;
     if let Some(path) = &a.gpkg {
         veg_io::write_gpkg(&outputs.pending(path), &extraction.objects, &image.crs_wkt)?;
     }
@@ -262,31 +276,10 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
         output::write_atomic(&outputs.pending(path), &png)?;
     }
     outputs.commit()?;
-    // The classified pixels against the labels, and the excess-green
-    // baseline's (R, G, B bands) beside them.
-    let land_cover = match &land_cover_labels {
-        Some(labels) => {
-            let names: Vec<(&str, bool)> = class_kinds(&extraction).collect();
-            let region_map = extraction.pixel_regions()?;
-            let (w, h) = (image.image.width, image.image.height);
-            let valid = |i: usize| image.valid.as_ref().is_none_or(|v| v[i]);
-            let ours = eval::land_cover(labels, w, h, |i| {
-                valid(i).then(|| names[extraction.labels[region_map[i] as usize].class])
-            });
-            let baseline = (image.image.bands >= 3).then(|| {
-                let green = baseline::excess_green_mask(&image.image);
-                eval::land_cover(labels, w, h, |i| {
-                    valid(i).then_some(if green[i] {
-                        ("excess green", true)
-                    } else {
-                        ("not green", false)
-                    })
-                })
-            });
-            Some((ours, baseline))
-        }
-        None => None,
-    };
+    let land_cover = land_cover_labels
+        .as_ref()
+        .map(|labels| land_cover_figures(labels, &extraction, &image))
+        .transpose()?;
     let r = &extraction.report;
     if a.json {
         let mut report = serde_json::to_value(r)?;
@@ -298,7 +291,7 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
     } else {
         println!(
             "{}: {}×{} px of {:.2} m, {} leaves → {} regions, {} objects ({:.0} ms split-and-merge, {:.0} ms classify, {:.0} ms place)",
-            a.image.display(), r.width, r.height, r.pixel_m, r.leaves, r.regions, r.objects,
+            image_path.display(), r.width, r.height, r.pixel_m, r.leaves, r.regions, r.objects,
             r.segment_ms, r.classify_ms, r.detect_ms
         );
         if let (relevo_core::veg::detect::Placement::Crowns { spacing_px, .. }, None) =
@@ -350,6 +343,107 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The classified pixels against land-cover `labels`, and the
+/// excess-green baseline's (R, G, B bands) beside them.
+fn land_cover_figures(
+    labels: &[samples::Sample],
+    extraction: &pipeline::Extraction,
+    image: &pipeline::VegImage,
+) -> Result<(
+    Vec<eval::LandCoverFigures>,
+    Option<Vec<eval::LandCoverFigures>>,
+)> {
+    let names: Vec<(&str, bool)> = class_kinds(extraction).collect();
+    let region_map = extraction.pixel_regions()?;
+    let (w, h) = (image.image.width, image.image.height);
+    let valid = |i: usize| image.valid.as_ref().is_none_or(|v| v[i]);
+    let ours = eval::land_cover(labels, w, h, |i| {
+        valid(i).then(|| names[extraction.labels[region_map[i] as usize].class])
+    });
+    let baseline = (image.image.bands >= 3).then(|| {
+        let green = baseline::excess_green_mask(&image.image);
+        eval::land_cover(labels, w, h, |i| {
+            valid(i).then_some(if green[i] {
+                ("excess green", true)
+            } else {
+                ("not green", false)
+            })
+        })
+    });
+    Ok((ours, baseline))
+}
+
+/// `veg detect --plan DIR`: with the image, make the plan (and submit it
+/// with --submit); alone, run a job, finish or submit.
+fn detect_plan(dir: &Path, a: &VegDetectArgs) -> Result<()> {
+    let p = &a.plan;
+    if let (Some(image), Some(samples), Some(out)) = (&a.image, &a.samples, &a.out) {
+        if a.labels.is_some() || a.overlay.is_some() || a.land_cover.is_some() {
+            bail!("--labels, --overlay and --land-cover need the whole image: not with --plan");
+        }
+        if p.job.is_some() || p.finish {
+            bail!("--job and --finish act on a plan already made: give --plan alone");
+        }
+        let plan = VegPlan::create(
+            dir,
+            VegPlanRequest {
+                image: ImageSpec {
+                    path: image.clone(),
+                    bands: a.bands.clone(),
+                    stretch: a.stretch,
+                    pixel_size: a.pixel_size,
+                },
+                samples,
+                options: a.options(),
+                out,
+                gpkg: a.gpkg.as_deref(),
+                jobs: p.jobs,
+                force: a.force,
+            },
+        )?;
+        let tiles = plan.model.tiles().len();
+        if !a.json {
+            println!(
+                "{}: a plan of {} jobs over {tiles} tiles of {}×{} px, writing {}",
+                dir.display(),
+                plan.jobs.len(),
+                plan.model.size[0],
+                plan.model.size[1],
+                plan.out.display()
+            );
+        }
+        if p.submit.is_some() {
+            return p.submit_to(dir, &plan, a.json);
+        }
+        if !a.json {
+            println!(
+                "run each job with `relevo veg detect --plan {0} --job K`, or `relevo veg \
+                 detect --plan {0} --submit slurm`; then `relevo veg detect --plan {0} --finish`",
+                dir.display()
+            );
+        }
+        return Ok(());
+    }
+    let plan = VegPlan::load(dir)?;
+    if let Some(k) = p.job {
+        let r = plan.run_job(dir, k)?;
+        println!(
+            "job {k}: tiles {}–{}, {} objects in {:.1} s",
+            r.tiles[0],
+            r.tiles[1],
+            r.objects.len(),
+            r.ms / 1e3
+        );
+        return Ok(());
+    }
+    if p.finish {
+        let n = plan.finish(dir)?;
+        println!("{}: {n} objects", plan.out.display());
+        return Ok(());
+    }
+    p.submit_to(dir, &plan, a.json)
 }
 
 /// [`pipeline::extract`] on a worker thread while a bar shows its steps

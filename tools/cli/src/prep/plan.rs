@@ -138,6 +138,38 @@ impl Plan {
     }
 }
 
+impl super::slurm::Jobs for Plan {
+    fn subcommand(&self) -> &'static [&'static str] {
+        &["prep"]
+    }
+
+    fn steps(&self) -> Vec<(String, usize, usize)> {
+        self.steps
+            .iter()
+            .map(|s| (s.name.clone(), s.jobs[0], s.jobs[1]))
+            .collect()
+    }
+
+    fn unfinished(&self, _: &Path) -> Result<Vec<usize>> {
+        Ok(unfinished(self)?
+            .into_iter()
+            .map(|(j, _)| j.index)
+            .collect())
+    }
+
+    fn target(&self) -> &Path {
+        &self.out
+    }
+
+    /// Twice the build's working estimate (a window of a tile and a tile
+    /// around it, a thread), and 256 MiB.
+    fn default_mem(&self, threads: usize) -> Result<String> {
+        let t = self.layout()?.tile_cells as u64;
+        let working = threads as u64 * (3 * t + 1).pow(2) * 24;
+        Ok(format!("{}M", ((2 * working) >> 20) + 256))
+    }
+}
+
 /// How a plan is made.
 #[derive(Debug, Clone, Copy)]
 pub struct PlanOptions {

@@ -1,6 +1,6 @@
-//! `relevo prep --plan DIR --submit slurm`: a plan's jobs as Slurm array
-//! jobs, through Slurm's own commands (`sbatch`, `squeue`) and nothing
-//! else.
+//! `--plan DIR --submit slurm`: a plan's jobs (a pyramid's, `relevo prep`;
+//! a vegetation detection's, `relevo veg detect`) as Slurm array jobs,
+//! through Slurm's own commands (`sbatch`, `squeue`) and nothing else.
 //!
 //! Each step is one batch script in `DIR/slurm/` whose array task i runs
 //! the step's i-th job; the scripts are plain files a person can read,
@@ -10,14 +10,29 @@
 //! task is killed or a node fails, submitting again sends only what is
 //! left.
 
-use super::plan::{unfinished, Plan};
 use anyhow::{bail, Context, Result};
 use relevo_core::bundle::sha256_bytes;
-use relevo_core::pyramid::Step;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
+
+/// A plan whose numbered jobs run in steps, each step's jobs side by side
+/// once the step before has succeeded.
+pub trait Jobs {
+    /// The `relevo` subcommand that runs a job with `--plan DIR --job K`
+    /// and finishes with `--plan DIR --finish`.
+    fn subcommand(&self) -> &'static [&'static str];
+    /// The steps, in order: name, first and last job.
+    fn steps(&self) -> Vec<(String, usize, usize)>;
+    /// The jobs of the plan in `dir` not done, in order.
+    fn unfinished(&self, dir: &Path) -> Result<Vec<usize>>;
+    /// What the plan writes, for the scripts' comments.
+    fn target(&self) -> &Path;
+    /// Memory a task running on `threads` threads asks for by default, as
+    /// `sbatch --mem` takes it.
+    fn default_mem(&self, threads: usize) -> Result<String>;
+}
 
 /// What the batch scripts ask Slurm for (`#SBATCH` lines).
 #[derive(Debug, Clone, Default)]
@@ -45,9 +60,9 @@ pub struct Submitted {
 /// The batch script of each step, and the finish's, in the order they run.
 struct Script {
     path: PathBuf,
-    step: Option<Step>,
-    /// The step's first job: array task i runs job `first + i`.
-    first: usize,
+    /// The step's name, first and last job; none for the finish. Array
+    /// task i runs job `first + i`.
+    step: Option<(String, usize, usize)>,
 }
 
 /// The prefix of every Slurm job name of the plan in `dir`: one plan's
@@ -64,36 +79,26 @@ fn quoted(s: &str) -> String {
 }
 
 /// The scripts of `plan` in `dir/slurm/`, in the order they run.
-fn scripts(dir: &Path, plan: &Plan) -> Vec<Script> {
+fn scripts(dir: &Path, plan: &dyn Jobs) -> Vec<Script> {
     let slurm = dir.join("slurm");
-    let mut out: Vec<Script> = plan
-        .steps
+    let steps = plan.steps();
+    let mut out: Vec<Script> = steps
         .iter()
         .enumerate()
         .map(|(i, s)| Script {
-            path: slurm.join(format!("{i:02}-{}.sbatch", s.name.replace(' ', "-"))),
-            step: Some(s.step),
-            first: s.jobs[0],
+            path: slurm.join(format!("{i:02}-{}.sbatch", s.0.replace(' ', "-"))),
+            step: Some(s.clone()),
         })
         .collect();
     out.push(Script {
-        path: slurm.join(format!("{:02}-finish.sbatch", plan.steps.len())),
+        path: slurm.join(format!("{:02}-finish.sbatch", steps.len())),
         step: None,
-        first: 0,
     });
     out
 }
 
-/// The default `--mem`: twice the build's working estimate for
-/// `threads` threads, and 256 MiB, in MiB.
-fn default_mem(plan: &Plan, threads: usize) -> Result<String> {
-    let t = plan.layout()?.tile_cells as u64;
-    let working = threads as u64 * (3 * t + 1).pow(2) * 24;
-    Ok(format!("{}M", ((2 * working) >> 20) + 256))
-}
-
 /// Write the plan's batch scripts with `options`, replacing earlier ones.
-pub fn write_scripts(dir: &Path, plan: &Plan, options: &SlurmOptions) -> Result<Vec<PathBuf>> {
+pub fn write_scripts(dir: &Path, plan: &dyn Jobs, options: &SlurmOptions) -> Result<Vec<PathBuf>> {
     let slurm = dir.join("slurm");
     std::fs::create_dir_all(&slurm).with_context(|| slurm.display().to_string())?;
     let dir_abs = std::fs::canonicalize(dir)?;
@@ -102,8 +107,14 @@ pub fn write_scripts(dir: &Path, plan: &Plan, options: &SlurmOptions) -> Result<
     let cpus = options.cpus_per_task.max(1);
     let mem = match &options.mem {
         Some(m) => m.clone(),
-        None => default_mem(plan, cpus)?,
+        None => plan.default_mem(cpus)?,
     };
+    let relevo = format!(
+        "{} {}",
+        quoted(&exe.display().to_string()),
+        plan.subcommand().join(" ")
+    );
+    let plan_dir = quoted(&dir_abs.display().to_string());
     let mut written = Vec::new();
     for (i, script) in scripts(dir, plan).iter().enumerate() {
         let stem = script
@@ -111,36 +122,19 @@ pub fn write_scripts(dir: &Path, plan: &Plan, options: &SlurmOptions) -> Result<
             .file_stem()
             .map(|s| s.to_string_lossy().to_string())
             .unwrap_or_default();
-        let (what, array, command) = match script.step {
-            Some(step) => {
-                let s = &plan.steps[i];
-                let n = s.jobs[1] - s.jobs[0] + 1;
-                (
-                    format!(
-                        "step \"{}\": jobs {}–{} of the plan, array task i runs job {} + i",
-                        step.name(),
-                        s.jobs[0],
-                        s.jobs[1],
-                        script.first
-                    ),
-                    Some(format!("0-{}", n - 1)),
-                    format!(
-                        "{} prep --plan {} --job $(( {} + SLURM_ARRAY_TASK_ID ))",
-                        quoted(&exe.display().to_string()),
-                        quoted(&dir_abs.display().to_string()),
-                        script.first
-                    ),
-                )
-            }
-            None => (
-                "the finish: checks every job, writes the manifest, moves the pyramid into place"
-                    .to_string(),
-                None,
+        let (what, array, command) = match &script.step {
+            Some((name, first, last)) => (
                 format!(
-                    "{} prep --plan {} --finish",
-                    quoted(&exe.display().to_string()),
-                    quoted(&dir_abs.display().to_string())
+                    "step \"{name}\": jobs {first}–{last} of the plan, array task i runs job \
+                     {first} + i"
                 ),
+                Some(format!("0-{}", last - first)),
+                format!("{relevo} --plan {plan_dir} --job $(( {first} + SLURM_ARRAY_TASK_ID ))"),
+            ),
+            None => (
+                "the finish: checks every job is done and writes the result".to_string(),
+                None,
+                format!("{relevo} --plan {plan_dir} --finish"),
             ),
         };
         let log = match array {
@@ -155,7 +149,7 @@ pub fn write_scripts(dir: &Path, plan: &Plan, options: &SlurmOptions) -> Result<
              #   sbatch {path}\n\
              #SBATCH --job-name={prefix}-{i:02}\n",
             plan_dir = dir_abs.display(),
-            out = plan.out.display(),
+            out = plan.target().display(),
             path = dir_abs
                 .join("slurm")
                 .join(script.path.file_name().unwrap_or_default())
@@ -200,19 +194,22 @@ fn slurm(program: &str, args: &[String]) -> Result<String> {
     Ok(String::from_utf8_lossy(&out.stdout).to_string())
 }
 
-/// Submit the plan in `dir`'s jobs that are not done, and its finish;
-/// with `options`, the scripts are written anew first (else the ones in
-/// `dir/slurm/`, written at the first submission, are used as they are).
-/// Refused while jobs of the plan are still queued or running.
-pub fn submit(dir: &Path, options: Option<&SlurmOptions>) -> Result<Vec<Submitted>> {
-    let plan = Plan::load(dir)?;
-    let scripts = scripts(dir, &plan);
+/// Submit the jobs of `plan` (in `dir`) that are not done, and its
+/// finish; with `options`, the scripts are written anew first (else the
+/// ones in `dir/slurm/`, written at the first submission, are used as they
+/// are). Refused while jobs of the plan are still queued or running.
+pub fn submit(
+    dir: &Path,
+    plan: &dyn Jobs,
+    options: Option<&SlurmOptions>,
+) -> Result<Vec<Submitted>> {
+    let scripts = scripts(dir, plan);
     match options {
         Some(o) => {
-            write_scripts(dir, &plan, o)?;
+            write_scripts(dir, plan, o)?;
         }
         None if !scripts.iter().all(|s| s.path.is_file()) => {
-            write_scripts(dir, &plan, &SlurmOptions::default())?;
+            write_scripts(dir, plan, &SlurmOptions::default())?;
         }
         None => {}
     }
@@ -240,19 +237,19 @@ pub fn submit(dir: &Path, options: Option<&SlurmOptions>) -> Result<Vec<Submitte
             ids.join(" ")
         );
     }
+    let steps = plan.steps();
     let mut left: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
-    for (job, _) in unfinished(&plan)? {
-        let step = plan
-            .steps
+    for job in plan.unfinished(dir)? {
+        let step = steps
             .iter()
-            .position(|s| s.step == job.step)
-            .context("a job of a step the plan does not list")?;
-        left.entry(step).or_default().push(job.index);
+            .position(|s| (s.1..=s.2).contains(&job))
+            .context("a job of no step of the plan")?;
+        left.entry(step).or_default().push(job);
     }
     let mut submitted = Vec::new();
     let mut after: Option<String> = None;
     for (i, script) in scripts.iter().enumerate() {
-        let jobs: Vec<usize> = match script.step {
+        let jobs: Vec<usize> = match &script.step {
             Some(_) => match left.get(&i) {
                 Some(jobs) => jobs.clone(),
                 None => continue,
@@ -260,11 +257,8 @@ pub fn submit(dir: &Path, options: Option<&SlurmOptions>) -> Result<Vec<Submitte
             None => Vec::new(),
         };
         let mut args = vec!["--parsable".to_string()];
-        if script.step.is_some() {
-            let tasks: Vec<String> = jobs
-                .iter()
-                .map(|j| (j - script.first).to_string())
-                .collect();
+        if let Some((_, first, _)) = &script.step {
+            let tasks: Vec<String> = jobs.iter().map(|j| (j - first).to_string()).collect();
             args.push(format!("--array={}", tasks.join(",")));
         }
         if let Some(id) = &after {
@@ -281,8 +275,8 @@ pub fn submit(dir: &Path, options: Option<&SlurmOptions>) -> Result<Vec<Submitte
             script: script.path.clone(),
             step: script
                 .step
-                .map(|s| s.name())
-                .unwrap_or_else(|| "finish".into()),
+                .as_ref()
+                .map_or_else(|| "finish".into(), |s| s.0.clone()),
             jobs,
             slurm_job_id: id.clone(),
         });

@@ -39,7 +39,7 @@ pub enum Placement {
 }
 
 /// A detected object in pixel coordinates.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Object {
     pub x: f64,
     pub y: f64,

@@ -109,10 +109,17 @@ impl VegOptions {
     pub fn threshold_gain(&self, image: &Image, samples: &[Sample]) -> f32 {
         match self.contrast {
             Contrast::Absolute => 1.0,
-            Contrast::Samples => {
-                let Some(contrast) = super::samples::contrast(image, samples) else {
-                    return 1.0;
-                };
+            Contrast::Samples => Self::samples_gain(super::samples::contrast(image, samples)),
+        }
+    }
+
+    /// The thresholds' gain for the samples' `contrast` (their median
+    /// brightness spread, see [`super::samples::contrast`]) under
+    /// [`Contrast::Samples`].
+    pub fn samples_gain(contrast: Option<f32>) -> f32 {
+        match contrast {
+            None => 1.0,
+            Some(contrast) => {
                 let gain = contrast / REFERENCE_SAMPLES_CONTRAST;
                 if !(1.0 / MAX_THRESHOLD_GAIN..=MAX_THRESHOLD_GAIN).contains(&gain) {
                     tracing::warn!(
@@ -445,27 +452,15 @@ pub fn extract_tiled(
              or scale them to the samples (--contrast samples)"
         );
     }
-    let mut params = options.segment_params();
-    params.check()?;
-    params.brightness_std *= threshold_gain;
-    params.chroma_std *= threshold_gain;
     let (w, h) = (image.image.width, image.image.height);
-    let tiles = tiling.plan(w, h);
-    // Each sample is learnt from the tile owning its centre.
-    let owner = |s: &Sample| {
-        let [x, y] = s.centre();
-        let (x, y) = (x.clamp(0.0, w as f64 - 0.5), y.clamp(0.0, h as f64 - 0.5));
-        tiles.iter().position(|t| t.owns(x, y)).unwrap_or(0)
-    };
-    let work = Work {
+    let work = Work::new(
         image,
+        image.pixel_m,
         samples,
         options,
-        owners: samples.iter().map(owner).collect(),
-        at_once: rayon::current_num_threads().clamp(1, tiles.len()),
-        tiles,
-        params,
-    };
+        tiling.plan(w, h),
+        threshold_gain,
+    )?;
     work.check_memory()?;
     watch.start(1 + work.tiles.len());
     let wall = Instant::now();
@@ -499,7 +494,12 @@ pub fn extract_tiled(
         ms = wall.elapsed().as_secs_f64() * 1e3,
         "vegetation extraction"
     );
-    let objects = world_objects(&gathered.found, image, &learnt.classifier);
+    let objects = world_objects(
+        &gathered.found,
+        &learnt.classifier.classes,
+        image.pixel_m,
+        |x, y| image.to_world(x, y),
+    );
     let report = Report {
         width: w,
         height: h,
@@ -528,11 +528,116 @@ pub fn extract_tiled(
     })
 }
 
+/// Everything an extraction learns before it analyses its tiles, kept so
+/// that separate processes (the jobs of `relevo veg detect --plan`) each
+/// analyse some of the tiles exactly as one extraction of the whole image
+/// would: the tiling, the scaled thresholds, the placement (its crown
+/// spacing learnt) and the samples' signatures, from which each process
+/// learns the same classifier.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Model {
+    /// The image's width and height, pixels.
+    pub size: [usize; 2],
+    /// Ground size of a pixel, metres.
+    pub pixel_m: f64,
+    pub tiling: Tiling,
+    pub threshold_gain: f32,
+    pub placement: Placement,
+    pub options: VegOptions,
+    /// Class names, in the classifier's order.
+    pub classes: Vec<String>,
+    marked: Vec<(String, Vec<f32>)>,
+}
+
+impl Model {
+    /// Learn from `samples` on `source` (pixels of `pixel_m` metres),
+    /// reading only the tiles that hold them; thresholds scaled by
+    /// `threshold_gain` (see [`VegOptions::threshold_gain`]).
+    pub fn learn(
+        source: &dyn PixelSource,
+        pixel_m: f64,
+        samples: &[Sample],
+        options: &VegOptions,
+        threshold_gain: f32,
+    ) -> Result<Model> {
+        let placement = options.placement(pixel_m)?;
+        let tiling = options.tiling(placement)?;
+        let (w, h) = source.size();
+        let work = Work::new(
+            source,
+            pixel_m,
+            samples,
+            options,
+            tiling.plan(w, h),
+            threshold_gain,
+        )?;
+        let segmented: Vec<Mutex<Option<Segmentation>>> =
+            work.tiles.iter().map(|_| Mutex::new(None)).collect();
+        let learnt = work.learn(placement, &segmented)?;
+        Ok(Model {
+            size: [w, h],
+            pixel_m,
+            tiling,
+            threshold_gain,
+            placement: learnt.placement,
+            options: options.clone(),
+            classes: learnt.classifier.classes.clone(),
+            marked: learnt.marked,
+        })
+    }
+
+    /// The image's tiles, in the order their objects are numbered.
+    pub fn tiles(&self) -> Vec<Tile> {
+        self.tiling.plan(self.size[0], self.size[1])
+    }
+
+    /// Analyse `tiles` (of [`Model::tiles`]) of `source`: the objects they
+    /// own, in the image's pixel coordinates, in tile order. Every tile is
+    /// analysed as the whole extraction analyses it, so the objects of all
+    /// tiles, sorted by row then column, are the extraction's.
+    pub fn analyse(&self, source: &dyn PixelSource, tiles: Vec<Tile>) -> Result<Vec<Object>> {
+        let classifier = Classifier::learn(
+            self.marked.clone(),
+            self.options.window_px,
+            self.options.neighbours,
+        )?;
+        let vegetation = classifier
+            .classes
+            .iter()
+            .map(|c| *c != self.options.negative_class)
+            .collect();
+        let learnt = Learnt {
+            classifier,
+            marked: Vec::new(),
+            vegetation,
+            placement: self.placement,
+            segment_ms: 0.0,
+            ms: 0.0,
+        };
+        let work = Work::new(
+            source,
+            self.pixel_m,
+            &[],
+            &self.options,
+            tiles,
+            self.threshold_gain,
+        )?;
+        work.check_memory()?;
+        let segmented: Vec<Mutex<Option<Segmentation>>> =
+            work.tiles.iter().map(|_| Mutex::new(None)).collect();
+        let done = work.analyse_tiles(&segmented, &learnt, None, &Watch::default());
+        let (w, _) = source.size();
+        Ok(gather(done, &work.tiles, None, w)?.found)
+    }
+}
+
 /// What every stage of one extraction reads: the image, the samples and
 /// options, the tiles with the tile owning each sample, the segmentation's
 /// thresholds (scaled for the image) and how many tiles run at once.
 struct Work<'a> {
-    image: &'a VegImage,
+    source: &'a dyn PixelSource,
+    /// Ground size of a pixel, metres.
+    pixel_m: f64,
     samples: &'a [Sample],
     options: &'a VegOptions,
     tiles: Vec<Tile>,
@@ -542,7 +647,40 @@ struct Work<'a> {
     at_once: usize,
 }
 
-impl Work<'_> {
+impl<'a> Work<'a> {
+    /// The work of analysing `tiles` of `source` (pixels of `pixel_m`
+    /// metres), the thresholds scaled by `threshold_gain`.
+    fn new(
+        source: &'a dyn PixelSource,
+        pixel_m: f64,
+        samples: &'a [Sample],
+        options: &'a VegOptions,
+        tiles: Vec<Tile>,
+        threshold_gain: f32,
+    ) -> Result<Work<'a>> {
+        let mut params = options.segment_params();
+        params.check()?;
+        params.brightness_std *= threshold_gain;
+        params.chroma_std *= threshold_gain;
+        let (w, h) = source.size();
+        // Each sample is learnt from the tile owning its centre.
+        let owner = |s: &Sample| {
+            let [x, y] = s.centre();
+            let (x, y) = (x.clamp(0.0, w as f64 - 0.5), y.clamp(0.0, h as f64 - 0.5));
+            tiles.iter().position(|t| t.owns(x, y)).unwrap_or(0)
+        };
+        Ok(Work {
+            source,
+            pixel_m,
+            samples,
+            options,
+            owners: samples.iter().map(owner).collect(),
+            at_once: rayon::current_num_threads().clamp(1, tiles.len().max(1)),
+            tiles,
+            params,
+        })
+    }
+
     /// Refuse the extraction when its working set exceeds the budget: the
     /// tiles analysed at once, each its pixels, opponent colours, quadtree,
     /// adjacency and labels (about `TILE_BYTES_PER_PIXEL` bytes a pixel),
@@ -581,7 +719,7 @@ impl Work<'_> {
         placement: Placement,
         segmented: &[Mutex<Option<Segmentation>>],
     ) -> Result<Learnt> {
-        let (image, samples, options) = (self.image, self.samples, self.options);
+        let (samples, options) = (self.samples, self.options);
         let start = Instant::now();
         let mut marked: Vec<Vec<Vec<f32>>> = vec![Vec::new(); samples.len()];
         let mut learn_segment_ms = 0.0;
@@ -593,7 +731,7 @@ impl Work<'_> {
             if !self.owners.contains(&t) {
                 continue;
             }
-            let context = TileImage::of(image, tile, Vec::new());
+            let context = self.source.window(tile.context, Vec::new())?;
             let seg_start = Instant::now();
             let segmentation = segment(context.image(), &self.params, &mut learn_buffers)?;
             learn_segment_ms += seg_start.elapsed().as_secs_f64() * 1e3;
@@ -608,10 +746,10 @@ impl Work<'_> {
                 if learn_spacing && sample.class != options.negative_class {
                     marked_crowns.push(MarkedCrown::cut(
                         context.image(),
-                        context.valid(image),
+                        context.valid(),
                         &segmentation,
                         &local,
-                        spacing::margin_px(image.pixel_m),
+                        spacing::margin_px(self.pixel_m),
                         options.window_px,
                     ));
                 }
@@ -623,7 +761,7 @@ impl Work<'_> {
             .zip(marked)
             .flat_map(|(s, signatures)| signatures.into_iter().map(|g| (s.class.clone(), g)))
             .collect();
-        let classifier = Classifier::learn(marked, options.window_px, options.neighbours)?;
+        let classifier = Classifier::learn(marked.clone(), options.window_px, options.neighbours)?;
         let vegetation: Vec<bool> = classifier
             .classes
             .iter()
@@ -641,11 +779,11 @@ impl Work<'_> {
                     &marked_crowns,
                     &classifier,
                     &vegetation,
-                    image.pixel_m,
+                    self.pixel_m,
                     min_radius_px,
                 );
                 Placement::Crowns {
-                    spacing_px: (spacing_m / image.pixel_m) as f32,
+                    spacing_px: (spacing_m / self.pixel_m) as f32,
                     min_radius_px,
                 }
             }
@@ -653,6 +791,7 @@ impl Work<'_> {
         };
         Ok(Learnt {
             classifier,
+            marked,
             vegetation,
             placement,
             segment_ms: learn_segment_ms,
@@ -669,8 +808,10 @@ impl Work<'_> {
             if learning_done.load(Ordering::Acquire) {
                 break;
             }
-            let context = TileImage::of(self.image, &self.tiles[t], Vec::new());
             // A failure here comes back when the tile is analysed.
+            let Ok(context) = self.source.window(self.tiles[t].context, Vec::new()) else {
+                continue;
+            };
             if let Ok(s) = segment(context.image(), &self.params, &mut buffers) {
                 *locked(&segmented[t]) = Some(s);
             }
@@ -699,7 +840,7 @@ impl Work<'_> {
                         let Some(tile) = self.tiles.get(t) else { break };
                         let segmented = locked(&segmented[t]).take();
                         let result = analyse_tile(
-                            self.image,
+                            self.source,
                             tile,
                             segmented,
                             &mut buffers,
@@ -783,19 +924,25 @@ fn gather(
 }
 
 /// The objects found, numbered from 1, in the image's world coordinates
-/// with their class names and sizes in metres.
-fn world_objects(found: &[Object], image: &VegImage, classifier: &Classifier) -> Vec<VegObject> {
+/// (`to_world` of pixel coordinates) with their class names and sizes in
+/// metres (pixels of `pixel_m`).
+pub fn world_objects(
+    found: &[Object],
+    classes: &[String],
+    pixel_m: f64,
+    to_world: impl Fn(f64, f64) -> (f64, f64),
+) -> Vec<VegObject> {
     found
         .iter()
         .enumerate()
         .map(|(k, o)| {
-            let (x, y) = image.to_world(o.x, o.y);
+            let (x, y) = to_world(o.x, o.y);
             VegObject {
                 id: k as u64 + 1,
                 x,
                 y,
-                class: classifier.classes[o.class].clone(),
-                size: o.size_px as f64 * image.pixel_m,
+                class: classes[o.class].clone(),
+                size: o.size_px as f64 * pixel_m,
                 score: o.score,
             }
         })
@@ -838,6 +985,8 @@ fn locked<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 /// What learning from the samples gives.
 struct Learnt {
     classifier: Classifier,
+    /// The samples' signatures the classifier was learnt from.
+    marked: Vec<(String, Vec<f32>)>,
     /// Per class: whether it is vegetation (not the negative class).
     vegetation: Vec<bool>,
     /// The placement, with the crown spacing learnt when it is.
@@ -847,47 +996,64 @@ struct Learnt {
     ms: f64,
 }
 
-/// A tile's pixels: the image itself when the tile is the whole image.
-enum TileImage<'a> {
-    Whole(&'a Image),
-    Window(Image, Option<Vec<bool>>),
+/// Where an extraction reads its tiles' pixels: an image in memory
+/// ([`VegImage`]), or a file read window by window (the jobs of a plan,
+/// `relevo veg detect --plan`).
+pub trait PixelSource: Sync {
+    /// Width and height, pixels.
+    fn size(&self) -> (usize, usize);
+    /// The pixels of `rect` (`[x0, y0, x1, y1)`) and which have data; a
+    /// copy may be made into `pixels` (whatever it held).
+    fn window(&self, rect: [usize; 4], pixels: Vec<u8>) -> Result<TileImage<'_>>;
 }
 
-impl<'a> TileImage<'a> {
-    /// The tile's context of `image`; a window is copied into `pixels`
-    /// (whatever it held).
-    fn of(image: &'a VegImage, tile: &Tile, pixels: Vec<u8>) -> TileImage<'a> {
-        let (w, h) = (image.image.width, image.image.height);
-        if tile.context == [0, 0, w, h] {
-            return TileImage::Whole(&image.image);
+impl PixelSource for VegImage {
+    fn size(&self) -> (usize, usize) {
+        (self.image.width, self.image.height)
+    }
+
+    fn window(&self, rect: [usize; 4], pixels: Vec<u8>) -> Result<TileImage<'_>> {
+        let (w, h) = self.size();
+        if rect == [0, 0, w, h] {
+            return Ok(TileImage::Whole(&self.image, self.valid.as_deref()));
         }
-        let [x0, y0, x1, y1] = tile.context;
-        let valid = image.valid.as_ref().map(|v| {
+        let [x0, y0, x1, y1] = rect;
+        let valid = self.valid.as_ref().map(|v| {
             (y0..y1)
                 .flat_map(|y| v[y * w + x0..y * w + x1].iter().copied())
                 .collect()
         });
-        TileImage::Window(image.image.window(tile.context, pixels), valid)
+        Ok(TileImage::Window(self.image.window(rect, pixels), valid))
     }
+}
 
+/// Pixels of a window of an image, with which of them have data (`None`:
+/// all): the image itself when the window is all of it.
+pub enum TileImage<'a> {
+    Whole(&'a Image, Option<&'a [bool]>),
+    Window(Image, Option<Vec<bool>>),
+}
+
+impl TileImage<'_> {
     /// A window's pixels, to copy the next window into.
     fn into_pixels(self) -> Vec<u8> {
         match self {
-            TileImage::Whole(_) => Vec::new(),
+            TileImage::Whole(..) => Vec::new(),
             TileImage::Window(image, _) => image.pixels,
         }
     }
 
-    fn image(&self) -> &Image {
+    /// The pixels.
+    pub fn image(&self) -> &Image {
         match self {
-            TileImage::Whole(image) => image,
+            TileImage::Whole(image, _) => image,
             TileImage::Window(image, _) => image,
         }
     }
 
-    fn valid<'b>(&'b self, whole: &'b VegImage) -> Option<&'b [bool]> {
+    fn valid(&self) -> Option<&[bool]> {
         match self {
-            TileImage::Whole(_) => whole.valid.as_deref(),
+            TileImage::Whole(_, valid) => *valid,
             TileImage::Window(_, valid) => valid.as_deref(),
         }
     }
@@ -923,7 +1089,7 @@ struct TileResult {
 /// one tile's context; keep its core, whose labels go into `labels_map`.
 #[allow(clippy::too_many_arguments)]
 fn analyse_tile(
-    image: &VegImage,
+    source: &dyn PixelSource,
     tile: &Tile,
     segmented: Option<Segmentation>,
     buffers: &mut TileBuffers,
@@ -933,7 +1099,7 @@ fn analyse_tile(
     vegetation: &[bool],
     placement: Placement,
 ) -> Result<TileResult> {
-    let context = TileImage::of(image, tile, std::mem::take(&mut buffers.pixels));
+    let context = source.window(tile.context, std::mem::take(&mut buffers.pixels))?;
     let start = Instant::now();
     let whole = tile.context == tile.core;
     let segmentation = match segmented {
@@ -951,7 +1117,7 @@ fn analyse_tile(
         &segmentation,
         &labels,
         vegetation,
-        context.valid(image),
+        context.valid(),
         placement,
         [x0, y0],
         &mut buffers.detect,
@@ -986,7 +1152,7 @@ fn analyse_tile(
             context_regions,
             &labels,
             labels_map,
-            image.image.width,
+            source.size().0,
         );
         buffers.segment.reuse_labels(context_labels);
         core

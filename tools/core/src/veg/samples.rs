@@ -102,10 +102,17 @@ impl Sample {
 /// pixels. The median keeps one uniform rectangle (water) or one busy one
 /// (a road edge) from setting it.
 pub fn contrast(image: &Image, samples: &[Sample]) -> Option<f32> {
-    let mut spreads: Vec<f32> = samples
-        .iter()
-        .filter_map(|s| s.brightness_std(image))
-        .collect();
+    median_spread(
+        samples
+            .iter()
+            .filter_map(|s| s.brightness_std(image))
+            .collect(),
+    )
+}
+
+/// The median of the samples' brightness spreads (the upper one of an even
+/// count): [`contrast`] of spreads measured sample by sample.
+pub fn median_spread(mut spreads: Vec<f32>) -> Option<f32> {
     spreads.sort_by(f32::total_cmp);
     spreads.get(spreads.len() / 2).copied()
 }

@@ -19,7 +19,7 @@ pub const ALIGN_PX: usize = super::segment::TILE;
 const MIN_MARGIN_PX: usize = ALIGN_PX;
 
 /// How an image is cut.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Tiling {
     /// Side of a tile's core, pixels.
     pub core_px: usize,
@@ -67,7 +67,7 @@ impl Tiling {
 }
 
 /// One tile: `[x0, y0, x1, y1)` rectangles in the image's pixels.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Tile {
     /// The pixels the tile owns.
     pub core: [usize; 4],
