@@ -108,7 +108,13 @@ fn stale_staging_is_cleared_and_failures_leave_nothing() {
     assert!(d.path().join("lux.relevo.tmp/junk").exists());
     // Debris of a killed run carries the staging mark and is cleared.
     std::fs::write(d.path().join("lux.relevo.tmp/.relevo-staging"), "").unwrap();
-    relevo_ok(args);
+    let cleared = relevo(args);
+    let stderr = String::from_utf8_lossy(&cleared.stderr);
+    assert!(cleared.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("lux.relevo.tmp: left by a run of Relevo that did not finish"),
+        "{stderr}"
+    );
     assert_eq!(listing(d.path()), ["lux.relevo"]);
     assert!(!out.join("junk").exists());
 

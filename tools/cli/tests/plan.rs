@@ -242,6 +242,28 @@ fn plans_in_the_wrong_place_and_jobs_that_do_not_exist_are_refused() {
     let o = job(&plan, 9999);
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("no job 9999"), "{}", stderr(&o));
+    // Another writer of the same bundle does not clear the plan's build.
+    let o = relevo([
+        "prep",
+        "--dem",
+        dem.to_str().unwrap(),
+        "--tiled",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("holds the build of the plan in") && plan.join("plan.json").exists(),
+        "{}",
+        stderr(&o)
+    );
+    for (name, first, last) in steps(&plan) {
+        for k in first..=last {
+            assert!(job(&plan, k).status.success(), "{name} {k}");
+        }
+    }
+    relevo_ok(["prep", "--plan", plan.to_str().unwrap(), "--finish", "-q"]);
+    assert!(!out.join(".relevo-plan").exists() && out.join("manifest.json").exists());
     let o = relevo([
         "prep",
         "--plan",

@@ -25,7 +25,7 @@ use super::tiled::{
     height_source, region_name, write_options, Heights, TiledOptions, TiledSummary,
 };
 use anyhow::{bail, Context, Result};
-use relevo_core::bundle::{staging_path, StageTiming};
+use relevo_core::bundle::{staging_path, StageTiming, PLAN_MARK};
 use relevo_core::pyramid::jobs::{self, Job};
 use relevo_core::pyramid::{
     self, build, BuildReport, PyramidDescription, Step, TileLayout, WriteOptions,
@@ -242,6 +242,10 @@ pub fn create(region: &RegionSpec, out: &Path, dir: &Path, options: PlanOptions)
         }
     };
     drop(store);
+    let mark = staging.dir().join(PLAN_MARK);
+    let plan_dir = std::fs::canonicalize(dir)?;
+    std::fs::write(&mark, plan_dir.display().to_string())
+        .with_context(|| mark.display().to_string())?;
     staging.keep();
     let layout = TileLayout::new(description.grid.side, options.tile_cells)?;
     let all = jobs::jobs(&layout, true, options.jobs_per_step);

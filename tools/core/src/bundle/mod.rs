@@ -24,6 +24,8 @@ pub use manifest::{
 };
 pub use names::MANIFEST_FILE;
 pub use reader::{Array, Bundle, Drape, LpArray, MAX_IMAGE_SIDE, MAX_SIDE};
-pub use staging::{format_of, is_bundle, staging_path, Leftover, Staging, PYRAMID_FORMAT};
+pub use staging::{
+    format_of, is_bundle, staging_path, Leftover, Staging, PLAN_MARK, PYRAMID_FORMAT,
+};
 pub use validate::validate_artifacts;
 pub use writer::{write_terrain_bundle, BundleWriter, Description};

@@ -80,9 +80,24 @@ impl Staging {
                      Relevo; move it away",
                 ));
             }
+            let plan = fs::read_to_string(dir.join(PLAN_MARK)).ok();
+            if let (Some(plan), Leftover::Clear, false) = (&plan, leftover, force) {
+                return Err(Error::invalid(
+                    &dir,
+                    format!(
+                        "holds the build of the plan in {} (relevo prep --plan): finish it \
+                         there, or pass --force to start afresh",
+                        plan.trim()
+                    ),
+                ));
+            }
             if leftover == Leftover::Resume {
                 resumed = true;
             } else {
+                tracing::warn!(
+                    "{}: left by a run of Relevo that did not finish; removed, starting afresh",
+                    dir.display()
+                );
                 fs::remove_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
             }
         }
@@ -128,6 +143,10 @@ impl Staging {
     pub fn commit(mut self) -> Result<PathBuf> {
         let mark = self.dir.join(STAGING_MARK);
         fs::remove_file(&mark).map_err(|e| Error::io(&mark, e))?;
+        let plan = self.dir.join(PLAN_MARK);
+        if plan.exists() {
+            fs::remove_file(&plan).map_err(|e| Error::io(&plan, e))?;
+        }
         // Only a bundle that was there when this writer started (and that it
         // was allowed to replace) is replaced; one that appeared since is not.
         if self.replacing && self.target.symlink_metadata().is_ok() {
@@ -278,6 +297,11 @@ fn unused_path(target: &Path, suffix: &str) -> PathBuf {
 /// such a folder is ever cleared; it is removed before the folder becomes
 /// the bundle.
 const STAGING_MARK: &str = ".relevo-staging";
+
+/// The file a plan's build keeps in its staging folder, naming the plan's
+/// folder: the jobs share the folder, and no other writer clears it
+/// without `--force`.
+pub const PLAN_MARK: &str = ".relevo-plan";
 
 /// `TARGET.tmp` beside the target.
 pub fn staging_path(target: &Path) -> PathBuf {
