@@ -15,6 +15,7 @@ pub mod clusters;
 pub mod commands;
 pub mod ingest;
 pub mod output;
+pub mod plan;
 pub mod prep;
 pub mod progress;
 pub mod veg_io;

@@ -14,8 +14,8 @@
 //! writes on one machine.
 
 use crate::output;
-use crate::prep::plan::write_json;
-use crate::prep::slurm::Jobs;
+use crate::plan::slurm::Jobs;
+use crate::plan::{absolute, job_record, write_json};
 use crate::veg_io::{self, ImageReader};
 use anyhow::{bail, Context, Result};
 use relevo_core::geo::GeoTransform;
@@ -30,7 +30,6 @@ use std::time::Instant;
 /// `format` of a vegetation plan's `plan.json`.
 pub const VEG_PLAN_FORMAT: &str = "relevo-veg-plan";
 const VERSION: u32 = 1;
-const PLAN_FILE: &str = "plan.json";
 
 /// How the image is read, as `veg detect` was told.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -92,31 +91,9 @@ pub struct VegPlanRequest<'a> {
     pub force: bool,
 }
 
-fn absolute(p: &Path) -> Result<PathBuf> {
-    Ok(if p.is_absolute() {
-        p.to_path_buf()
-    } else {
-        std::env::current_dir()?.join(p)
-    })
-}
-
 impl VegPlan {
     pub fn load(dir: &Path) -> Result<VegPlan> {
-        let path = dir.join(PLAN_FILE);
-        let text = relevo_core::files::read_to_string(&path)
-            .with_context(|| format!("{}: no plan here (make one with --jobs)", dir.display()))?;
-        let plan: VegPlan = serde_json::from_str(&text)
-            .with_context(|| format!("{}: not a vegetation plan", path.display()))?;
-        if plan.format != VEG_PLAN_FORMAT || plan.format_version != VERSION {
-            bail!(
-                "{}: a plan of format {} version {}; this relevo reads {VEG_PLAN_FORMAT} \
-                 version {VERSION}",
-                path.display(),
-                plan.format,
-                plan.format_version
-            );
-        }
-        Ok(plan)
+        crate::plan::load(dir, VEG_PLAN_FORMAT, VERSION)
     }
 
     /// Learn from the samples and write the plan in `dir` (a new or empty
@@ -125,28 +102,7 @@ impl VegPlan {
         if r.jobs == 0 {
             bail!("--jobs must be at least 1");
         }
-        if dir.join(PLAN_FILE).is_file() {
-            if !r.force {
-                bail!(
-                    "{}: already holds a plan (pass --force to replace it)",
-                    dir.display()
-                );
-            }
-            for sub in ["jobs", "logs", "slurm"] {
-                let p = dir.join(sub);
-                if p.exists() {
-                    std::fs::remove_dir_all(&p).with_context(|| p.display().to_string())?;
-                }
-            }
-        } else if dir.read_dir().is_ok_and(|mut d| d.next().is_some()) {
-            bail!(
-                "{}: not empty and not a plan; give --plan a new or empty folder",
-                dir.display()
-            );
-        }
-        for sub in ["jobs", "logs"] {
-            std::fs::create_dir_all(dir.join(sub))?;
-        }
+        crate::plan::prepare(dir, r.force)?;
         let image = ImageSpec {
             path: absolute(&r.image.path)?,
             ..r.image
@@ -179,7 +135,7 @@ impl VegPlan {
             model,
             jobs,
         };
-        write_json(&dir.join(PLAN_FILE), &plan)?;
+        crate::plan::save(dir, &plan)?;
         Ok(plan)
     }
 
@@ -203,20 +159,18 @@ impl VegPlan {
             job: k,
             tiles: [from, to],
             ms: start.elapsed().as_secs_f64() * 1e3,
-            host: std::fs::read_to_string("/proc/sys/kernel/hostname")
-                .map(|h| h.trim().to_string())
-                .unwrap_or_default(),
+            host: crate::plan::hostname(),
             memory_budget_bytes: relevo_core::memory::budget(),
             objects,
         };
-        write_json(&job_path(dir, k), &record)?;
+        write_json(&job_record(dir, k), &record)?;
         Ok(record)
     }
 
     /// The jobs without a record.
     pub fn missing(&self, dir: &Path) -> Vec<usize> {
         (0..self.jobs.len())
-            .filter(|&k| !job_path(dir, k).is_file())
+            .filter(|&k| !job_record(dir, k).is_file())
             .collect()
     }
 
@@ -240,7 +194,7 @@ impl VegPlan {
         }
         let mut found = Vec::new();
         for k in 0..self.jobs.len() {
-            let path = job_path(dir, k);
+            let path = job_record(dir, k);
             let record: VegJobRecord =
                 serde_json::from_str(&relevo_core::files::read_to_string(&path)?)
                     .with_context(|| path.display().to_string())?;
@@ -270,10 +224,6 @@ impl VegPlan {
         outputs.commit()?;
         Ok(objects.len())
     }
-}
-
-fn job_path(dir: &Path, k: usize) -> PathBuf {
-    dir.join("jobs").join(format!("{k}.json"))
 }
 
 /// The samples' contrast as one extraction measures it on the whole image,

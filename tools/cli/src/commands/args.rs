@@ -157,7 +157,7 @@ impl PlanArgs {
     pub fn submit_to(
         &self,
         dir: &std::path::Path,
-        plan: &dyn crate::prep::slurm::Jobs,
+        plan: &dyn crate::plan::slurm::Jobs,
         json: bool,
     ) -> anyhow::Result<()> {
         let Some(Scheduler::Slurm) = self.submit else {
@@ -170,13 +170,13 @@ impl PlanArgs {
             || self.mem.is_some()
             || self.time.is_some()
             || self.cpus_per_task != 1;
-        let options = crate::prep::slurm::SlurmOptions {
+        let options = crate::plan::slurm::SlurmOptions {
             partition: self.partition.clone(),
             mem: self.mem.clone(),
             cpus_per_task: self.cpus_per_task,
             time: self.time.clone(),
         };
-        let submitted = crate::prep::slurm::submit(dir, plan, given.then_some(&options))?;
+        let submitted = crate::plan::slurm::submit(dir, plan, given.then_some(&options))?;
         if json {
             println!("{}", serde_json::to_string(&submitted)?);
         } else {

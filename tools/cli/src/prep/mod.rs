@@ -7,7 +7,6 @@
 mod direct;
 pub mod plan;
 pub mod region;
-pub mod slurm;
 pub mod tiled;
 
 use crate::clusters::{bake_with_progress, ClustersSummary};

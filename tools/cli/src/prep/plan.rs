@@ -24,6 +24,7 @@ use super::region::RegionSpec;
 use super::tiled::{
     height_source, region_name, write_options, Heights, TiledOptions, TiledSummary,
 };
+use crate::plan::absolute;
 use anyhow::{bail, Context, Result};
 use relevo_core::bundle::{staging_path, StageTiming, PLAN_MARK};
 use relevo_core::pyramid::jobs::{self, Job};
@@ -37,7 +38,6 @@ use std::time::Instant;
 /// `format` of a plan's `plan.json`.
 pub const PLAN_FORMAT: &str = "relevo-plan";
 const PLAN_VERSION: u32 = 1;
-const PLAN_FILE: &str = "plan.json";
 
 /// `DIR/plan.json`: everything a job needs to run without the user's
 /// command line.
@@ -99,21 +99,7 @@ pub struct JobRecord {
 impl Plan {
     /// Read `dir/plan.json`.
     pub fn load(dir: &Path) -> Result<Plan> {
-        let path = dir.join(PLAN_FILE);
-        let text = relevo_core::files::read_to_string(&path)
-            .with_context(|| format!("{}: no plan here (make one with --jobs)", dir.display()))?;
-        let plan: Plan = serde_json::from_str(&text)
-            .with_context(|| format!("{}: not a Relevo plan", path.display()))?;
-        if plan.format != PLAN_FORMAT || plan.format_version != PLAN_VERSION {
-            bail!(
-                "{}: a plan of format {} version {}; this relevo reads {PLAN_FORMAT} version \
-                 {PLAN_VERSION}",
-                path.display(),
-                plan.format,
-                plan.format_version
-            );
-        }
-        Ok(plan)
+        crate::plan::load(dir, PLAN_FORMAT, PLAN_VERSION)
     }
 
     pub fn layout(&self) -> Result<TileLayout> {
@@ -138,7 +124,7 @@ impl Plan {
     }
 }
 
-impl super::slurm::Jobs for Plan {
+impl crate::plan::slurm::Jobs for Plan {
     fn subcommand(&self) -> &'static [&'static str] {
         &["prep"]
     }
@@ -191,14 +177,7 @@ pub fn create(region: &RegionSpec, out: &Path, dir: &Path, options: PlanOptions)
     if options.jobs_per_step == 0 {
         bail!("--jobs must be at least 1");
     }
-    prepare_dir(dir, options.force)?;
-    let absolute = |p: &Path| -> Result<PathBuf> {
-        Ok(if p.is_absolute() {
-            p.to_path_buf()
-        } else {
-            std::env::current_dir()?.join(p)
-        })
-    };
+    crate::plan::prepare(dir, options.force)?;
     let out = absolute(out)?;
     if out.symlink_metadata().is_ok() && !options.force {
         bail!(
@@ -272,48 +251,8 @@ pub fn create(region: &RegionSpec, out: &Path, dir: &Path, options: PlanOptions)
         heights,
         steps,
     };
-    write_json(&dir.join(PLAN_FILE), &plan)?;
+    crate::plan::save(dir, &plan)?;
     Ok(plan)
-}
-
-/// Make `dir` ready for a new plan: created, or emptied of an earlier
-/// plan's files with `force`; a folder holding anything else is refused.
-fn prepare_dir(dir: &Path, force: bool) -> Result<()> {
-    if dir.join(PLAN_FILE).is_file() {
-        if !force {
-            bail!(
-                "{}: already holds a plan (pass --force to replace it)",
-                dir.display()
-            );
-        }
-        for sub in ["jobs", "logs", "slurm"] {
-            let p = dir.join(sub);
-            if p.exists() {
-                std::fs::remove_dir_all(&p).with_context(|| p.display().to_string())?;
-            }
-        }
-        std::fs::remove_file(dir.join(PLAN_FILE))?;
-    } else if dir.read_dir().is_ok_and(|mut d| d.next().is_some()) {
-        bail!(
-            "{}: not empty and not a plan; give --plan a new or empty folder",
-            dir.display()
-        );
-    }
-    for sub in ["jobs", "logs"] {
-        let p = dir.join(sub);
-        std::fs::create_dir_all(&p).with_context(|| p.display().to_string())?;
-    }
-    Ok(())
-}
-
-/// Write `value` as JSON at `path` atomically (a reader sees the old file
-/// or the whole new one).
-pub fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
-    let mut text = serde_json::to_string_pretty(value)?;
-    text.push('\n');
-    let tmp = path.with_extension("json.tmp");
-    std::fs::write(&tmp, text).with_context(|| tmp.display().to_string())?;
-    std::fs::rename(&tmp, path).with_context(|| path.display().to_string())
 }
 
 /// Run job `index` of the plan in `dir`.
@@ -362,21 +301,13 @@ pub fn run_job(dir: &Path, index: usize) -> Result<JobRecord> {
         tiles: job.tiles.len(),
         computed: before,
         ms,
-        host: hostname(),
+        host: crate::plan::hostname(),
         threads: rayon::current_num_threads(),
         memory_budget_bytes: relevo_core::memory::budget(),
         slurm,
     };
-    let jobs_dir = dir.join("jobs");
-    std::fs::create_dir_all(&jobs_dir)?;
-    write_json(&jobs_dir.join(format!("{index}.json")), &record)?;
+    crate::plan::write_json(&crate::plan::job_record(dir, index), &record)?;
     Ok(record)
-}
-
-fn hostname() -> String {
-    std::fs::read_to_string("/proc/sys/kernel/hostname")
-        .map(|h| h.trim().to_string())
-        .unwrap_or_default()
 }
 
 /// The plan's jobs not done, each with its step and tiles left, in order.
@@ -441,22 +372,9 @@ pub fn finish(dir: &Path) -> Result<TiledSummary> {
         timings,
     };
     let bundle = pyramid::seal_build(staging, store, report, plan.description.clone(), &options)?;
-    let opened = pyramid::Pyramid::open(&bundle)?;
-    let m = &opened.manifest;
-    Ok(TiledSummary {
-        bundle,
-        region: m.region.clone(),
-        side: m.grid.side,
-        cell_size_m: m.grid.cell_size_m,
-        tile_cells: m.tiling.tile_cells,
-        levels: m.tiling.levels,
-        tiles: m.tiling.tiles,
-        valid_vertices: m.grid.valid_vertices,
-        height_range_m: m.grid.height_range_m,
-        read_by_windows: matches!(plan.heights, PlannedHeights::Windows { .. }),
-        grid_ms: 0.0,
-        pyramid_ms: m.timings.iter().map(|t| t.ms).sum(),
-    })
+    let pyramid_ms = start.elapsed().as_secs_f64() * 1e3;
+    let windows = matches!(plan.heights, PlannedHeights::Windows { .. });
+    TiledSummary::of(bundle, windows, 0.0, pyramid_ms)
 }
 
 /// The jobs' wall times summed by the stage the manifest records them
@@ -464,7 +382,7 @@ pub fn finish(dir: &Path) -> Result<TiledSummary> {
 fn job_timings(dir: &Path, plan: &Plan) -> Result<Vec<StageTiming>> {
     let mut timings: Vec<StageTiming> = Vec::new();
     for job in plan.jobs()? {
-        let path = dir.join("jobs").join(format!("{}.json", job.index));
+        let path = crate::plan::job_record(dir, job.index);
         let Ok(text) = std::fs::read_to_string(&path) else {
             continue; // done by a run that left no record (killed after its last mark)
         };

@@ -77,22 +77,35 @@ pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Res
     })?;
     bar.finish_and_clear();
     let pyramid_ms = start.elapsed().as_secs_f64() * 1e3;
-    let opened = pyramid::Pyramid::open(&bundle)?;
-    let m = &opened.manifest;
-    Ok(TiledSummary {
-        bundle,
-        region: name,
-        side: m.grid.side,
-        cell_size_m: m.grid.cell_size_m,
-        tile_cells: m.tiling.tile_cells,
-        levels: m.tiling.levels,
-        tiles: m.tiling.tiles,
-        valid_vertices: m.grid.valid_vertices,
-        height_range_m: m.grid.height_range_m,
-        read_by_windows,
-        grid_ms,
-        pyramid_ms,
-    })
+    TiledSummary::of(bundle, read_by_windows, grid_ms, pyramid_ms)
+}
+
+impl TiledSummary {
+    /// What the pyramid written at `bundle` reports, with how its heights
+    /// were read and the grid's and the pyramid's wall times, ms.
+    pub fn of(
+        bundle: PathBuf,
+        read_by_windows: bool,
+        grid_ms: f64,
+        pyramid_ms: f64,
+    ) -> Result<TiledSummary> {
+        let opened = pyramid::Pyramid::open(&bundle)?;
+        let m = &opened.manifest;
+        Ok(TiledSummary {
+            region: m.region.clone(),
+            side: m.grid.side,
+            cell_size_m: m.grid.cell_size_m,
+            tile_cells: m.tiling.tile_cells,
+            levels: m.tiling.levels,
+            tiles: m.tiling.tiles,
+            valid_vertices: m.grid.valid_vertices,
+            height_range_m: m.grid.height_range_m,
+            read_by_windows,
+            grid_ms,
+            pyramid_ms,
+            bundle,
+        })
+    }
 }
 
 /// The region's name: its own, else the output's file stem.

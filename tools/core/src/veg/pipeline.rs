@@ -592,9 +592,10 @@ impl Model {
     }
 
     /// Analyse `tiles` (of [`Model::tiles`]) of `source`: the objects they
-    /// own, in the image's pixel coordinates, in tile order. Every tile is
-    /// analysed as the whole extraction analyses it, so the objects of all
-    /// tiles, sorted by row then column, are the extraction's.
+    /// own, in the image's pixel coordinates, sorted by row then column
+    /// (tile order kept among equals). Every tile is analysed as the whole
+    /// extraction analyses it, so the objects of all tiles, gathered in
+    /// tile order and sorted so, are the extraction's.
     pub fn analyse(&self, source: &dyn PixelSource, tiles: Vec<Tile>) -> Result<Vec<Object>> {
         let classifier = Classifier::learn(
             self.marked.clone(),
