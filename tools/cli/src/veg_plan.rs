@@ -92,8 +92,28 @@ pub struct VegPlanRequest<'a> {
 }
 
 impl VegPlan {
+    /// Read `dir/plan.json`; refused when its jobs do not cut the
+    /// model's tiles.
     pub fn load(dir: &Path) -> Result<VegPlan> {
-        crate::plan::load(dir, VEG_PLAN_FORMAT, VERSION)
+        let plan: VegPlan = crate::plan::load(dir, VEG_PLAN_FORMAT, VERSION)?;
+        let tiles = plan.model.tiles().len();
+        let mut next = 0;
+        for &[from, to] in &plan.jobs {
+            if from != next || to < from || to > tiles {
+                bail!(
+                    "{}: its jobs do not cut the {tiles} tiles in order; make the plan again",
+                    dir.join("plan.json").display()
+                );
+            }
+            next = to;
+        }
+        if next != tiles {
+            bail!(
+                "{}: its jobs leave tiles out; make the plan again",
+                dir.join("plan.json").display()
+            );
+        }
+        Ok(plan)
     }
 
     /// Learn from the samples and write the plan in `dir` (a new or empty
@@ -150,6 +170,16 @@ impl VegPlan {
         };
         let start = Instant::now();
         let reader = self.image.open()?;
+        if reader.size() != (self.model.size[0], self.model.size[1]) {
+            bail!(
+                "{}: {}×{} pixels, not the {}×{} the plan was made for; make the plan again",
+                self.image.path.display(),
+                reader.width,
+                reader.height,
+                self.model.size[0],
+                self.model.size[1]
+            );
+        }
         let tiles = self.model.tiles()[from..to].to_vec();
         let objects = self
             .model
@@ -248,8 +278,12 @@ impl Jobs for VegPlan {
         &["veg", "detect"]
     }
 
-    fn steps(&self) -> Vec<(String, usize, usize)> {
-        vec![("vegetation".into(), 0, self.jobs.len() - 1)]
+    fn steps(&self) -> Result<Vec<(String, usize, usize)>> {
+        Ok(vec![(
+            "vegetation".into(),
+            0,
+            self.jobs.len().saturating_sub(1),
+        )])
     }
 
     fn unfinished(&self, dir: &Path) -> Result<Vec<usize>> {

@@ -4,7 +4,8 @@
 //! (its thresholds absolute and scaled to the samples' contrast) and
 //! forest fill on the Olinda Landsat scene, in tiles of 256 pixels so
 //! objects on tile borders are many; the finish refuses a plan with jobs
-//! left, naming them.
+//! left, naming them; a plan whose jobs were edited out of the tiles is
+//! refused.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
@@ -107,6 +108,17 @@ fn a_detection_run_as_jobs_writes_the_single_machine_database() {
                 std::fs::read_to_string(&out).unwrap() == expected,
                 "{label}, {jobs} jobs: not the single machine's database"
             );
+            if jobs == 3 && k == 0 {
+                let path = plan.join("plan.json");
+                let mut edited: serde_json::Value =
+                    serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+                edited["jobs"] = serde_json::json!([[0, 9999]]);
+                std::fs::write(&path, edited.to_string()).unwrap();
+                let o = plan_command(&plan, &["--job", "0"]);
+                let e = String::from_utf8_lossy(&o.stderr);
+                assert_eq!(o.status.code(), Some(1), "{e}");
+                assert!(e.contains("do not cut the 25 tiles"), "{e}");
+            }
         }
     }
 }

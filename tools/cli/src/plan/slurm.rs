@@ -24,7 +24,7 @@ pub trait Jobs {
     /// and finishes with `--plan DIR --finish`.
     fn subcommand(&self) -> &'static [&'static str];
     /// The steps, in order: name, first and last job.
-    fn steps(&self) -> Vec<(String, usize, usize)>;
+    fn steps(&self) -> Result<Vec<(String, usize, usize)>>;
     /// The jobs of the plan in `dir` not done, in order.
     fn unfinished(&self, dir: &Path) -> Result<Vec<usize>>;
     /// What the plan writes, for the scripts' comments.
@@ -79,9 +79,9 @@ fn quoted(s: &str) -> String {
 }
 
 /// The scripts of `plan` in `dir/slurm/`, in the order they run.
-fn scripts(dir: &Path, plan: &dyn Jobs) -> Vec<Script> {
+fn scripts(dir: &Path, plan: &dyn Jobs) -> Result<Vec<Script>> {
     let slurm = dir.join("slurm");
-    let steps = plan.steps();
+    let steps = plan.steps()?;
     let mut out: Vec<Script> = steps
         .iter()
         .enumerate()
@@ -94,7 +94,7 @@ fn scripts(dir: &Path, plan: &dyn Jobs) -> Vec<Script> {
         path: slurm.join(format!("{:02}-finish.sbatch", steps.len())),
         step: None,
     });
-    out
+    Ok(out)
 }
 
 /// Write the plan's batch scripts with `options`, replacing earlier ones.
@@ -116,7 +116,7 @@ pub fn write_scripts(dir: &Path, plan: &dyn Jobs, options: &SlurmOptions) -> Res
     );
     let plan_dir = quoted(&dir_abs.display().to_string());
     let mut written = Vec::new();
-    for (i, script) in scripts(dir, plan).iter().enumerate() {
+    for (i, script) in scripts(dir, plan)?.iter().enumerate() {
         let stem = script
             .path
             .file_stem()
@@ -203,7 +203,7 @@ pub fn submit(
     plan: &dyn Jobs,
     options: Option<&SlurmOptions>,
 ) -> Result<Vec<Submitted>> {
-    let scripts = scripts(dir, plan);
+    let scripts = scripts(dir, plan)?;
     match options {
         Some(o) => {
             write_scripts(dir, plan, o)?;
@@ -237,7 +237,7 @@ pub fn submit(
             ids.join(" ")
         );
     }
-    let steps = plan.steps();
+    let steps = plan.steps()?;
     let mut left: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
     for job in plan.unfinished(dir)? {
         let step = steps

@@ -129,11 +129,13 @@ impl crate::plan::slurm::Jobs for Plan {
         &["prep"]
     }
 
-    fn steps(&self) -> Vec<(String, usize, usize)> {
-        self.steps
-            .iter()
-            .map(|s| (s.name.clone(), s.jobs[0], s.jobs[1]))
-            .collect()
+    /// From the jobs the plan's tiling gives (not the table kept for
+    /// people, which an edit could make disagree).
+    fn steps(&self) -> Result<Vec<(String, usize, usize)>> {
+        Ok(step_table(&self.jobs()?)
+            .into_iter()
+            .map(|s| (s.name, s.jobs[0], s.jobs[1]))
+            .collect())
     }
 
     fn unfinished(&self, _: &Path) -> Result<Vec<usize>> {
@@ -154,6 +156,26 @@ impl crate::plan::slurm::Jobs for Plan {
         let working = threads as u64 * (3 * t + 1).pow(2) * 24;
         Ok(format!("{}M", ((2 * working) >> 20) + 256))
     }
+}
+
+/// Each step of `jobs` (in order) with its first and last job and tiles.
+fn step_table(jobs: &[Job]) -> Vec<PlannedStep> {
+    let mut table: Vec<PlannedStep> = Vec::new();
+    for job in jobs {
+        match table.last_mut() {
+            Some(s) if s.step == job.step => {
+                s.jobs[1] = job.index;
+                s.tiles += job.tiles.len();
+            }
+            _ => table.push(PlannedStep {
+                step: job.step,
+                name: job.step.name(),
+                jobs: [job.index, job.index],
+                tiles: job.tiles.len(),
+            }),
+        }
+    }
+    table
 }
 
 /// How a plan is made.
@@ -228,18 +250,7 @@ pub fn create(region: &RegionSpec, out: &Path, dir: &Path, options: PlanOptions)
     staging.keep();
     let layout = TileLayout::new(description.grid.side, options.tile_cells)?;
     let all = jobs::jobs(&layout, true, options.jobs_per_step);
-    let steps = build::steps(&layout, true)
-        .into_iter()
-        .map(|step| {
-            let of: Vec<&Job> = all.iter().filter(|j| j.step == step).collect();
-            PlannedStep {
-                step,
-                name: step.name(),
-                jobs: [of[0].index, of[of.len() - 1].index],
-                tiles: of.iter().map(|j| j.tiles.len()).sum(),
-            }
-        })
-        .collect();
+    let steps = step_table(&all);
     let plan = Plan {
         format: PLAN_FORMAT.into(),
         format_version: PLAN_VERSION,
@@ -271,11 +282,20 @@ pub fn run_job(dir: &Path, index: usize) -> Result<JobRecord> {
     let store = plan.store()?;
     let before = job.step.missing(&store, &job.tiles)?.len();
     let source = match (&plan.heights, job.step) {
-        (PlannedHeights::Windows { holes }, Step::Heights) => Some(
-            DirectSource::open(&plan.region)?
-                .context("the plan's DEM no longer reads as it did when planned")?
-                .with_holes(holes.clone()),
-        ),
+        (PlannedHeights::Windows { holes }, Step::Heights) => {
+            let changed = || {
+                format!(
+                    "{}: the DEM no longer reads as it did when the plan was made; make the \
+                     plan again",
+                    plan.region.dem.files[0].display()
+                )
+            };
+            let source = DirectSource::open(&plan.region)?.with_context(changed)?;
+            if source.grid != plan.description.grid {
+                bail!(changed());
+            }
+            Some(source.with_holes(holes.clone()))
+        }
         _ => None,
     };
     let bar = crate::progress::pass_bar();
