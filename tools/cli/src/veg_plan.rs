@@ -14,7 +14,7 @@
 //! writes on one machine.
 
 use crate::output;
-use crate::plan::slurm::Jobs;
+use crate::plan::Jobs;
 use crate::plan::{absolute, job_record, write_json};
 use crate::veg_io::{self, ImageReader};
 use anyhow::{bail, Context, Result};

@@ -113,6 +113,16 @@ fn a_plan_run_as_jobs_gives_the_single_machine_pyramid_for_any_job_count() {
                             && !out.exists(),
                         "{e}"
                     );
+                    let status = relevo_ok(["prep", "--plan", plan.to_str().unwrap(), "--status"]);
+                    let own = format!(
+                        "own errors: {} of {} jobs done",
+                        steps[1].2 - steps[1].1 + 1,
+                        steps[1].2 - steps[1].1 + 1
+                    );
+                    assert!(
+                        status.contains(&own) && status.contains("lattice: 0 of 1 jobs done"),
+                        "{status}"
+                    );
                 }
                 for k in (first..=last).rev() {
                     let o = job(&plan, k);

@@ -97,6 +97,9 @@ fn a_detection_run_as_jobs_writes_the_single_machine_database() {
                     e.contains("2 jobs are not done: 0, 1") && !out.exists(),
                     "{e}"
                 );
+                let o = plan_command(&plan, &["--status"]);
+                let status = String::from_utf8_lossy(&o.stdout);
+                assert!(status.contains("vegetation: 1 of 3 jobs done"), "{status}");
             }
             for job in (0..jobs).rev() {
                 let o = plan_command(&plan, &["--job", &job.to_string()]);

@@ -132,6 +132,9 @@ pub struct PlanArgs {
     /// With --plan: check every job is done and write the result.
     #[arg(long, requires = "plan", conflicts_with = "submit")]
     pub finish: bool,
+    /// With --plan: how far the plan has come, step by step.
+    #[arg(long, requires = "plan", conflicts_with_all = ["job", "finish", "submit"])]
+    pub status: bool,
     /// With --plan: submit the jobs not done, step after step, then the
     /// finish, to a scheduler (Slurm's sbatch); prints the job ids.
     #[arg(long, value_enum, requires = "plan")]
@@ -152,12 +155,42 @@ pub struct PlanArgs {
 }
 
 impl PlanArgs {
+    /// `--status`: each step's jobs done of all (as JSON with `json`).
+    pub fn print_status(
+        &self,
+        dir: &std::path::Path,
+        plan: &dyn crate::plan::Jobs,
+        json: bool,
+    ) -> anyhow::Result<()> {
+        let status = crate::plan::status(dir, plan)?;
+        if json {
+            println!("{}", serde_json::to_string(&status)?);
+            return Ok(());
+        }
+        for s in &status {
+            println!("{:>18}: {} of {} jobs done", s.step, s.done, s.jobs);
+        }
+        let (done, all) = status
+            .iter()
+            .fold((0, 0), |(d, a), s| (d + s.done, a + s.jobs));
+        println!(
+            "{}: {done} of {all} jobs done{}",
+            dir.display(),
+            if done == all {
+                "; finish with --finish"
+            } else {
+                ""
+            }
+        );
+        Ok(())
+    }
+
     /// `--submit`: the jobs of `plan` (in `dir`) not done, then its finish;
     /// the ids printed (as JSON with `json`).
     pub fn submit_to(
         &self,
         dir: &std::path::Path,
-        plan: &dyn crate::plan::slurm::Jobs,
+        plan: &dyn crate::plan::Jobs,
         json: bool,
     ) -> anyhow::Result<()> {
         let Some(Scheduler::Slurm) = self.submit else {

@@ -83,6 +83,7 @@ pub enum Command {
   relevo prep --dem county_utm.tif --tiled --plan /shared/plan --jobs 16 --out /shared/county.relevo
   relevo prep --plan /shared/plan --job 3        # one job of the plan, on any machine
   relevo prep --plan /shared/plan --submit slurm --mem 4G --cpus-per-task 4 --time 1:00:00
+  relevo prep --plan /shared/plan --status       # each step's jobs done
   relevo prep --plan /shared/plan --finish       # check every job, move the pyramid into place")]
     Prep(prep::PrepArgs),
     /// Export the mesh at an object-space tolerance as glTF (.glb) or OBJ,

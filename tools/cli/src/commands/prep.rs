@@ -257,5 +257,9 @@ fn run_plan(dir: &Path, a: &PrepArgs) -> Result<()> {
     if p.finish {
         return print_tiled(&plan::finish(dir)?, a.json);
     }
-    p.submit_to(dir, &plan::Plan::load(dir)?, a.json)
+    let plan = plan::Plan::load(dir)?;
+    if p.status {
+        return p.print_status(dir, &plan, a.json);
+    }
+    p.submit_to(dir, &plan, a.json)
 }

@@ -32,6 +32,7 @@ Examples:
   relevo veg detect state_naip.vrt --samples marks.csv --plan /shared/veg --jobs 64 \\
       --out /shared/trees.csv --submit slurm --mem 8G   # as Slurm array jobs
   relevo veg detect --plan /shared/veg --job 3      # one job, on any machine
+  relevo veg detect --plan /shared/veg --status     # jobs done of all
   relevo veg detect --plan /shared/veg --finish     # gather the jobs' objects"
     )]
     Detect(Box<VegDetectArgs>),
@@ -442,6 +443,9 @@ fn detect_plan(dir: &Path, a: &VegDetectArgs) -> Result<()> {
         let n = plan.finish(dir)?;
         println!("{}: {n} objects", plan.out.display());
         return Ok(());
+    }
+    if p.status {
+        return p.print_status(dir, &plan, a.json);
     }
     p.submit_to(dir, &plan, a.json)
 }

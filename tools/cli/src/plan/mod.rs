@@ -10,6 +10,45 @@ use serde::de::DeserializeOwned;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
+/// A plan whose numbered jobs run in steps, each step's jobs side by side
+/// once the step before has succeeded.
+pub trait Jobs {
+    /// The `relevo` subcommand that runs a job with `--plan DIR --job K`
+    /// and finishes with `--plan DIR --finish`.
+    fn subcommand(&self) -> &'static [&'static str];
+    /// The steps, in order: name, first and last job.
+    fn steps(&self) -> Result<Vec<(String, usize, usize)>>;
+    /// The jobs of the plan in `dir` not done, in order.
+    fn unfinished(&self, dir: &Path) -> Result<Vec<usize>>;
+    /// What the plan writes, for the scripts' comments.
+    fn target(&self) -> &Path;
+    /// Memory a task running on `threads` threads asks for by default, as
+    /// `sbatch --mem` takes it.
+    fn default_mem(&self, threads: usize) -> Result<String>;
+}
+
+/// How far one step of a plan has come.
+#[derive(Debug, Clone, Serialize)]
+pub struct StepStatus {
+    pub step: String,
+    pub jobs: usize,
+    pub done: usize,
+}
+
+/// Each step of `plan` (in `dir`) with its jobs done of all.
+pub fn status(dir: &Path, plan: &dyn Jobs) -> Result<Vec<StepStatus>> {
+    let left = plan.unfinished(dir)?;
+    Ok(plan
+        .steps()?
+        .into_iter()
+        .map(|(step, first, last)| StepStatus {
+            step,
+            jobs: last + 1 - first,
+            done: (first..=last).filter(|j| !left.contains(j)).count(),
+        })
+        .collect())
+}
+
 /// The plan's own file in its folder.
 const PLAN_FILE: &str = "plan.json";
 

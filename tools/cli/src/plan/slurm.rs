@@ -10,29 +10,13 @@
 //! task is killed or a node fails, submitting again sends only what is
 //! left.
 
+use super::Jobs;
 use anyhow::{bail, Context, Result};
 use relevo_core::bundle::sha256_bytes;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-
-/// A plan whose numbered jobs run in steps, each step's jobs side by side
-/// once the step before has succeeded.
-pub trait Jobs {
-    /// The `relevo` subcommand that runs a job with `--plan DIR --job K`
-    /// and finishes with `--plan DIR --finish`.
-    fn subcommand(&self) -> &'static [&'static str];
-    /// The steps, in order: name, first and last job.
-    fn steps(&self) -> Result<Vec<(String, usize, usize)>>;
-    /// The jobs of the plan in `dir` not done, in order.
-    fn unfinished(&self, dir: &Path) -> Result<Vec<usize>>;
-    /// What the plan writes, for the scripts' comments.
-    fn target(&self) -> &Path;
-    /// Memory a task running on `threads` threads asks for by default, as
-    /// `sbatch --mem` takes it.
-    fn default_mem(&self, threads: usize) -> Result<String>;
-}
 
 /// What the batch scripts ask Slurm for (`#SBATCH` lines).
 #[derive(Debug, Clone, Default)]

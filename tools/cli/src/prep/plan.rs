@@ -124,7 +124,7 @@ impl Plan {
     }
 }
 
-impl crate::plan::slurm::Jobs for Plan {
+impl crate::plan::Jobs for Plan {
     fn subcommand(&self) -> &'static [&'static str] {
         &["prep"]
     }
