@@ -290,6 +290,15 @@ impl Jobs for VegPlan {
         Ok(self.missing(dir))
     }
 
+    /// The database is written and no job was run again since.
+    fn finished(&self, dir: &Path) -> bool {
+        let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+        let Some(written) = modified(&self.out) else {
+            return false;
+        };
+        (0..self.jobs.len()).all(|k| modified(&job_record(dir, k)).is_some_and(|t| t <= written))
+    }
+
     fn target(&self) -> &Path {
         &self.out
     }

@@ -156,6 +156,8 @@ fn a_plan_run_as_jobs_gives_the_single_machine_pyramid_for_any_job_count() {
             assert_eq!(total, heights + 64 * 3 + 1 + 2 * 21, "{label} {jobs}");
             let o = relevo(["prep", "--plan", plan.to_str().unwrap(), "--finish"]);
             assert!(stderr(&o).contains("already finished"), "{}", stderr(&o));
+            let status = relevo_ok(["prep", "--plan", plan.to_str().unwrap(), "--status"]);
+            assert!(status.contains("jobs done; finished: "), "{status}");
         }
     }
 }

@@ -111,6 +111,9 @@ fn a_detection_run_as_jobs_writes_the_single_machine_database() {
                 std::fs::read_to_string(&out).unwrap() == expected,
                 "{label}, {jobs} jobs: not the single machine's database"
             );
+            let status =
+                String::from_utf8_lossy(&plan_command(&plan, &["--status"]).stdout).to_string();
+            assert!(status.contains("jobs done; finished: "), "{status}");
             if jobs == 3 && k == 0 {
                 let path = plan.join("plan.json");
                 let mut edited: serde_json::Value =

@@ -173,15 +173,14 @@ impl PlanArgs {
         let (done, all) = status
             .iter()
             .fold((0, 0), |(d, a), s| (d + s.done, a + s.jobs));
-        println!(
-            "{}: {done} of {all} jobs done{}",
-            dir.display(),
-            if done == all {
-                "; finish with --finish"
-            } else {
-                ""
-            }
-        );
+        let next = if plan.finished(dir) {
+            format!("; finished: {}", plan.target().display())
+        } else if done == all {
+            "; finish with --finish".to_string()
+        } else {
+            String::new()
+        };
+        println!("{}: {done} of {all} jobs done{next}", dir.display());
         Ok(())
     }
 
@@ -195,10 +194,17 @@ impl PlanArgs {
     ) -> anyhow::Result<()> {
         let Some(Scheduler::Slurm) = self.submit else {
             anyhow::bail!(
-                "{}: say what to do with the plan: --job K, --finish or --submit slurm",
+                "{}: say what to do with the plan: --job K, --status, --finish or --submit slurm",
                 dir.display()
             );
         };
+        if plan.finished(dir) {
+            anyhow::bail!(
+                "{}: this plan is already finished: {}",
+                dir.display(),
+                plan.target().display()
+            );
+        }
         let given = self.partition.is_some()
             || self.mem.is_some()
             || self.time.is_some()

@@ -20,6 +20,8 @@ pub trait Jobs {
     fn steps(&self) -> Result<Vec<(String, usize, usize)>>;
     /// The jobs of the plan in `dir` not done, in order.
     fn unfinished(&self, dir: &Path) -> Result<Vec<usize>>;
+    /// Whether the plan in `dir` is finished: its result written.
+    fn finished(&self, dir: &Path) -> bool;
     /// What the plan writes, for the scripts' comments.
     fn target(&self) -> &Path;
     /// Memory a task running on `threads` threads asks for by default, as
@@ -37,7 +39,11 @@ pub struct StepStatus {
 
 /// Each step of `plan` (in `dir`) with its jobs done of all.
 pub fn status(dir: &Path, plan: &dyn Jobs) -> Result<Vec<StepStatus>> {
-    let left = plan.unfinished(dir)?;
+    let left = if plan.finished(dir) {
+        Vec::new()
+    } else {
+        plan.unfinished(dir)?
+    };
     Ok(plan
         .steps()?
         .into_iter()

@@ -138,6 +138,10 @@ impl crate::plan::Jobs for Plan {
             .collect())
     }
 
+    fn finished(&self, _: &Path) -> bool {
+        !staging_path(&self.out).exists() && pyramid::Pyramid::open(&self.out).is_ok()
+    }
+
     fn unfinished(&self, _: &Path) -> Result<Vec<usize>> {
         Ok(unfinished(self)?
             .into_iter()
@@ -345,7 +349,7 @@ pub fn unfinished(plan: &Plan) -> Result<Vec<(Job, usize)>> {
 /// its place.
 pub fn finish(dir: &Path) -> Result<TiledSummary> {
     let plan = Plan::load(dir)?;
-    if !staging_path(&plan.out).exists() && pyramid::Pyramid::open(&plan.out).is_ok() {
+    if crate::plan::Jobs::finished(&plan, dir) {
         bail!(
             "{}: this plan is already finished; its pyramid is {}",
             dir.display(),
