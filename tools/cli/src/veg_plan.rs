@@ -303,10 +303,7 @@ impl Jobs for VegPlan {
         &self.out
     }
 
-    /// Twice the tiles' working estimate, and 256 MiB.
-    fn default_mem(&self, threads: usize) -> Result<String> {
-        let side = (self.model.tiling.core_px + 2 * self.model.tiling.margin_px) as u64;
-        let working = threads as u64 * side * side * 64;
-        Ok(format!("{}M", ((2 * working) >> 20) + 256))
+    fn working_bytes(&self, threads: usize) -> Result<u64> {
+        Ok(self.model.working_bytes(threads))
     }
 }

@@ -167,13 +167,14 @@ impl PlanArgs {
             println!("{}", serde_json::to_string(&status)?);
             return Ok(());
         }
-        for s in &status {
+        for s in &status.steps {
             println!("{:>18}: {} of {} jobs done", s.step, s.done, s.jobs);
         }
         let (done, all) = status
+            .steps
             .iter()
             .fold((0, 0), |(d, a), s| (d + s.done, a + s.jobs));
-        let next = if plan.finished(dir) {
+        let next = if status.finished {
             format!("; finished: {}", plan.target().display())
         } else if done == all {
             "; finish with --finish".to_string()

@@ -24,9 +24,17 @@ pub trait Jobs {
     fn finished(&self, dir: &Path) -> bool;
     /// What the plan writes, for the scripts' comments.
     fn target(&self) -> &Path;
-    /// Memory a task running on `threads` threads asks for by default, as
-    /// `sbatch --mem` takes it.
-    fn default_mem(&self, threads: usize) -> Result<String>;
+    /// Bytes a job on `threads` threads holds at once, by the estimate
+    /// it checks against its memory budget before it starts.
+    fn working_bytes(&self, threads: usize) -> Result<u64>;
+}
+
+/// How far a plan has come.
+#[derive(Debug, Clone, Serialize)]
+pub struct Status {
+    pub steps: Vec<StepStatus>,
+    /// Whether its result is written.
+    pub finished: bool,
 }
 
 /// How far one step of a plan has come.
@@ -37,14 +45,16 @@ pub struct StepStatus {
     pub done: usize,
 }
 
-/// Each step of `plan` (in `dir`) with its jobs done of all.
-pub fn status(dir: &Path, plan: &dyn Jobs) -> Result<Vec<StepStatus>> {
-    let left = if plan.finished(dir) {
+/// Each step of `plan` (in `dir`) with its jobs done of all, and whether
+/// it is finished.
+pub fn status(dir: &Path, plan: &dyn Jobs) -> Result<Status> {
+    let finished = plan.finished(dir);
+    let left = if finished {
         Vec::new()
     } else {
         plan.unfinished(dir)?
     };
-    Ok(plan
+    let steps = plan
         .steps()?
         .into_iter()
         .map(|(step, first, last)| StepStatus {
@@ -52,7 +62,8 @@ pub fn status(dir: &Path, plan: &dyn Jobs) -> Result<Vec<StepStatus>> {
             jobs: last + 1 - first,
             done: (first..=last).filter(|j| !left.contains(j)).count(),
         })
-        .collect())
+        .collect();
+    Ok(Status { steps, finished })
 }
 
 /// The plan's own file in its folder.

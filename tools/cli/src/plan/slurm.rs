@@ -23,7 +23,7 @@ use std::process::Command;
 pub struct SlurmOptions {
     pub partition: Option<String>,
     /// Memory a task, as `sbatch --mem` takes it (e.g. `2G`); by default
-    /// twice the build's working estimate and 256 MiB.
+    /// twice the job's working estimate and 256 MiB.
     pub mem: Option<String>,
     /// CPUs a task; the job's threads.
     pub cpus_per_task: usize,
@@ -82,25 +82,21 @@ fn scripts(dir: &Path, plan: &dyn Jobs) -> Result<Vec<Script>> {
 }
 
 /// Write the plan's batch scripts with `options`, replacing earlier ones.
-pub fn write_scripts(dir: &Path, plan: &dyn Jobs, options: &SlurmOptions) -> Result<Vec<PathBuf>> {
-    let slurm = dir.join("slurm");
+pub fn write_scripts(dir: &Path, plan: &dyn Jobs, options: &SlurmOptions) -> Result<()> {
+    let dir_abs = std::fs::canonicalize(dir).with_context(|| dir.display().to_string())?;
+    let slurm = dir_abs.join("slurm");
     std::fs::create_dir_all(&slurm).with_context(|| slurm.display().to_string())?;
-    let dir_abs = std::fs::canonicalize(dir)?;
     let exe = std::env::current_exe().context("cannot find the relevo executable")?;
     let prefix = job_name_prefix(dir)?;
     let cpus = options.cpus_per_task.max(1);
     let mem = match &options.mem {
         Some(m) => m.clone(),
-        None => plan.default_mem(cpus)?,
+        None => format!("{}M", ((2 * plan.working_bytes(cpus)?) >> 20) + 256),
     };
-    let relevo = format!(
-        "{} {}",
-        quoted(&exe.display().to_string()),
-        plan.subcommand().join(" ")
-    );
+    let subcommand = plan.subcommand().join(" ");
+    let relevo = format!("{} {subcommand}", quoted(&exe.display().to_string()));
     let plan_dir = quoted(&dir_abs.display().to_string());
-    let mut written = Vec::new();
-    for (i, script) in scripts(dir, plan)?.iter().enumerate() {
+    for (i, script) in scripts(&dir_abs, plan)?.iter().enumerate() {
         let stem = script
             .path
             .file_stem()
@@ -128,16 +124,13 @@ pub fn write_scripts(dir: &Path, plan: &dyn Jobs, options: &SlurmOptions) -> Res
         let mut text = format!(
             "#!/bin/bash\n\
              # Relevo plan {plan_dir}, building {out}: {what}.\n\
-             # `relevo prep --plan DIR --submit slurm` submits it with --array (the tasks left)\n\
-             # and --dependency=afterok on the step before; by hand, in step order:\n\
+             # `relevo {subcommand} --plan DIR --submit slurm` submits it with --array (the\n\
+             # tasks left) and --dependency=afterok on the step before; by hand, in step order:\n\
              #   sbatch {path}\n\
              #SBATCH --job-name={prefix}-{i:02}\n",
             plan_dir = dir_abs.display(),
             out = plan.target().display(),
-            path = dir_abs
-                .join("slurm")
-                .join(script.path.file_name().unwrap_or_default())
-                .display(),
+            path = script.path.display(),
         );
         if let Some(a) = &array {
             text.push_str(&format!("#SBATCH --array={a}\n"));
@@ -158,9 +151,8 @@ pub fn write_scripts(dir: &Path, plan: &dyn Jobs, options: &SlurmOptions) -> Res
              exec {command}\n"
         ));
         std::fs::write(&script.path, text).with_context(|| script.path.display().to_string())?;
-        written.push(script.path.clone());
     }
-    Ok(written)
+    Ok(())
 }
 
 /// Run a Slurm command, its stdout on success.

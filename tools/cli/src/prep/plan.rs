@@ -153,12 +153,8 @@ impl crate::plan::Jobs for Plan {
         &self.out
     }
 
-    /// Twice the build's working estimate (a window of a tile and a tile
-    /// around it, a thread), and 256 MiB.
-    fn default_mem(&self, threads: usize) -> Result<String> {
-        let t = self.layout()?.tile_cells as u64;
-        let working = threads as u64 * (3 * t + 1).pow(2) * 24;
-        Ok(format!("{}M", ((2 * working) >> 20) + 256))
+    fn working_bytes(&self, threads: usize) -> Result<u64> {
+        Ok(build::working_bytes(&self.layout()?, threads))
     }
 }
 
@@ -226,6 +222,7 @@ pub fn create(region: &RegionSpec, out: &Path, dir: &Path, options: PlanOptions)
     };
     let write = write_options(&region, &description, tiled);
     let (staging, store) = pyramid::start_build(&out, &description, &write)?;
+    let layout = store.layout;
     let heights = match &source {
         Heights::Windows(d) => PlannedHeights::Windows {
             holes: d.holes().to_vec(),
@@ -233,7 +230,6 @@ pub fn create(region: &RegionSpec, out: &Path, dir: &Path, options: PlanOptions)
         Heights::Grid(_) => {
             // The grid is in memory now and in no job's: write its tiles here.
             let bar = crate::progress::pass_bar();
-            let layout = store.layout;
             build::run_step(
                 Some(source.source()),
                 &store,
@@ -252,9 +248,11 @@ pub fn create(region: &RegionSpec, out: &Path, dir: &Path, options: PlanOptions)
     std::fs::write(&mark, plan_dir.display().to_string())
         .with_context(|| mark.display().to_string())?;
     staging.keep();
-    let layout = TileLayout::new(description.grid.side, options.tile_cells)?;
-    let all = jobs::jobs(&layout, true, options.jobs_per_step);
-    let steps = step_table(&all);
+    let steps = step_table(&jobs::jobs(
+        &layout,
+        write.build.drape,
+        options.jobs_per_step,
+    ));
     let plan = Plan {
         format: PLAN_FORMAT.into(),
         format_version: PLAN_VERSION,
@@ -386,10 +384,11 @@ pub fn finish(dir: &Path) -> Result<TiledSummary> {
     let (staging, store) = pyramid::start_build(&plan.out, &plan.description, &options)?;
     let (height_range_m, valid_vertices) = build::statistics(&store)?;
     let mut timings = job_timings(dir, &plan)?;
-    timings.push(StageTiming {
-        stage: "statistics".into(),
-        ms: start.elapsed().as_secs_f64() * 1e3,
-    });
+    StageTiming::add(
+        &mut timings,
+        "statistics",
+        start.elapsed().as_secs_f64() * 1e3,
+    );
     let report = BuildReport {
         height_range_m,
         valid_vertices,
@@ -412,14 +411,7 @@ fn job_timings(dir: &Path, plan: &Plan) -> Result<Vec<StageTiming>> {
         };
         let record: JobRecord =
             serde_json::from_str(&text).with_context(|| path.display().to_string())?;
-        let stage = job.step.timing_name();
-        match timings.iter_mut().find(|t| t.stage == stage) {
-            Some(t) => t.ms += record.ms,
-            None => timings.push(StageTiming {
-                stage: stage.into(),
-                ms: record.ms,
-            }),
-        }
+        StageTiming::add(&mut timings, job.step.timing_name(), record.ms);
     }
     Ok(timings)
 }

@@ -145,3 +145,16 @@ pub struct StageTiming {
     pub stage: String,
     pub ms: f64,
 }
+
+impl StageTiming {
+    /// Add `ms` to `stage`'s entry of `timings`, appending it when new.
+    pub fn add(timings: &mut Vec<StageTiming>, stage: &str, ms: f64) {
+        match timings.iter_mut().find(|t| t.stage == stage) {
+            Some(t) => t.ms += ms,
+            None => timings.push(StageTiming {
+                stage: stage.into(),
+                ms,
+            }),
+        }
+    }
+}

@@ -104,18 +104,26 @@ pub fn partials_capacity(layout: &TileLayout) -> usize {
 /// threads at 512-cell tiles, 21 B per window vertex.
 const WORK_BYTES_PER_WINDOW_VERTEX: u64 = 24;
 
-/// Refuse, before anything is written, a build whose concurrent tile work
-/// (one widest window per thread of the pool) exceeds the memory budget.
-pub fn check_working_memory(layout: &TileLayout) -> Result<()> {
+/// Bytes the tile work of a build of `layout` on `threads` threads holds
+/// at once: one widest window a thread.
+pub fn working_bytes(layout: &TileLayout, threads: usize) -> u64 {
     let window = (3 * layout.tile_cells as u64 + 1).pow(2);
-    let threads = rayon::current_num_threads() as u64;
+    (threads as u64)
+        .saturating_mul(window)
+        .saturating_mul(WORK_BYTES_PER_WINDOW_VERTEX)
+}
+
+/// Refuse, before anything is written, a build whose concurrent tile work
+/// ([`working_bytes`] on the pool's threads) exceeds the memory budget.
+pub fn check_working_memory(layout: &TileLayout) -> Result<()> {
+    let threads = rayon::current_num_threads();
     crate::memory::check(
         &format!(
             "building tiles of {} cells on {threads} threads",
             layout.tile_cells
         ),
-        threads.saturating_mul(window),
-        WORK_BYTES_PER_WINDOW_VERTEX,
+        working_bytes(layout, threads),
+        1,
         "use smaller tiles (--tile-size) or fewer threads (RAYON_NUM_THREADS)",
     )
 }
@@ -237,13 +245,6 @@ pub fn build(
 ) -> Result<BuildReport> {
     let layout = store.layout;
     let mut timings: Vec<StageTiming> = Vec::new();
-    let mut spent = |stage: &str, ms: f64| match timings.iter_mut().find(|t| t.stage == stage) {
-        Some(t) => t.ms += ms,
-        None => timings.push(StageTiming {
-            stage: stage.into(),
-            ms,
-        }),
-    };
     for step in steps(&layout, options.drape) {
         let ms = run_step(
             Some(source),
@@ -253,11 +254,15 @@ pub fn build(
             &step.tiles(&layout),
             progress,
         )?;
-        spent(step.timing_name(), ms);
+        StageTiming::add(&mut timings, step.timing_name(), ms);
     }
     let start = std::time::Instant::now();
     let (height_range_m, valid_vertices) = statistics(store)?;
-    spent("statistics", start.elapsed().as_secs_f64() * 1e3);
+    StageTiming::add(
+        &mut timings,
+        "statistics",
+        start.elapsed().as_secs_f64() * 1e3,
+    );
     Ok(BuildReport {
         height_range_m,
         valid_vertices,

@@ -591,6 +591,17 @@ impl Model {
         self.tiling.plan(self.size[0], self.size[1])
     }
 
+    /// Bytes [`Model::analyse`] holds at once on `threads` threads.
+    pub fn working_bytes(&self, threads: usize) -> u64 {
+        let context_pixels = self
+            .tiles()
+            .iter()
+            .map(|t| (t.context_size().0 * t.context_size().1) as u64)
+            .max()
+            .unwrap_or(0);
+        tiles_working_bytes(context_pixels, threads.max(1), 0)
+    }
+
     /// Analyse `tiles` (of [`Model::tiles`]) of `source`: the objects they
     /// own, in the image's pixel coordinates, sorted by row then column
     /// (tile order kept among equals). Every tile is analysed as the whole
@@ -630,6 +641,18 @@ impl Model {
         let (w, _) = source.size();
         Ok(gather(done, &work.tiles, None, w)?.found)
     }
+}
+
+/// Bytes an extraction holds at once analysing `at_once` tiles of up to
+/// `context_pixels` pixels, with the segmentations of `sample_tiles`
+/// learnt from kept for their tiles and one for each other thread: about
+/// `TILE_BYTES_PER_PIXEL` a pixel of each tile analysed (pixels, opponent
+/// colours, quadtree, adjacency, labels) and `SEGMENTATION_BYTES_PER_PIXEL`
+/// a pixel of each segmentation kept.
+fn tiles_working_bytes(context_pixels: u64, at_once: usize, sample_tiles: usize) -> u64 {
+    context_pixels
+        * (at_once as u64 * TILE_BYTES_PER_PIXEL
+            + (sample_tiles + at_once - 1) as u64 * SEGMENTATION_BYTES_PER_PIXEL)
 }
 
 /// What every stage of one extraction reads: the image, the samples and
@@ -703,9 +726,7 @@ impl<'a> Work<'a> {
             &format!(
                 "vegetation extraction in {at_once} tile(s) of up to {context_pixels} pixels at once"
             ),
-            context_pixels
-                * (at_once as u64 * TILE_BYTES_PER_PIXEL
-                    + (sample_tiles + at_once - 1) as u64 * SEGMENTATION_BYTES_PER_PIXEL),
+            tiles_working_bytes(context_pixels, at_once, sample_tiles),
             1,
             "use smaller tiles (tile_px, --tile)",
         )
