@@ -166,7 +166,7 @@ fn large(
         .into_iter()
         .filter(|&n| n <= max_objects)
     {
-        let objects = tiled_detections(database, source, &frame, count);
+        let objects = tiled_detections(database, source, &frame, [[0.0; 2], [extent; 2]], count);
         let options = BakeOptions {
             budget_bytes: budget_mib << 20,
             ..BakeOptions::default()
@@ -410,21 +410,25 @@ pub fn pictures(repo: &Path, out: &Path) -> Result<()> {
 }
 
 /// `count` objects: the real detections of `database` (on `source`) tiled
-/// k × k over the terrain of `target`, k the smallest that holds them, in
+/// k × k over `area` of the terrain of `target` (its lowest and highest
+/// terrain coordinates, metres), k the smallest that holds them, in
 /// database order tile after tile — density grows with the count.
 pub fn tiled_detections(
     database: &[VegObject],
     source: &TerrainFrame,
     target: &TerrainFrame,
+    area: [[f64; 2]; 2],
     count: usize,
 ) -> Vec<VegObject> {
     let source_side = (source.side - 1) as f64 * source.cell_size_m;
-    let extent = (target.side - 1) as f64 * target.cell_size_m;
     let relative: Vec<(f64, f64, &VegObject)> = database
         .iter()
         .filter_map(|o| {
             let (x, y) = source.terrain_from_world(o.x, o.y)?;
-            Some((x / source_side, y / source_side, o))
+            // Vertices stand half a cell inside the grid's edge: an object
+            // on that rim is kept on the tile.
+            let relative = |t: f64| (t / source_side).clamp(0.0, 1.0);
+            Some((relative(x), relative(y), o))
         })
         .collect();
     if relative.is_empty() {
@@ -432,7 +436,8 @@ pub fn tiled_detections(
     }
     let tiles = count.div_ceil(relative.len());
     let k = (tiles as f64).sqrt().ceil() as usize;
-    let tile_m = extent / k as f64;
+    let [low, high] = area;
+    let tile_m = [0, 1].map(|a| (high[a] - low[a]) / k as f64);
     (0..count)
         .map(|i| {
             // Fewer than the detections: spread over them, not the first ones.
@@ -443,8 +448,8 @@ pub fn tiled_detections(
             };
             let (tile, (rx, ry, o)) = (i / relative.len(), relative[source]);
             let (x, y) = (
-                ((tile % k) as f64 + rx) * tile_m,
-                ((tile / k) as f64 + ry) * tile_m,
+                low[0] + ((tile % k) as f64 + rx) * tile_m[0],
+                low[1] + ((tile / k) as f64 + ry) * tile_m[1],
             );
             let (east, north) = target.world_from_terrain(x, y);
             VegObject {

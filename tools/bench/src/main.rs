@@ -13,6 +13,7 @@ mod render;
 mod slurm;
 mod veg_protocol;
 mod view;
+mod view_inputs;
 mod view_vegetation;
 
 use clap::{Args, Parser, Subcommand};
@@ -31,6 +32,7 @@ use std::process::ExitCode;
   cargo run --release -p relevo-bench -- veg --json --runs 3 --max-side 10000
   cargo run --release -p relevo-bench -- veg-protocol --json
   cargo run --release -p relevo-bench -- view --json --runs 3
+  cargo run --release -p relevo-bench -- view-inputs --out gpu-inputs
   cargo run --release -p relevo-bench -- clusters --json --runs 5
   cargo run --release -p relevo-bench -- check --json --runs 5
   cargo build --release -p relevo && cargo run --release -p relevo-bench -- pyramid --json --max-side 32769"
@@ -189,6 +191,23 @@ enum BenchCommand {
   VK_ICD_FILENAMES=/usr/share/vulkan/icd.d/lvp_icd.x86_64.json relevo-bench view --json --runs 3
   relevo-bench view --max-side 2049")]
     View(ViewArgs),
+    /// Write the bundles of the viewer's figures (the sample regions, the
+    /// 4097² fractal, the sample region with --objects objects) to a
+    /// folder, for `relevo-view bench` on a machine with a GPU and no
+    /// GDAL; prints the commands to run there.
+    #[command(after_help = "Examples:
+  relevo-bench view-inputs --out gpu-inputs
+  relevo-bench view-inputs --out gpu-inputs --objects 100000")]
+    ViewInputs {
+        #[command(flatten)]
+        common: BenchArgs,
+        /// The folder to write.
+        #[arg(long)]
+        out: PathBuf,
+        /// Objects in the dense vegetation scene.
+        #[arg(long, default_value_t = 1_000_000)]
+        objects: usize,
+    },
 }
 
 #[derive(Args, Debug)]
@@ -237,6 +256,11 @@ fn main() -> ExitCode {
             a.max_side,
             a.common.json,
         ),
+        BenchCommand::ViewInputs {
+            common: a,
+            out,
+            objects,
+        } => view_inputs::run(&a.repo, &a.data, &out, objects),
         BenchCommand::ViewVegetation {
             common: a,
             max_objects,

@@ -154,7 +154,7 @@ fn frame_time(
 /// The bundles the viewer is timed over: the sample regions (Olinda with
 /// its objects) and, when `max_side` allows, a 4097² fractal terrain for
 /// scale; each with its name and the objects to composite.
-fn bench_bundles(
+pub fn bench_bundles(
     repo: &Path,
     data: &Path,
     scratch: &Path,

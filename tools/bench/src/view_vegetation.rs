@@ -6,7 +6,7 @@
 //! from the start of its CPU work until the GPU has finished it.
 
 use crate::measure::{emit, median};
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use glam::DVec3;
 use relevo::prep::prep;
 use relevo::prep::region::RegionSpec;
@@ -116,6 +116,9 @@ struct Bench {
     queue: Queue,
     bundle: PathBuf,
     frame: TerrainFrame,
+    /// The colour image's extent on the terrain (lowest and highest
+    /// terrain coordinates, metres): where objects may stand.
+    drape_area: [[f64; 2]; 2],
     database: Vec<VegObject>,
     runs: usize,
     json: bool,
@@ -137,6 +140,7 @@ pub fn run(repo: &Path, runs: usize, max_objects: usize, json: bool) -> Result<(
     )?;
     let opened = Bundle::open(&bundle)?;
     let frame = opened.frame();
+    let drape_area = drape_area(&opened)?;
     let database = opened
         .vegetation()?
         .context("the sample region has no vegetation")?;
@@ -146,6 +150,7 @@ pub fn run(repo: &Path, runs: usize, max_objects: usize, json: bool) -> Result<(
         queue,
         bundle,
         frame,
+        drape_area,
         database,
         runs,
         json,
@@ -159,24 +164,74 @@ pub fn run(repo: &Path, runs: usize, max_objects: usize, json: bool) -> Result<(
     Ok(())
 }
 
+/// The extent of `bundle`'s colour image on its terrain (lowest and highest
+/// terrain coordinates, metres, half a metre inside, clear of the
+/// database's rounding): where its objects may stand.
+fn drape_area(bundle: &Bundle) -> Result<[[f64; 2]; 2]> {
+    let frame = bundle.frame();
+    let colour = bundle
+        .manifest
+        .color
+        .as_ref()
+        .context("the bundle has no colour image")?;
+    let [x0, y0, x1, y1] = colour.geotransform.bounds(colour.width, colour.height);
+    let corners = [(x0, y0), (x1, y1)].map(|(e, n)| frame.terrain_from_world(e, n));
+    let [Some(a), Some(b)] = corners else {
+        bail!("the colour image lies off the terrain");
+    };
+    Ok([
+        [a.0.min(b.0) + 0.5, a.1.min(b.1) + 0.5],
+        [a.0.max(b.0) - 0.5, a.1.max(b.1) - 0.5],
+    ])
+}
+
+/// Rewrite the bundle at `path` with `objects` (numbered afresh, as a
+/// database's ids are) baked with `options`.
+fn rewrite_vegetation(path: &Path, objects: &[VegObject], options: &BakeOptions) -> Result<()> {
+    let numbered: Vec<VegObject> = objects
+        .iter()
+        .enumerate()
+        .map(|(k, o)| VegObject {
+            id: k as u64 + 1,
+            ..o.clone()
+        })
+        .collect();
+    let lock = BundleLock::acquire(path)?;
+    let bundle = Bundle::open(path)?;
+    let new = NewVegetation {
+        database: Some(&numbered),
+        samples_csv: None,
+    };
+    rewrite_bundle(
+        lock,
+        &bundle,
+        &new,
+        &Default::default(),
+        options,
+        &|_, _| {},
+    )?;
+    Ok(())
+}
+
+/// Rewrite the bundle at `path` with `count` objects tiled from its own
+/// detections over its colour image, default bake: the dense scenes of
+/// [`Bench::object_counts`], for `relevo-view bench`.
+pub fn densify(path: &Path, count: usize) -> Result<()> {
+    let bundle = Bundle::open(path)?;
+    let frame = bundle.frame();
+    let area = drape_area(&bundle)?;
+    let database = bundle
+        .vegetation()?
+        .context("the bundle has no vegetation")?;
+    drop(bundle);
+    let objects = crate::clusters::tiled_detections(&database, &frame, &frame, area, count);
+    rewrite_vegetation(path, &objects, &BakeOptions::default())
+}
+
 impl Bench {
     /// Rewrite the bundle with `objects` baked with `options`, and open it.
     fn scene(&self, objects: &[VegObject], options: &BakeOptions) -> Result<Scene> {
-        let lock = BundleLock::acquire(&self.bundle)?;
-        let bundle = Bundle::open(&self.bundle)?;
-        let new = NewVegetation {
-            database: Some(objects),
-            samples_csv: None,
-        };
-        rewrite_bundle(
-            lock,
-            &bundle,
-            &new,
-            &Default::default(),
-            options,
-            &|_, _| {},
-        )?;
-        drop(bundle);
+        rewrite_vegetation(&self.bundle, objects, options)?;
         Scene::open(&self.bundle)
     }
 
@@ -506,7 +561,13 @@ impl Bench {
             .into_iter()
             .filter(|&n| n <= max_objects)
         {
-            let objects = crate::clusters::tiled_detections(&self.database, frame, frame, count);
+            let objects = crate::clusters::tiled_detections(
+                &self.database,
+                frame,
+                frame,
+                self.drape_area,
+                count,
+            );
             // At 100k, also with a 1 GiB atlas: what sharper clusters buy.
             let budgets: &[u64] = if count == 100_000 {
                 &[256 << 20, 1 << 30]

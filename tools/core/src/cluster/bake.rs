@@ -15,7 +15,7 @@
 //! (docs/algorithms.md#clusters).
 
 use super::cut::CutOptions;
-use super::image::PremulImage;
+use super::image::{ColourRange, PremulImage};
 use super::model::{Model, ModelSource};
 use super::quadtree::{ClusterObject, Node, Quadtree, NONE};
 use super::views::{render_view, ImpostorView, Placed};
@@ -430,6 +430,7 @@ fn compose_clusters(
     class_views: &[[PremulImage; 5]],
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Vec<[PremulImage; 5]> {
+    let range = ColourRange::of(class_views.as_flattened());
     let class_mips: Vec<[Vec<tiny_skia::Pixmap>; 5]> = class_views
         .iter()
         .map(|views| {
@@ -451,7 +452,7 @@ fn compose_clusters(
             let members = &tree.objects[node.members()];
             let sizes = atlas.plans[i].unwrap_or_default();
             let views = ImpostorView::ALL
-                .map(|v| compose_view(node, members, v, sizes[v as usize], &class_mips));
+                .map(|v| compose_view(node, members, v, sizes[v as usize], &class_mips, &range));
             progress(1, baked_nodes.len() as u64);
             views
         })
@@ -470,13 +471,15 @@ fn to_pixmap(image: &PremulImage) -> Option<tiny_skia::Pixmap> {
 }
 
 /// View `view` of `node`: each member's class view at its place, in
-/// painter's order, into `w`×`h` texels over the node's box.
+/// painter's order, into `w`×`h` texels over the node's box, held within
+/// the class views' colour `range`.
 fn compose_view(
     node: &Node,
     members: &[ClusterObject],
     view: ImpostorView,
     [w, h]: [usize; 2],
     class_mips: &[[Vec<tiny_skia::Pixmap>; 5]],
+    range: &ColourRange,
 ) -> PremulImage {
     let Some(mut canvas) = tiny_skia::Pixmap::new(w as u32, h as u32) else {
         return PremulImage::transparent(w, h);
@@ -543,7 +546,7 @@ fn compose_view(
     let texels = canvas
         .data()
         .chunks_exact(4)
-        .map(|p| [p[0], p[1], p[2], p[3]])
+        .map(|p| range.clamp([p[0], p[1], p[2], p[3]]))
         .collect();
     PremulImage {
         width: w,
@@ -726,8 +729,8 @@ pub(crate) mod tests {
     #[test]
     fn atlas_texels_have_no_fringe_at_any_level() {
         let clusters = baked_clusters(600);
-        let (lo, hi) = checks::source_colour_range(&clusters);
-        assert!(hi[1] > lo[1], "{lo:?} {hi:?}");
+        let range = checks::source_colour_range(&clusters);
+        assert!(range.hi[1] > range.lo[1], "{range:?}");
         let (partial, problems) = checks::fringe_problems(&clusters);
         assert_eq!(problems, Vec::<String>::new());
         assert!(partial > 1000, "{partial} partly covered texels");

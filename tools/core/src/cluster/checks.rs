@@ -4,16 +4,12 @@
 
 use super::bake::{render_node_view, MIP_LEVELS};
 use super::cut::{box_distance, box_in_frustum, CutOptions, DrawList, Drawn};
-use super::image::PremulImage;
+use super::image::{ColourRange, PremulImage};
 use super::model::Model;
 use super::quadtree::NONE;
 use super::views::ImpostorView;
 use super::Clusters;
 use crate::camera::Camera;
-
-/// Rounding allowed by [`fringe_problems`], in 8-bit units of premultiplied
-/// colour: the composition's and each mip reduction's.
-pub const FRINGE_TOLERANCE: f64 = 2.0;
 
 /// The texels of an atlas frame.
 pub fn frame_image(clusters: &Clusters, f: &super::AtlasFrame) -> PremulImage {
@@ -25,29 +21,16 @@ pub fn frame_image(clusters: &Clusters, f: &super::AtlasFrame) -> PremulImage {
     )
 }
 
-/// Per-channel colour range of the class views (the sources every texel is
-/// made from). A texel of coverage A and premultiplied value P holds a
-/// colour within (P ± ½)·255/A; texels with A ≥ 16 add that whole interval
-/// (at most 16 units wide), so colours seen only at thin edges — a trunk,
-/// a twig — count too.
-pub fn source_colour_range(clusters: &Clusters) -> ([u8; 3], [u8; 3]) {
-    let (mut lo, mut hi) = ([255u8; 3], [0u8; 3]);
-    for f in clusters.classes.iter().flat_map(|c| &c.frames) {
-        for t in frame_image(clusters, f)
-            .texels
-            .iter()
-            .filter(|t| t[3] >= 16)
-        {
-            let a = t[3] as f64;
-            for k in 0..3 {
-                let low = ((t[k] as f64 - 0.5) * 255.0 / a).floor().clamp(0.0, 255.0) as u8;
-                let high = ((t[k] as f64 + 0.5) * 255.0 / a).ceil().clamp(0.0, 255.0) as u8;
-                lo[k] = lo[k].min(low);
-                hi[k] = hi[k].max(high);
-            }
-        }
-    }
-    (lo, hi)
+/// The colour range of the class views: the sources every texel is made
+/// from.
+pub fn source_colour_range(clusters: &Clusters) -> ColourRange {
+    let views: Vec<PremulImage> = clusters
+        .classes
+        .iter()
+        .flat_map(|c| &c.frames)
+        .map(|f| frame_image(clusters, f))
+        .collect();
+    ColourRange::of(&views)
 }
 
 /// No fringe at any mip level: an empty texel carries no colour, and a
@@ -56,27 +39,23 @@ pub fn source_colour_range(clusters: &Clusters) -> ([u8; 3], [u8; 3]) {
 /// half coverage would be ~128 where the bound is ~64.) Returns the
 /// number of partly covered texels checked and the problems (at most 5).
 pub fn fringe_problems(clusters: &Clusters) -> (usize, Vec<String>) {
-    let (lo, hi) = source_colour_range(clusters);
+    let range = source_colour_range(clusters);
     let (mut partial, mut problems) = (0, Vec::new());
     for (p, page) in clusters.pages.iter().enumerate() {
         for (level, image) in page.mip_chain(MIP_LEVELS).iter().enumerate() {
             for (i, t) in image.texels.iter().enumerate() {
-                let a = t[3] as f64 / 255.0;
                 let bad = match t[3] {
                     0 => t[..3] != [0; 3],
                     255 => false,
                     _ => {
                         partial += 1;
-                        (0..3).any(|k| {
-                            let c = t[k] as f64;
-                            c < a * lo[k] as f64 - FRINGE_TOLERANCE
-                                || c > a * hi[k] as f64 + FRINGE_TOLERANCE
-                        })
+                        !range.holds(*t)
                     }
                 };
                 if bad && problems.len() < 5 {
                     problems.push(format!(
-                        "page {p} level {level} texel {i}: {t:?} lies outside the sources' colours {lo:?}–{hi:?}"
+                        "page {p} level {level} texel {i}: {t:?} lies outside the sources' colours {:?}–{:?}",
+                        range.lo, range.hi
                     ));
                 }
             }

@@ -7,6 +7,77 @@
 //! borders of straight-alpha textures cannot arise. Invariant: each colour
 //! channel is at most alpha.
 
+/// Rounding allowed, in 8-bit units of premultiplied colour, when a texel
+/// is compared with a [`ColourRange`]: a composition's and each mip
+/// reduction's.
+pub const ROUNDING_UNITS: f64 = 2.0;
+
+/// The per-channel range of (un-premultiplied) colours that source images
+/// hold: a texel composed from them, a blend of their colours, lies within
+/// it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ColourRange {
+    pub lo: [u8; 3],
+    pub hi: [u8; 3],
+}
+
+impl ColourRange {
+    /// The range of `images`' texels. A texel of coverage A and
+    /// premultiplied value P holds a colour within (P ± ½)·255/A; texels
+    /// with A ≥ 16 add that whole interval (at most 16 units wide), so
+    /// colours seen only at thin edges — a trunk, a twig — count too.
+    pub fn of(images: &[PremulImage]) -> ColourRange {
+        let (mut lo, mut hi) = ([255u8; 3], [0u8; 3]);
+        for t in images.iter().flat_map(|i| &i.texels).filter(|t| t[3] >= 16) {
+            let a = t[3] as f64;
+            for k in 0..3 {
+                let low = ((t[k] as f64 - 0.5) * 255.0 / a).floor().clamp(0.0, 255.0) as u8;
+                let high = ((t[k] as f64 + 0.5) * 255.0 / a).ceil().clamp(0.0, 255.0) as u8;
+                lo[k] = lo[k].min(low);
+                hi[k] = hi[k].max(high);
+            }
+        }
+        ColourRange { lo, hi }
+    }
+
+    /// The premultiplied values channel `k` of a texel of coverage `alpha`
+    /// may hold: a·lo − rounding to a·hi + rounding.
+    fn bounds(&self, alpha: u8, k: usize) -> (f64, f64) {
+        let a = alpha as f64 / 255.0;
+        (
+            a * self.lo[k] as f64 - ROUNDING_UNITS,
+            a * self.hi[k] as f64 + ROUNDING_UNITS,
+        )
+    }
+
+    /// Whether the partly covered texel `t` lies within the range.
+    pub fn holds(&self, t: [u8; 4]) -> bool {
+        (0..3).all(|k| {
+            let (low, high) = self.bounds(t[3], k);
+            (low..=high).contains(&(t[k] as f64))
+        })
+    }
+
+    /// `t` moved into the range, channel by channel, if partly covered
+    /// (empty and full texels are kept). A composite of thousands of
+    /// layers needs it: the 8-bit rounding of faint edge texels (a
+    /// premultiplied 1 at coverage 3 stands for any colour from 42 to 127)
+    /// adds up, stacked that deep, to texels well outside the blend of the
+    /// sources.
+    pub fn clamp(&self, t: [u8; 4]) -> [u8; 4] {
+        if t[3] == 0 || t[3] == 255 {
+            return t;
+        }
+        let mut out = t;
+        for k in 0..3 {
+            let (low, high) = self.bounds(t[3], k);
+            let (low, high) = (low.ceil().max(0.0), high.floor().min(t[3] as f64));
+            out[k] = (t[k] as f64).clamp(low, high) as u8;
+        }
+        out
+    }
+}
+
 /// A premultiplied RGBA8 image, row-major, texels `[r, g, b, a]`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct PremulImage {
@@ -112,6 +183,29 @@ impl PremulImage {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn colour_range_holds_blends_of_its_sources_and_clamps_drift_back() {
+        // Two sources: a dark green and a brown, a fully and a half covered texel.
+        let sources = PremulImage {
+            width: 2,
+            height: 1,
+            texels: vec![[20, 100, 20, 255], [40, 15, 10, 128]],
+        };
+        let range = ColourRange::of(std::slice::from_ref(&sources));
+        assert_eq!((range.lo, range.hi), ([19, 28, 18], [81, 101, 21]));
+        // A half-covered blend of the two lies within; drift does not.
+        assert!(range.holds([10, 50, 10, 128]));
+        let drifted = [3, 3, 0, 3];
+        assert!(!range.holds(drifted));
+        let clamped = range.clamp(drifted);
+        assert!(range.holds(clamped), "{clamped:?}");
+        assert!(clamped[..3].iter().all(|&c| c <= clamped[3]));
+        // Blends are kept as they are; empty and full texels too.
+        for t in [[10, 50, 10, 128], [0, 0, 0, 0], [200, 0, 0, 255]] {
+            assert_eq!(range.clamp(t), t);
+        }
+    }
 
     #[test]
     fn reduction_keeps_coverage_and_never_exceeds_alpha() {
