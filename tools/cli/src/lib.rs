@@ -18,5 +18,6 @@ pub mod output;
 pub mod plan;
 pub mod prep;
 pub mod progress;
+pub mod terrain_export;
 pub mod veg_io;
 pub mod veg_plan;

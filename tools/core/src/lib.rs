@@ -44,6 +44,7 @@ pub mod objects;
 pub mod pyramid;
 pub mod raster;
 pub mod scene;
+pub mod terrain_tiles;
 pub mod validation;
 pub mod veg;
 pub mod zbuffer;

@@ -5,6 +5,7 @@ mod args;
 pub mod bake;
 mod check;
 mod diff;
+pub mod export;
 mod fill;
 mod hierarchy;
 mod info;
@@ -94,6 +95,9 @@ pub enum Command {
   relevo mesh fuji.relevo --max-error 5 --keep-padding --out fuji.glb
   relevo mesh country.relevo --max-error 1 --window 712000,5000000,716000,5004000 --out part.glb   # a window of a pyramid")]
     Mesh(mesh::MeshArgs),
+    /// Export a bundle in formats other clients read: Cesium quantized-mesh terrain.
+    #[command(subcommand)]
+    Export(export::ExportCommand),
     /// Render a bundle with the CPU floating-horizon raycaster (PNG and depth);
     /// a pyramid's distance bands read its coarser levels farther away.
     #[command(after_help = "Examples:
@@ -180,6 +184,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Hierarchy(a) => hierarchy::run(a),
         Command::Prep(a) => prep::run(a),
         Command::Mesh(a) => mesh::run(a),
+        Command::Export(a) => export::run(a),
         Command::Render(a) => render::run(a),
         Command::Veg(a) => veg::run(a),
         Command::Bake(a) => bake::run(a),
