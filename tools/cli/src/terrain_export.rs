@@ -4,7 +4,6 @@
 //! tiles by `relevo_core::terrain_tiles`, the tiles written into a staging
 //! folder that replaces the output only when complete.
 
-use crate::commands::export::QuantizedMeshArgs;
 use crate::ingest::crs;
 use crate::progress;
 use anyhow::{bail, Context, Result};
@@ -77,9 +76,23 @@ impl Summary {
     }
 }
 
+/// What to export, and how.
+pub struct Request<'a> {
+    /// The bundle (single grid or pyramid).
+    pub bundle: &'a Path,
+    /// The folder to write.
+    pub out: &'a Path,
+    /// The finest level; `None`: the level matching the grid's cells.
+    pub max_zoom: Option<u32>,
+    /// What the bundle's heights are measured from.
+    pub vertical: VerticalDatum,
+    /// Replace an earlier export.
+    pub force: bool,
+}
+
 /// Export `a.bundle` as quantized-mesh tiles into `a.out`.
-pub fn quantized_mesh(a: &QuantizedMeshArgs) -> Result<Summary> {
-    crate::output::check(&[&a.out], a.force)?;
+pub fn quantized_mesh(a: &Request) -> Result<Summary> {
+    crate::output::check(&[a.out], a.force)?;
     if a.out.exists() && !a.out.join("layer.json").is_file() {
         bail!(
             "{}: exists and holds no layer.json; refusing to replace it, even with --force",
@@ -88,8 +101,8 @@ pub fn quantized_mesh(a: &QuantizedMeshArgs) -> Result<Summary> {
     }
     let start = Instant::now();
     let name = a.bundle.display().to_string();
-    if relevo_core::bundle::format_of(&a.bundle).as_deref() == Some(PYRAMID_FORMAT) {
-        let pyramid = Pyramid::open(&a.bundle)?;
+    if relevo_core::bundle::format_of(a.bundle).as_deref() == Some(PYRAMID_FORMAT) {
+        let pyramid = Pyramid::open(a.bundle)?;
         let source = PyramidMesh::new(&pyramid)?;
         let m = &pyramid.manifest;
         return export(
@@ -101,7 +114,7 @@ pub fn quantized_mesh(a: &QuantizedMeshArgs) -> Result<Summary> {
             start,
         );
     }
-    let bundle = Bundle::open(&a.bundle)?;
+    let bundle = Bundle::open(a.bundle)?;
     let (heights, mask, lp) = (bundle.heights()?, bundle.mask()?, bundle.lp()?);
     let surface = Surface {
         frame: bundle.frame(),
@@ -127,7 +140,7 @@ pub fn quantized_mesh(a: &QuantizedMeshArgs) -> Result<Summary> {
 const BYTES_PER_FINEST_VERTEX: u64 = 160;
 
 fn export(
-    a: &QuantizedMeshArgs,
+    a: &Request,
     source: &dyn MeshSource,
     crs_wkt: &str,
     region: &str,
@@ -210,10 +223,13 @@ fn export(
         "minzoom": 0,
         "maxzoom": max_zoom,
         "available": available_json(&tiles.ranges),
+        // Clients that read availability from the tiles: each tile lists
+        // its children (CesiumJS reads the metadata extension only so).
+        "metadataAvailability": 1,
         "extensions": ["octvertexnormals", "watermask", "metadata"],
     });
     let levels = meshes.iter().map(|m| level_mesh(m, &place, &earth));
-    let (count, bytes) = write_folder(&a.out, |staging| tiles.write(staging, levels, &layer))?;
+    let (count, bytes) = write_folder(a.out, |staging| tiles.write(staging, levels, &layer))?;
     Ok(Summary {
         out: a.out.display().to_string(),
         max_zoom,
@@ -268,14 +284,11 @@ impl TileSet {
         let (mut tiles, mut bytes) = (0, 0u64);
         for (z, surface) in levels.enumerate() {
             for patch in level_patches(&surface, self.ranges[z]) {
-                let children = self
-                    .ranges
-                    .get(z + 1)
-                    .and_then(|next| children_available(patch.tile, next));
+                let children = children_available(patch.tile, self.ranges.get(z + 1));
                 let extras = TileExtras {
                     height_range_m: self.height_range_m,
                     water: water_mask(&patch, &self.outline),
-                    children_available: children.as_ref(),
+                    children_available: &children,
                 };
                 let data = encode(patch.tile, &patch.mesh, &extras);
                 let dir = folder.join(format!("{z}/{}", patch.tile.x));

@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::{relevo, relevo_ok, repo, sample_bundle};
+use common::{grid_points_on_the_ellipsoid, relevo, relevo_ok, repo, sample_bundle};
 use serde_json::Value;
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -98,77 +98,6 @@ fn surface_height(points: &[[f64; 3]], triangles: &[f64], p: [f64; 2]) -> Option
         }
     }
     None
-}
-
-/// Bundle grid points (every `step`-th, away from no-data) as longitude,
-/// latitude and ellipsoidal height, by `gdaltransform` (PROJ): the bundle's
-/// CRS to WGS84, then EGM96 heights to ellipsoidal ones.
-fn grid_points_on_the_ellipsoid(bundle: &Path, step: usize) -> Vec<[f64; 3]> {
-    let manifest: Value =
-        serde_json::from_slice(&std::fs::read(bundle.join("manifest.json")).unwrap()).unwrap();
-    let side = manifest["grid"]["side"].as_u64().unwrap() as usize;
-    let gt = numbers(&manifest["grid"]["geotransform"]);
-    let heights: Vec<f32> = std::fs::read(bundle.join("height.f32"))
-        .unwrap()
-        .chunks_exact(4)
-        .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
-        .collect();
-    let mask = std::fs::read(bundle.join("mask.u8")).unwrap();
-    let mut input = String::new();
-    for r in (1..side - 1).step_by(step) {
-        for c in (1..side - 1).step_by(step) {
-            let all_data =
-                (r - 1..=r + 1).all(|j| (c - 1..=c + 1).all(|i| mask[j * side + i] != 0));
-            if all_data {
-                let (x, y) = (
-                    gt[0] + (c as f64 + 0.5) * gt[1],
-                    gt[3] + (r as f64 + 0.5) * gt[5],
-                );
-                input += &format!("{x} {y} {}\n", heights[r * side + c]);
-            }
-        }
-    }
-    let wkt = bundle.with_extension("wkt");
-    std::fs::write(&wkt, manifest["crs"]["wkt"].as_str().unwrap()).unwrap();
-    let run = |args: &[&str], text: &str| -> String {
-        use std::io::Write;
-        let mut child = Command::new("gdaltransform")
-            .args(args)
-            .stdin(std::process::Stdio::piped())
-            .stdout(std::process::Stdio::piped())
-            .spawn()
-            .expect("gdal-bin is installed");
-        child
-            .stdin
-            .take()
-            .unwrap()
-            .write_all(text.as_bytes())
-            .unwrap();
-        let out = child.wait_with_output().unwrap();
-        assert!(out.status.success());
-        String::from_utf8(out.stdout).unwrap()
-    };
-    let geographic = run(
-        &[
-            "-s_srs",
-            wkt.to_str().unwrap(),
-            "-t_srs",
-            "+proj=longlat +datum=WGS84",
-        ],
-        &input,
-    );
-    // gdaltransform keeps longitude first for geographic CRSs.
-    let ellipsoidal = run(
-        &["-s_srs", "EPSG:4326+5773", "-t_srs", "EPSG:4979"],
-        &geographic,
-    );
-    ellipsoidal
-        .lines()
-        .map(|l| {
-            let v: Vec<f64> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
-            [v[0], v[1], v[2]]
-        })
-        .collect()
 }
 
 #[test]
@@ -262,15 +191,32 @@ fn assert_decoders_agree(js: &BTreeMap<TileKey, Value>, py: &BTreeMap<TileKey, V
             a["waterMaskBytes"].as_u64().unwrap() == 1
                 || a["waterMaskBytes"].as_u64().unwrap() == 65536
         );
-        // Counter-clockwise, as clients cull.
-        let tris = numbers(&a["triangles"]);
-        for t in tris.chunks(3) {
-            let [p, q, r] = [0, 1, 2].map(|k| ours[t[k] as usize]);
+        // Counter-clockwise, as clients cull, and covering the tile once —
+        // no hole, no overlap — in the quantized grid. Rounding each vertex
+        // to the grid (half a unit) changes a triangle's doubled area by
+        // less than 3 × its longest edge: only a sliver that thin may turn.
+        let q = numbers(&a["vertices"]);
+        let count = q.len() / 3;
+        let uv = |i: f64| [q[i as usize], q[count + i as usize]];
+        let mut area = 0.0;
+        for t in numbers(&a["triangles"]).chunks(3) {
+            let [p, r, s] = [0, 1, 2].map(|k| uv(t[k]));
+            let doubled = (r[0] - p[0]) * (s[1] - p[1]) - (s[0] - p[0]) * (r[1] - p[1]);
+            let longest = [(p, r), (r, s), (s, p)]
+                .iter()
+                .map(|(a, b)| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt())
+                .fold(0.0, f64::max);
             assert!(
-                (q[0] - p[0]) * (r[1] - p[1]) - (r[0] - p[0]) * (q[1] - p[1]) >= 0.0,
-                "{key:?}"
+                doubled >= -3.0 * longest,
+                "{key:?}: a triangle turns clockwise ({doubled})"
             );
+            area += doubled / 2.0;
         }
+        let full = 32767.0 * 32767.0;
+        assert!(
+            (area - full).abs() < 1e-4 * full,
+            "{key:?}: {area} of {full}"
+        );
     }
 }
 

@@ -48,7 +48,13 @@ pub struct QuantizedMeshArgs {
 pub fn run(command: ExportCommand) -> Result<()> {
     match command {
         ExportCommand::QuantizedMesh(a) => {
-            let summary = terrain_export::quantized_mesh(&a)?;
+            let summary = terrain_export::quantized_mesh(&terrain_export::Request {
+                bundle: &a.bundle,
+                out: &a.out,
+                max_zoom: a.max_zoom,
+                vertical: a.vertical,
+                force: a.force,
+            })?;
             if a.json {
                 println!("{}", serde_json::to_string_pretty(&summary)?);
             } else {

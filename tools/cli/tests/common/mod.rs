@@ -308,3 +308,79 @@ pub fn pyramid_contents(p: &Path) -> (Vec<String>, serde_json::Value) {
     manifest.as_object_mut().unwrap().remove("timings");
     (tiles, manifest)
 }
+
+/// Bundle grid points (every `step`-th, away from no-data) as longitude,
+/// latitude and ellipsoidal height, by `gdaltransform` (PROJ): the bundle's
+/// CRS to WGS84, then EGM96 heights to ellipsoidal ones.
+pub fn grid_points_on_the_ellipsoid(bundle: &Path, step: usize) -> Vec<[f64; 3]> {
+    let manifest: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(bundle.join("manifest.json")).unwrap()).unwrap();
+    let side = manifest["grid"]["side"].as_u64().unwrap() as usize;
+    let gt = manifest["grid"]["geotransform"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect::<Vec<f64>>();
+    let heights: Vec<f32> = std::fs::read(bundle.join("height.f32"))
+        .unwrap()
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+        .collect();
+    let mask = std::fs::read(bundle.join("mask.u8")).unwrap();
+    let mut input = String::new();
+    for r in (1..side - 1).step_by(step) {
+        for c in (1..side - 1).step_by(step) {
+            let all_data =
+                (r - 1..=r + 1).all(|j| (c - 1..=c + 1).all(|i| mask[j * side + i] != 0));
+            if all_data {
+                let (x, y) = (
+                    gt[0] + (c as f64 + 0.5) * gt[1],
+                    gt[3] + (r as f64 + 0.5) * gt[5],
+                );
+                input += &format!("{x} {y} {}\n", heights[r * side + c]);
+            }
+        }
+    }
+    let wkt = bundle.with_extension("wkt");
+    std::fs::write(&wkt, manifest["crs"]["wkt"].as_str().unwrap()).unwrap();
+    let run = |args: &[&str], text: &str| -> String {
+        use std::io::Write;
+        let mut child = Command::new("gdaltransform")
+            .args(args)
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .expect("gdal-bin is installed");
+        child
+            .stdin
+            .take()
+            .unwrap()
+            .write_all(text.as_bytes())
+            .unwrap();
+        let out = child.wait_with_output().unwrap();
+        assert!(out.status.success());
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let geographic = run(
+        &[
+            "-s_srs",
+            wkt.to_str().unwrap(),
+            "-t_srs",
+            "+proj=longlat +datum=WGS84",
+        ],
+        &input,
+    );
+    // gdaltransform keeps longitude first for geographic CRSs.
+    let ellipsoidal = run(
+        &["-s_srs", "EPSG:4326+5773", "-t_srs", "EPSG:4979"],
+        &geographic,
+    );
+    ellipsoidal
+        .lines()
+        .map(|l| {
+            let v: Vec<f64> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
+            [v[0], v[1], v[2]]
+        })
+        .collect()
+}

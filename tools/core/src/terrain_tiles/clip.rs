@@ -300,7 +300,9 @@ fn fill(patch: &mut SurfaceMesh, bounds: [f64; 4]) {
         .into_iter()
         .filter(|&((a, b), count)| {
             let (pa, pb) = (patch.lon_lat_deg[a as usize], patch.lon_lat_deg[b as usize]);
-            let along_border = on_border(pa) && on_border(pb) && (pa[0] == pb[0] || pa[1] == pb[1]);
+            // On one side of the tile, not across it.
+            let along_border = (pa[0] == pb[0] && (pa[0] == w || pa[0] == e))
+                || (pa[1] == pb[1] && (pa[1] == s || pa[1] == n));
             count == 1 && !along_border
         })
         .map(|(edge, _)| edge)
@@ -340,8 +342,20 @@ fn fill(patch: &mut SurfaceMesh, bounds: [f64; 4]) {
             }
         }
     }
-    for corner in [[w, s], [e, s], [e, n], [w, n]] {
-        insert(&mut cdt, patch, corner, None);
+    // A lattice on the ellipsoid wherever the mesh does not reach (the
+    // corners among it), so that the fill's flat triangles follow the
+    // Earth's curve: a tile of level z is 180/2^z degrees, a fill triangle
+    // at most 1/16 of that, whose chord sinks R θ²/8 — 30 km at level 0,
+    // a quarter as much each level, within the level's geometric error.
+    let covered_triangles = patch.triangles.len();
+    let lookup = Coverage::new(patch, covered_triangles, bounds);
+    for j in 0..=FILL_LATTICE {
+        for i in 0..=FILL_LATTICE {
+            let p = [lattice(w, e, i), lattice(s, n, j)];
+            if !lookup.covers(patch, p) {
+                insert(&mut cdt, patch, p, None);
+            }
+        }
     }
     for &(a, b) in &border {
         if let (Some(&ha), Some(&hb)) = (handles.get(&a), handles.get(&b)) {
@@ -350,8 +364,6 @@ fn fill(patch: &mut SurfaceMesh, bounds: [f64; 4]) {
             }
         }
     }
-    let covered_triangles = patch.triangles.len();
-    let lookup = Coverage::new(patch, covered_triangles, bounds);
     let mut fill_triangles = Vec::new();
     for face in cdt.inner_faces() {
         let ids = face
@@ -378,6 +390,19 @@ fn fill(patch: &mut SurfaceMesh, bounds: [f64; 4]) {
         }
     }
     patch.triangles.extend(fill_triangles);
+}
+
+/// Intervals of the fill's lattice along a tile's side.
+const FILL_LATTICE: usize = 16;
+
+/// Lattice line `i` of [`FILL_LATTICE`] between `lo` and `hi`, the ends
+/// exact (a tile's side is its neighbour's).
+fn lattice(lo: f64, hi: f64, i: usize) -> f64 {
+    match i {
+        0 => lo,
+        FILL_LATTICE => hi,
+        _ => lo + (hi - lo) * i as f64 / FILL_LATTICE as f64,
+    }
 }
 
 /// Which of a patch's covered triangles lie in each cell of a grid over the
@@ -527,14 +552,23 @@ mod tests {
             .map(|&t| patch.doubled_area(t) / 2.0)
             .sum();
         assert!((area - 12.0).abs() < 1e-9, "{area}");
-        // The fill's own vertices are the tile's corners, on the ellipsoid.
-        assert_eq!(patch.lon_lat_deg.len(), 8);
-        for i in 4..8 {
+        // The fill's own vertices are a lattice on the ellipsoid, corners
+        // included, none of it under the mesh.
+        assert!(
+            patch.lon_lat_deg.len() > 4 + 200,
+            "{}",
+            patch.lon_lat_deg.len()
+        );
+        for i in 4..patch.lon_lat_deg.len() {
             assert_eq!(patch.height_m[i], 0.0);
+            let [x, y] = patch.lon_lat_deg[i];
+            assert!(!((0.0..=1.0).contains(&x) && (0.0..=1.0).contains(&y)));
         }
+        assert!(patch.lon_lat_deg.contains(&[3.0, 2.0]));
         assert!(patch.triangles.iter().all(|&t| patch.doubled_area(t) > 0.0));
-        // A tile the mesh does not reach: two triangles of fill.
+        // A tile the mesh does not reach: the lattice's two triangles a cell.
         let (empty, covered) = tile_patch(&mesh, &[0, 1], [5.0, 5.0, 6.0, 6.0]);
-        assert_eq!((covered, empty.triangles.len()), (0, 2));
+        let cells = FILL_LATTICE * FILL_LATTICE;
+        assert_eq!((covered, empty.triangles.len()), (0, 2 * cells));
     }
 }

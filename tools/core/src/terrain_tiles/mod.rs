@@ -127,30 +127,33 @@ pub fn available_json(ranges: &[TileRange]) -> serde_json::Value {
     )
 }
 
-/// The children of `tile` in `next` (the next level's available range), as
-/// the metadata extension's one-level `available` list; `None` if none.
-pub fn children_available(tile: TileId, next: &TileRange) -> Option<serde_json::Value> {
+/// The metadata extension's `available` list for `tile`: its children in
+/// `next` (the next level's available range; `None` past the last level).
+/// Every tile carries one, empty where no child exists, since a client that
+/// reads availability from tiles (`metadataAvailability` 1 in
+/// `layer.json`) waits for each tile's word on its children.
+pub fn children_available(tile: TileId, next: Option<&TileRange>) -> serde_json::Value {
+    let Some(next) = next else {
+        return serde_json::json!([]);
+    };
     let inside: Vec<TileId> = tile
         .children()
         .into_iter()
         .filter(|c| next.contains(*c))
         .collect();
-    if inside.is_empty() {
-        return None;
-    }
-    let x = [
-        inside.iter().map(|c| c.x).min()?,
-        inside.iter().map(|c| c.x).max()?,
-    ];
-    let y = [
-        inside.iter().map(|c| c.y).min()?,
-        inside.iter().map(|c| c.y).max()?,
-    ];
-    Some(available_json(&[TileRange {
+    let (Some(x0), Some(x1), Some(y0), Some(y1)) = (
+        inside.iter().map(|c| c.x).min(),
+        inside.iter().map(|c| c.x).max(),
+        inside.iter().map(|c| c.y).min(),
+        inside.iter().map(|c| c.y).max(),
+    ) else {
+        return serde_json::json!([[]]);
+    };
+    available_json(&[TileRange {
         z: tile.z + 1,
-        x,
-        y,
-    }]))
+        x: [x0, x1],
+        y: [y0, y1],
+    }])
 }
 
 #[cfg(test)]
@@ -191,7 +194,13 @@ mod tests {
             .iter()
             .all(|p| water_mask(p, &outline) == WaterMask::Land));
         let next = TileRange::covering(11, mesh.bounds_deg());
-        let first = children_available(patches[0].tile, &next).unwrap();
+        let first = children_available(patches[0].tile, Some(&next));
         assert!(first[0][0]["startX"].as_u64().is_some());
+        let far = TileId { z: 10, x: 0, y: 0 };
+        assert_eq!(
+            children_available(far, Some(&next)),
+            serde_json::json!([[]])
+        );
+        assert_eq!(children_available(far, None), serde_json::json!([]));
     }
 }

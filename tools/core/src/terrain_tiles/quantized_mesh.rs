@@ -34,9 +34,9 @@ pub struct TileExtras<'a> {
     /// so a vertex two tiles share decodes to the same height in both.
     pub height_range_m: [f64; 2],
     pub water: WaterMask,
-    /// The available tiles of the next level under this one, as JSON
-    /// `available` rectangles; `None` at the last level.
-    pub children_available: Option<&'a serde_json::Value>,
+    /// The available tiles of the next level under this one, as the
+    /// metadata extension's `available` list.
+    pub children_available: &'a serde_json::Value,
 }
 
 /// Encode `patch` as tile `tile`.
@@ -139,12 +139,10 @@ pub fn encode(tile: TileId, patch: &SurfaceMesh, extras: &TileExtras) -> Vec<u8>
         WaterMask::Water => write_extension(&mut out, WATER_MASK, &[255]),
         WaterMask::Texels(t) => write_extension(&mut out, WATER_MASK, t),
     }
-    if let Some(available) = extras.children_available {
-        let json = serde_json::json!({ "available": available }).to_string();
-        let mut data = (json.len() as u32).to_le_bytes().to_vec();
-        data.extend(json.as_bytes());
-        write_extension(&mut out, METADATA, &data);
-    }
+    let json = serde_json::json!({ "available": extras.children_available }).to_string();
+    let mut data = (json.len() as u32).to_le_bytes().to_vec();
+    data.extend(json.as_bytes());
+    write_extension(&mut out, METADATA, &data);
     out
 }
 
@@ -262,7 +260,7 @@ mod tests {
         let extras = TileExtras {
             height_range_m: [0.0, 100.0],
             water: WaterMask::Land,
-            children_available: None,
+            children_available: &serde_json::json!([]),
         };
         let bytes = encode(tile, &patch, &extras);
         let u32_at = |i: usize| u32::from_le_bytes(bytes[i..i + 4].try_into().unwrap());
@@ -282,7 +280,11 @@ mod tests {
         let west = triangles_at + 4 + 12;
         assert_eq!(u32_at(west), 2);
         assert_eq!([u16_at(west + 4), u16_at(west + 6)], [0, 3]);
-        // Ends with the water mask's one byte.
-        assert_eq!(&bytes[bytes.len() - 6..], &[WATER_MASK, 1, 0, 0, 0, 0]);
+        // Then the water mask's one byte and the metadata.
+        let json = br#"{"available":[]}"#;
+        let tail = bytes.len() - json.len() - 4 - 5;
+        assert_eq!(&bytes[tail - 6..tail], &[WATER_MASK, 1, 0, 0, 0, 0]);
+        assert_eq!(bytes[tail], METADATA);
+        assert_eq!(&bytes[bytes.len() - json.len()..], json);
     }
 }
