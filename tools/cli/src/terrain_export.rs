@@ -1,29 +1,33 @@
-//! `relevo export quantized-mesh`: the bundle's vertices taken to the
-//! ellipsoid through PROJ (the bundle's CRS to longitude and latitude, then
-//! the geoid's heights to ellipsoidal ones), each level's LP mesh cut into
-//! tiles by `relevo_core::terrain_tiles`, the tiles written into a staging
-//! folder that replaces the output only when complete.
+//! `relevo export quantized-mesh`, tile by tile: the window of the tile's
+//! level's LP mesh that meets it, its vertices taken to the ellipsoid
+//! through PROJ (the bundle's CRS to longitude and latitude, the geoid's
+//! heights to ellipsoidal ones), cut and encoded by
+//! `relevo_core::terrain_tiles`; the tiles written into a staging folder
+//! that replaces the output only when complete.
 
 use crate::ingest::crs;
 use crate::progress;
 use anyhow::{bail, Context, Result};
 use gdal::spatial_ref::{AxisMappingStrategy, CoordTransform, SpatialRef};
+use rayon::prelude::*;
 use relevo_core::bundle::{Bundle, PYRAMID_FORMAT};
 use relevo_core::geo::TerrainFrame;
 use relevo_core::grid::vertex_normal_of;
 use relevo_core::lp::export::{MeshSource, Surface};
-use relevo_core::lp::extract::{walk, GridMesh, MeshWalk};
+use relevo_core::lp::extract::{mask_boundaries, walk, GridMesh, MeshWalk, VertexBits};
+use relevo_core::lp::window::Rect;
 use relevo_core::pyramid::mesh::PyramidMesh;
 use relevo_core::pyramid::Pyramid;
 use relevo_core::terrain_tiles::clip::SurfaceMesh;
 use relevo_core::terrain_tiles::ellipsoid::east_north_up;
 use relevo_core::terrain_tiles::quantized_mesh::{encode, TileExtras};
 use relevo_core::terrain_tiles::tiling::{
-    level_for_resolution, level_geometric_error_m, TileRange,
+    level_for_resolution, level_geometric_error_m, TileId, TileRange,
 };
-use relevo_core::terrain_tiles::{available_json, children_available, level_patches, water_mask};
+use relevo_core::terrain_tiles::{
+    available_json, bounds_of, children_available, patch, water_mask,
+};
 use serde::Serialize;
-use std::collections::HashMap;
 use std::path::Path;
 use std::time::Instant;
 
@@ -105,14 +109,13 @@ pub fn quantized_mesh(a: &Request) -> Result<Summary> {
         let pyramid = Pyramid::open(a.bundle)?;
         let source = PyramidMesh::new(&pyramid)?;
         let m = &pyramid.manifest;
-        return export(
-            a,
-            &source,
-            &m.crs.wkt,
-            &m.region,
-            m.grid.valid_extent,
-            start,
-        );
+        let parts = ManifestParts {
+            crs_wkt: m.crs.wkt.clone(),
+            region: m.region.clone(),
+            valid_extent: m.grid.valid_extent,
+            height_range_m: m.grid.height_range_m.map(f64::from),
+        };
+        return export(a, &source, &parts, start).with_context(|| name.clone());
     }
     let bundle = Bundle::open(a.bundle)?;
     let (heights, mask, lp) = (bundle.heights()?, bundle.mask()?, bundle.lp()?);
@@ -124,95 +127,57 @@ pub fn quantized_mesh(a: &Request) -> Result<Summary> {
         drape: None,
     };
     let m = &bundle.manifest;
-    export(
-        a,
-        &surface,
-        &m.crs.wkt,
-        &m.region,
-        m.grid.valid_extent,
-        start,
-    )
-    .with_context(|| name.clone())
+    let parts = ManifestParts {
+        crs_wkt: m.crs.wkt.clone(),
+        region: m.region.clone(),
+        valid_extent: m.grid.valid_extent,
+        height_range_m: m.grid.height_range_m.map(f64::from),
+    };
+    export(a, &surface, &parts, start).with_context(|| name.clone())
 }
-
-/// Bytes a vertex of the finest level holds while it is cut (its grid
-/// place, position, height and normal, twice over as the tiles copy them).
-const BYTES_PER_FINEST_VERTEX: u64 = 160;
 
 fn export(
     a: &Request,
     source: &dyn MeshSource,
-    crs_wkt: &str,
-    region: &str,
-    valid_extent: [f64; 4],
+    manifest: &ManifestParts,
     start: Instant,
 ) -> Result<Summary> {
-    if crs_wkt.trim().is_empty() {
+    if manifest.crs_wkt.trim().is_empty() {
         bail!("the bundle has no coordinate reference system, so its tiles cannot be placed on the Earth");
     }
     let frame = source.frame();
-    let side = frame.side;
-    relevo_core::memory::check(
-        &format!("the {side}×{side} grid's finest mesh"),
-        (side * side) as u64,
-        BYTES_PER_FINEST_VERTEX,
-        "pass a smaller --max-zoom",
-    )?;
-    let to_earth = ToEllipsoid::new(crs_wkt, a.vertical)?;
+    let to_earth = ToEllipsoid::new(&manifest.crs_wkt, a.vertical)?;
     let max_zoom = match a.max_zoom {
         Some(z) if z > 24 => bail!("--max-zoom {z}: at most 24"),
         Some(z) => z,
         None => level_for_resolution(to_earth.cell_deg(&frame)?),
     };
-    // The finest mesh keeps every vertex that matters (tolerance 0): its
-    // vertices hold every coarser level's.
-    let tolerance = |z: u32| {
-        if z == max_zoom {
-            0.0
-        } else {
-            level_geometric_error_m(z) as f32
-        }
-    };
-    let meshes: Vec<GridMesh> = (0..=max_zoom)
-        .map(|z| {
-            walk(&MeshWalk {
-                side,
-                max_error: tolerance(z),
-                error: &|i| source.error(i),
-                has_data: Some(&|i| source.has_data(i)),
-                window: None,
-                max_vertices: usize::MAX,
-            })
-            .unwrap_or_default()
-        })
-        .collect();
-    let finest = meshes.last().context("no level")?;
-    if finest.triangles.is_empty() {
-        bail!("the bundle holds no triangle with data");
-    }
-    let (earth, heights_note) = to_earth.vertices(source, &frame, &finest.vertices)?;
-    let place: HashMap<[u16; 2], u32> = finest
-        .vertices
-        .iter()
-        .enumerate()
-        .map(|(i, &v)| (v, i as u32))
-        .collect();
-    let bounds = earth.bounds_deg();
+    let last = (frame.side - 1) as f64;
+    let grid_box = bounds_of(&to_earth.outline(&frame, [[0.0, 0.0], [last, last]])?);
+    let data_outline = to_earth.outline_of_extent(manifest.valid_extent)?;
+    let bounds = bounds_of(&data_outline);
+    let (geoid_m, heights_note) = to_earth.geoid_range(bounds)?;
     let tiles = TileSet {
         ranges: (0..=max_zoom)
             .map(|z| TileRange::covering(z, bounds))
             .collect(),
-        // One quantization of heights for every tile: shared vertices
-        // decode alike.
-        height_range_m: [
-            earth.height_m.iter().copied().fold(0.0, f64::min),
-            earth.height_m.iter().copied().fold(0.0, f64::max),
-        ],
-        outline: to_earth.outline(valid_extent)?,
+        // One quantization of heights for every tile, so that shared
+        // vertices decode alike: the bundle's heights, moved by the
+        // geoid's range over the region (with a margin for between its
+        // samples), and 0, where the fill lies.
+        height_range_m: {
+            let [lo, hi] = manifest.height_range_m;
+            let margin = 1.0 + 0.2 * (geoid_m[1] - geoid_m[0]);
+            [
+                (lo + geoid_m[0] - margin).min(0.0),
+                (hi + geoid_m[1] + margin).max(0.0),
+            ]
+        },
+        outline: data_outline,
     };
     let layer = serde_json::json!({
         "tilejson": "2.1.0",
-        "name": region,
+        "name": manifest.region,
         "description": format!("Relevo {}: {heights_note}", env!("CARGO_PKG_VERSION")),
         "version": "1.0.0",
         "format": "quantized-mesh-1.0",
@@ -228,37 +193,78 @@ fn export(
         "metadataAvailability": 1,
         "extensions": ["octvertexnormals", "watermask", "metadata"],
     });
-    let levels = meshes.iter().map(|m| level_mesh(m, &place, &earth));
-    let (count, bytes) = write_folder(a.out, |staging| tiles.write(staging, levels, &layer))?;
+    // The mask's boundaries, once for every tile's walk.
+    let boundaries = mask_boundaries(frame.side, &|i| source.has_data(i));
+    let grid = Grid {
+        source,
+        frame,
+        boundaries: &boundaries,
+        grid_box,
+        crs_wkt: &manifest.crs_wkt,
+        vertical: a.vertical,
+        max_zoom,
+    };
+    let (count, bytes, level_triangles) =
+        write_folder(a.out, |staging| tiles.write(staging, &grid, &layer))?;
     Ok(Summary {
         out: a.out.display().to_string(),
         max_zoom,
         tiles: count,
         bytes,
-        level_triangles: meshes.iter().map(|m| m.triangles.len()).collect(),
+        level_triangles,
         heights: heights_note,
         seconds: start.elapsed().as_secs_f64(),
     })
 }
 
-/// A level's mesh on the ellipsoid: `mesh`'s vertices looked up (by grid
-/// place, `place`) in the finest level's, `earth`; triangles turned
-/// counter-clockwise in longitude and latitude.
-fn level_mesh(mesh: &GridMesh, place: &HashMap<[u16; 2], u32>, earth: &SurfaceMesh) -> SurfaceMesh {
-    let ids: Vec<usize> = mesh.vertices.iter().map(|v| place[v] as usize).collect();
-    let mut out = SurfaceMesh {
-        lon_lat_deg: ids.iter().map(|&i| earth.lon_lat_deg[i]).collect(),
-        height_m: ids.iter().map(|&i| earth.height_m[i]).collect(),
-        normal: ids.iter().map(|&i| earth.normal[i]).collect(),
-        triangles: Vec::with_capacity(mesh.triangles.len()),
-    };
-    for &t in &mesh.triangles {
-        let [p, q, r] = t.map(|v| out.lon_lat_deg[v as usize]);
-        let area = (q[0] - p[0]) * (r[1] - p[1]) - (r[0] - p[0]) * (q[1] - p[1]);
-        out.triangles
-            .push(if area < 0.0 { [t[0], t[2], t[1]] } else { t });
+/// What an export reads of a bundle's or a pyramid's manifest.
+struct ManifestParts {
+    crs_wkt: String,
+    region: String,
+    /// The DEM's extent in the bundle's CRS, `[x0, y0, x1, y1]`.
+    valid_extent: [f64; 4],
+    /// Lowest and highest height, metres (above the geoid, or as held).
+    height_range_m: [f64; 2],
+}
+
+/// The grid a tile's mesh is walked from.
+struct Grid<'a> {
+    source: &'a dyn MeshSource,
+    frame: TerrainFrame,
+    boundaries: &'a VertexBits,
+    /// The grid's square on the Earth, degrees.
+    grid_box: [f64; 4],
+    crs_wkt: &'a str,
+    vertical: VerticalDatum,
+    max_zoom: u32,
+}
+
+impl Grid<'_> {
+    /// Tile `tile`'s mesh, on the ellipsoid: the triangles of its level's
+    /// LP mesh (at the level's geometric error; every vertex on the last
+    /// level) that meet the tile, read by a window walk — exactly the
+    /// whole level's triangles there, so neighbours cut the same mesh.
+    fn tile_mesh(&self, to_earth: &ToEllipsoid, tile: TileId) -> Result<SurfaceMesh> {
+        let Some(window) = to_earth.window(tile.bounds_deg(), self.grid_box, &self.frame)? else {
+            return Ok(SurfaceMesh::default());
+        };
+        let max_error = if tile.z == self.max_zoom {
+            0.0
+        } else {
+            level_geometric_error_m(tile.z) as f32
+        };
+        let mesh = walk(&MeshWalk {
+            side: self.frame.side,
+            max_error,
+            error: &|i| self.source.error(i),
+            has_data: Some(&|i| self.source.has_data(i)),
+            boundaries: Some(self.boundaries),
+            window: Some(window),
+            max_vertices: usize::MAX,
+        })
+        .unwrap_or_default();
+        to_earth.surface(self.source, &self.frame, &mesh)
     }
-    out
 }
 
 /// What every tile of an export shares.
@@ -271,41 +277,55 @@ struct TileSet {
 }
 
 impl TileSet {
-    /// Write each level's tiles (from `levels`, level 0 first) and
-    /// `layer.json` into `folder`: the tiles and bytes written.
+    /// Write each level's tiles, cut from `grid` (tiles in parallel, each
+    /// worker with its own PROJ transforms), and `layer.json` into
+    /// `folder`: the tiles and bytes written, and each level's triangles.
     fn write(
         &self,
         folder: &Path,
-        levels: impl Iterator<Item = SurfaceMesh>,
+        grid: &Grid,
         layer: &serde_json::Value,
-    ) -> Result<(usize, u64)> {
+    ) -> Result<(usize, u64, Vec<usize>)> {
         let total: usize = self.ranges.iter().map(TileRange::len).sum();
         let bar = progress::bar(total as u64, "tiles");
-        let (mut tiles, mut bytes) = (0, 0u64);
-        for (z, surface) in levels.enumerate() {
-            for patch in level_patches(&surface, self.ranges[z]) {
-                let children = children_available(patch.tile, self.ranges.get(z + 1));
-                let extras = TileExtras {
-                    height_range_m: self.height_range_m,
-                    water: water_mask(&patch, &self.outline),
-                    children_available: &children,
-                };
-                let data = encode(patch.tile, &patch.mesh, &extras);
-                let dir = folder.join(format!("{z}/{}", patch.tile.x));
+        let (mut tiles, mut bytes, mut level_triangles) = (0, 0u64, Vec::new());
+        for (z, range) in self.ranges.iter().enumerate() {
+            let ids: Vec<TileId> = range.tiles().collect();
+            let encoded: Vec<Result<(TileId, Vec<u8>, usize)>> = ids
+                .par_iter()
+                .map(|&tile| {
+                    with_transforms(grid.crs_wkt, grid.vertical, |to_earth| {
+                        let patch = patch(&grid.tile_mesh(to_earth, tile)?, tile);
+                        let children = children_available(tile, self.ranges.get(z + 1));
+                        let extras = TileExtras {
+                            height_range_m: self.height_range_m,
+                            water: water_mask(&patch, &self.outline),
+                            children_available: &children,
+                        };
+                        bar.inc(1);
+                        Ok((tile, encode(tile, &patch.mesh, &extras), patch.covered))
+                    })
+                })
+                .collect();
+            let mut triangles = 0;
+            for result in encoded {
+                let (tile, data, covered) = result?;
+                let dir = folder.join(format!("{z}/{}", tile.x));
                 std::fs::create_dir_all(&dir)
                     .with_context(|| format!("{}: cannot write", dir.display()))?;
-                let path = dir.join(format!("{}.terrain", patch.tile.y));
+                let path = dir.join(format!("{}.terrain", tile.y));
                 std::fs::write(&path, &data)
                     .with_context(|| format!("{}: cannot write", path.display()))?;
                 tiles += 1;
                 bytes += data.len() as u64;
-                bar.inc(1);
+                triangles += covered;
             }
+            level_triangles.push(triangles);
         }
         bar.finish_and_clear();
         let text = serde_json::to_string_pretty(layer)?;
         std::fs::write(folder.join("layer.json"), &text)?;
-        Ok((tiles, bytes + text.len() as u64))
+        Ok((tiles, bytes + text.len() as u64, level_triangles))
     }
 }
 
@@ -336,13 +356,47 @@ fn write_folder<T>(out: &Path, write: impl FnOnce(&Path) -> Result<T>) -> Result
 /// and the geoid's heights to ellipsoidal ones (PROJ, with the geoid's grid).
 struct ToEllipsoid {
     horizontal: CoordTransform,
+    /// WGS84 back to the bundle's CRS.
+    inverse: CoordTransform,
     vertical: Option<(CoordTransform, VerticalDatum)>,
 }
+
+thread_local! {
+    /// Each worker thread's transforms, made once (PROJ looks the CRSs up
+    /// in its database): the CRS and datum they are for, and them.
+    static TRANSFORMS: std::cell::RefCell<Option<(String, VerticalDatum, ToEllipsoid)>> =
+        const { std::cell::RefCell::new(None) };
+}
+
+/// Run `f` with this thread's transforms from `crs_wkt` and `datum`. They
+/// are taken out of the thread's slot while `f` runs: a tile's own
+/// parallel work may run another tile on this thread meanwhile, which then
+/// makes its own.
+fn with_transforms<T>(
+    crs_wkt: &str,
+    datum: VerticalDatum,
+    f: impl FnOnce(&ToEllipsoid) -> Result<T>,
+) -> Result<T> {
+    let kept = TRANSFORMS.with(|cell| cell.borrow_mut().take());
+    let to_earth = match kept {
+        Some((wkt, d, t)) if wkt == crs_wkt && d == datum => t,
+        _ => ToEllipsoid::new(crs_wkt, datum)?,
+    };
+    let result = f(&to_earth);
+    TRANSFORMS.with(|cell| *cell.borrow_mut() = Some((crs_wkt.to_string(), datum, to_earth)));
+    result
+}
+
+/// Points a side of a tile or an extent is sampled at when it goes from one
+/// CRS to the other (its sides curve there).
+const SIDE_SAMPLES: usize = 9;
 
 impl ToEllipsoid {
     fn new(crs_wkt: &str, datum: VerticalDatum) -> Result<ToEllipsoid> {
         let from = crs::parse(crs_wkt)?;
-        let horizontal = CoordTransform::new(&from, &crs::wgs84()?)?;
+        let wgs84 = crs::wgs84()?;
+        let horizontal = CoordTransform::new(&from, &wgs84)?;
+        let inverse = CoordTransform::new(&wgs84, &from)?;
         let vertical = match datum.epsg() {
             None => None,
             Some(code) => {
@@ -355,6 +409,7 @@ impl ToEllipsoid {
         };
         Ok(ToEllipsoid {
             horizontal,
+            inverse,
             vertical,
         })
     }
@@ -363,35 +418,145 @@ impl ToEllipsoid {
     /// and latitude).
     fn cell_deg(&self, frame: &TerrainFrame) -> Result<f64> {
         let c = (frame.side / 2) as f64;
-        let (x0, y0) = frame.world_from_vertex(c, c);
-        let (x1, y1) = frame.world_from_vertex(c + 1.0, c + 1.0);
-        let (mut xs, mut ys, mut zs) = (vec![x0, x1], vec![y0, y1], vec![0.0; 2]);
-        self.horizontal
-            .transform_coords(&mut xs, &mut ys, &mut zs)?;
-        Ok((xs[1] - xs[0]).abs().min((ys[1] - ys[0]).abs()))
+        let p = self.to_degrees(&[
+            frame.world_from_vertex(c, c),
+            frame.world_from_vertex(c + 1.0, c + 1.0),
+        ])?;
+        Ok((p[1][0] - p[0][0]).abs().min((p[1][1] - p[0][1]).abs()))
     }
 
-    /// The corners of `extent` (`[x0, y0, x1, y1]` in the bundle's CRS) in
-    /// degrees, in order.
-    fn outline(&self, [x0, y0, x1, y1]: [f64; 4]) -> Result<Vec<[f64; 2]>> {
-        let (mut xs, mut ys, mut zs) = (vec![x0, x1, x1, x0], vec![y0, y0, y1, y1], vec![0.0; 4]);
+    /// The rectangle of vertices `[[c0, r0], [c1, r1]]` of `frame` on the
+    /// Earth: its sides sampled, degrees.
+    fn outline(
+        &self,
+        frame: &TerrainFrame,
+        [[c0, r0], [c1, r1]]: [[f64; 2]; 2],
+    ) -> Result<Vec<[f64; 2]>> {
+        let world: Vec<(f64, f64)> = rectangle_sides([c0, r0, c1, r1])
+            .into_iter()
+            .map(|[c, r]| frame.world_from_vertex(c, r))
+            .collect();
+        self.to_degrees(&world)
+    }
+
+    /// `extent` (`[x0, y0, x1, y1]` in the bundle's CRS) on the Earth: its
+    /// sides sampled, degrees, in order.
+    fn outline_of_extent(&self, extent: [f64; 4]) -> Result<Vec<[f64; 2]>> {
+        let world: Vec<(f64, f64)> = rectangle_sides(extent)
+            .into_iter()
+            .map(|[x, y]| (x, y))
+            .collect();
+        self.to_degrees(&world)
+    }
+
+    fn to_degrees(&self, world: &[(f64, f64)]) -> Result<Vec<[f64; 2]>> {
+        let mut xs: Vec<f64> = world.iter().map(|p| p.0).collect();
+        let mut ys: Vec<f64> = world.iter().map(|p| p.1).collect();
+        let mut zs = vec![0.0; xs.len()];
         self.horizontal
             .transform_coords(&mut xs, &mut ys, &mut zs)?;
         Ok(xs.iter().zip(&ys).map(|(&x, &y)| [x, y]).collect())
     }
 
-    /// `vertices` (grid places) on the ellipsoid, with normals, and what
-    /// the heights are measured from.
-    fn vertices(
+    /// The geoid's height above the ellipsoid over `bounds` (lowest and
+    /// highest on a 9 × 9 lattice), and what the heights written are
+    /// measured from; a warning when PROJ lacks the geoid's grid.
+    fn geoid_range(&self, [w, s, e, n]: [f64; 4]) -> Result<([f64; 2], String)> {
+        let Some((t, datum)) = &self.vertical else {
+            return Ok((
+                [0.0; 2],
+                "heights above the WGS84 ellipsoid, as the bundle holds them".into(),
+            ));
+        };
+        let at = |lo: f64, hi: f64, i: usize| lo + (hi - lo) * i as f64 / 8.0;
+        let (mut xs, mut ys): (Vec<f64>, Vec<f64>) =
+            (0..81).map(|k| (at(w, e, k % 9), at(s, n, k / 9))).unzip();
+        let mut zs = vec![0.0; xs.len()];
+        t.transform_coords(&mut xs, &mut ys, &mut zs)?;
+        let name = format!("{datum:?}").to_uppercase();
+        if zs.iter().all(|&z| z == 0.0) {
+            tracing::warn!(
+                "PROJ has no grid for the {name} geoid (Debian: proj-data; or projsync); the heights are written as the bundle holds them, above the geoid, not the ellipsoid"
+            );
+            return Ok((
+                [0.0; 2],
+                format!("heights above the {name} geoid (PROJ lacked its grid), not the ellipsoid"),
+            ));
+        }
+        let lo = zs.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = zs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        Ok((
+            [lo, hi],
+            format!("heights above the WGS84 ellipsoid, from {name} geoid heights through PROJ"),
+        ))
+    }
+
+    /// The vertices of `frame` a walk for tile `tile` (degrees) needs: the
+    /// part of the tile over the grid's box, taken to the bundle's CRS,
+    /// with a margin of two vertices; `None` when the tile misses the grid.
+    fn window(
+        &self,
+        tile: [f64; 4],
+        grid_box: [f64; 4],
+        frame: &TerrainFrame,
+    ) -> Result<Option<Rect>> {
+        let part = [
+            tile[0].max(grid_box[0]),
+            tile[1].max(grid_box[1]),
+            tile[2].min(grid_box[2]),
+            tile[3].min(grid_box[3]),
+        ];
+        if part[0] >= part[2] || part[1] >= part[3] {
+            return Ok(None);
+        }
+        let corners = rectangle_sides(part);
+        let (mut xs, mut ys): (Vec<f64>, Vec<f64>) = corners.iter().map(|p| (p[0], p[1])).unzip();
+        let mut zs = vec![0.0; xs.len()];
+        self.inverse.transform_coords(&mut xs, &mut ys, &mut zs)?;
+        let mut box_ = [
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ];
+        for (&x, &y) in xs.iter().zip(&ys) {
+            let Some((c, r)) = frame.vertex_from_world(x, y) else {
+                continue;
+            };
+            box_ = [
+                box_[0].min(c),
+                box_[1].min(r),
+                box_[2].max(c),
+                box_[3].max(r),
+            ];
+        }
+        let last = (frame.side - 1) as f64;
+        let [c0, r0] = [box_[0], box_[1]].map(|v| (v.floor() - 2.0).clamp(0.0, last) as usize);
+        let [c1, r1] = [box_[2], box_[3]].map(|v| (v.ceil() + 2.0).clamp(0.0, last) as usize);
+        if !(c0 < c1 && r0 < r1) {
+            return Ok(None);
+        }
+        Ok(Some(Rect {
+            c0,
+            r0,
+            width: c1 - c0 + 1,
+            height: r1 - r0 + 1,
+        }))
+    }
+
+    /// `mesh` on the ellipsoid: its vertices through PROJ, normals from the
+    /// grid in each vertex's east/north/up frame, triangles turned
+    /// counter-clockwise in longitude and latitude.
+    fn surface(
         &self,
         source: &dyn MeshSource,
         frame: &TerrainFrame,
-        vertices: &[[u16; 2]],
-    ) -> Result<(SurfaceMesh, String)> {
-        let n = vertices.len();
+        mesh: &GridMesh,
+    ) -> Result<SurfaceMesh> {
+        let n = mesh.vertices.len();
         let (mut xs, mut ys) = (Vec::with_capacity(n), Vec::with_capacity(n));
         let mut zs: Vec<f64> = Vec::with_capacity(n);
-        for &[c, r] in vertices {
+        for &[c, r] in &mesh.vertices {
             let (x, y) = frame.world_from_vertex(c as f64, r as f64);
             xs.push(x);
             ys.push(y);
@@ -400,29 +565,13 @@ impl ToEllipsoid {
         let mut flat = vec![0.0; n];
         self.horizontal
             .transform_coords(&mut xs, &mut ys, &mut flat)?;
-        let note = match &self.vertical {
-            None => "heights above the WGS84 ellipsoid, as the bundle holds them".to_string(),
-            Some((t, datum)) => {
-                let before = zs.clone();
-                let (mut lon, mut lat) = (xs.clone(), ys.clone());
-                t.transform_coords(&mut lon, &mut lat, &mut zs)?;
-                let name = format!("{datum:?}").to_uppercase();
-                if zs == before {
-                    tracing::warn!(
-                        "PROJ has no grid for the {name} geoid (Debian: proj-data; or projsync); the heights are written as the bundle holds them, above the geoid, not the ellipsoid"
-                    );
-                    format!(
-                        "heights above the {name} geoid (PROJ lacked its grid), not the ellipsoid"
-                    )
-                } else {
-                    format!(
-                        "heights above the WGS84 ellipsoid, from {name} geoid heights through PROJ"
-                    )
-                }
-            }
-        };
+        if let Some((t, _)) = &self.vertical {
+            let (mut lon, mut lat) = (xs.clone(), ys.clone());
+            t.transform_coords(&mut lon, &mut lat, &mut zs)?;
+        }
         let cell = frame.cell_size_m;
-        let normal = vertices
+        let normal = mesh
+            .vertices
             .iter()
             .zip(xs.iter().zip(&ys))
             .map(|(&[c, r], (&lon, &lat))| {
@@ -437,14 +586,38 @@ impl ToEllipsoid {
                 [0, 1, 2].map(|k| local[0] * e[k] + local[1] * n[k] + local[2] * u[k])
             })
             .collect();
-        Ok((
-            SurfaceMesh {
-                lon_lat_deg: xs.iter().zip(&ys).map(|(&x, &y)| [x, y]).collect(),
-                height_m: zs,
-                normal,
-                triangles: Vec::new(),
-            },
-            note,
-        ))
+        let mut out = SurfaceMesh {
+            lon_lat_deg: xs.iter().zip(&ys).map(|(&x, &y)| [x, y]).collect(),
+            height_m: zs,
+            normal,
+            triangles: Vec::with_capacity(mesh.triangles.len()),
+        };
+        for &t in &mesh.triangles {
+            let [p, q, r] = t.map(|v| out.lon_lat_deg[v as usize]);
+            let area = (q[0] - p[0]) * (r[1] - p[1]) - (r[0] - p[0]) * (q[1] - p[1]);
+            out.triangles
+                .push(if area < 0.0 { [t[0], t[2], t[1]] } else { t });
+        }
+        Ok(out)
     }
+}
+
+/// Points along the sides of rectangle `[x0, y0, x1, y1]`, in order round
+/// it, [`SIDE_SAMPLES`] a side.
+fn rectangle_sides([x0, y0, x1, y1]: [f64; 4]) -> Vec<[f64; 2]> {
+    let at = |a: f64, b: f64, i: usize| a + (b - a) * i as f64 / (SIDE_SAMPLES - 1) as f64;
+    let mut points = Vec::with_capacity(4 * (SIDE_SAMPLES - 1));
+    for i in 0..SIDE_SAMPLES - 1 {
+        points.push([at(x0, x1, i), y0]);
+    }
+    for i in 0..SIDE_SAMPLES - 1 {
+        points.push([x1, at(y0, y1, i)]);
+    }
+    for i in 0..SIDE_SAMPLES - 1 {
+        points.push([at(x1, x0, i), y1]);
+    }
+    for i in 0..SIDE_SAMPLES - 1 {
+        points.push([x0, at(y1, y0, i)]);
+    }
+    points
 }

@@ -303,6 +303,84 @@ fn assert_levels_within_error(js: &BTreeMap<TileKey, Value>, points: &[[f64; 3]]
     }
 }
 
+/// Every file under `dir`, relative, with its SHA-256.
+fn files(dir: &Path) -> BTreeMap<String, String> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else {
+                let name = path.strip_prefix(dir).unwrap().display().to_string();
+                out.insert(name, common::sha256(&path));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn a_pyramid_exports_the_same_tiles_as_its_single_grid_at_any_thread_count() {
+    let dir = tempfile::tempdir().unwrap();
+    // The sample region's DEM alone (a pyramid takes no imagery yet), as a
+    // single grid and as a pyramid of 33² tiles.
+    let dem = repo("data/olinda/olinda_dem_utm25s.tif");
+    let prep = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let mut args = vec![
+            "prep",
+            "--dem",
+            dem.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "-q",
+        ];
+        args.extend(extra);
+        relevo_ok(&args);
+        out
+    };
+    let single = prep("single.relevo", &[]);
+    let pyramid = prep("tiles.relevo", &["--tiled", "--tile-size", "32"]);
+    let export = |bundle: &Path, name: &str, threads: &str| {
+        let out = dir.path().join(name);
+        let status = Command::new(env!("CARGO_BIN_EXE_relevo"))
+            .args(["export", "quantized-mesh"])
+            .arg(bundle)
+            .arg("--out")
+            .arg(&out)
+            .env("RAYON_NUM_THREADS", threads)
+            .output()
+            .unwrap();
+        assert!(
+            status.status.success(),
+            "{}",
+            String::from_utf8_lossy(&status.stderr)
+        );
+        files(&out)
+    };
+    let from_grid = export(&single, "from_grid", "1");
+    assert!(from_grid.len() > 20);
+    assert_eq!(export(&single, "from_grid_4", "4"), from_grid);
+    // The pyramid's errors are the single grid's, bit for bit: so are its
+    // tiles (layer.json differs only by the region's name).
+    let tiles_only = |mut files: BTreeMap<String, String>| {
+        files.remove("layer.json");
+        files
+    };
+    let from_pyramid = export(&pyramid, "from_pyramid", "3");
+    assert_eq!(tiles_only(from_pyramid), tiles_only(from_grid));
+    let layer = |name: &str| -> Value {
+        serde_json::from_slice(&std::fs::read(dir.path().join(name).join("layer.json")).unwrap())
+            .unwrap()
+    };
+    assert_eq!(
+        layer("from_pyramid")["available"],
+        layer("from_grid")["available"]
+    );
+}
+
 #[test]
 fn bad_requests_are_refused_and_leave_nothing() {
     let dir = tempfile::tempdir().unwrap();

@@ -169,6 +169,7 @@ pub fn build(
         max_error,
         error: &error,
         has_data: (!keep_padding).then_some(&has_data as &(dyn Fn(usize) -> bool + Sync)),
+        boundaries: None,
         window,
         max_vertices,
     })

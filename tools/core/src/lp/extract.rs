@@ -83,6 +83,7 @@ pub fn extract(h: &Hierarchy, max_error: f32, mask: Option<&[u8]>) -> GridMesh {
         has_data: has_data
             .as_ref()
             .map(|f| f as &(dyn Fn(usize) -> bool + Sync)),
+        boundaries: None,
         window: None,
         max_vertices: usize::MAX,
     })
@@ -99,6 +100,10 @@ pub struct MeshWalk<'a> {
     pub error: &'a (dyn Fn(usize) -> f32 + Sync),
     /// Whether a vertex holds data; `None`: every vertex does.
     pub has_data: Option<&'a (dyn Fn(usize) -> bool + Sync)>,
+    /// [`mask_boundaries`] of `has_data`, computed once by a caller that
+    /// walks the same grid many times (window by window); `None`: the walk
+    /// computes them (a pass over the whole grid).
+    pub boundaries: Option<&'a VertexBits>,
     /// Keep only the triangles whose bounding box overlaps this rectangle
     /// of vertices with a positive area; `None`: the whole grid.
     pub window: Option<Rect>,
@@ -117,11 +122,18 @@ pub fn walk(input: &MeshWalk) -> Option<GridMesh> {
         side - 1 <= u16::MAX as usize + 1,
         "grid too large for u16 vertex coordinates"
     );
-    let mixed = input.has_data.map(|d| mask_boundaries(side, d));
-    let split =
-        |m: usize| (input.error)(m) > input.max_error || mixed.as_ref().is_some_and(|x| x.get(m));
-    // A dense numbering when it is small, else only the vertices used.
-    let numbers = if side * side <= DENSE_NUMBERING_VERTICES {
+    let computed;
+    let mixed = match input.boundaries {
+        Some(b) => Some(b),
+        None => {
+            computed = input.has_data.map(|d| mask_boundaries(side, d));
+            computed.as_ref()
+        }
+    };
+    let split = |m: usize| (input.error)(m) > input.max_error || mixed.is_some_and(|x| x.get(m));
+    // A dense numbering for a whole grid when it is small, else only the
+    // vertices used (a window's walk uses few of the grid's).
+    let numbers = if input.window.is_none() && side * side <= DENSE_NUMBERING_VERTICES {
         Numbers::Dense(vec![0; side * side])
     } else {
         Numbers::Sparse(HashMap::new())
@@ -453,10 +465,22 @@ mod tests {
                     max_error,
                     error: &error,
                     has_data: masked.then_some(&has_data as &(dyn Fn(usize) -> bool + Sync)),
+                    boundaries: None,
                     window,
                     max_vertices: usize::MAX,
                 };
                 let whole = walk(&input(None)).unwrap();
+                // The mask's boundaries computed once give the same mesh.
+                let bits = mask_boundaries(side, &has_data);
+                let shared = MeshWalk {
+                    boundaries: masked.then_some(&bits),
+                    ..input(None)
+                };
+                assert_eq!(
+                    walk(&shared).unwrap(),
+                    whole,
+                    "masked {masked}, {max_error} m"
+                );
                 assert_eq!(whole, extract(&h, max_error, masked.then_some(&mask)));
                 for rect in [
                     [0, 0, 256, 256],

@@ -29,21 +29,7 @@ pub struct SurfaceMesh {
 impl SurfaceMesh {
     /// `[west, south, east, north]` of its vertices, degrees.
     pub fn bounds_deg(&self) -> [f64; 4] {
-        let mut b = [
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NEG_INFINITY,
-        ];
-        for p in &self.lon_lat_deg {
-            b = [
-                b[0].min(p[0]),
-                b[1].min(p[1]),
-                b[2].max(p[0]),
-                b[3].max(p[1]),
-            ];
-        }
-        b
+        super::bounds_of(&self.lon_lat_deg)
     }
 
     fn push(&mut self, lon_lat: [f64; 2], height_m: f64, normal: [f64; 3]) -> u32 {

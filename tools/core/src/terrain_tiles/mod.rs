@@ -21,8 +21,7 @@ pub mod tiling;
 use clip::{tile_patch, Coverage, SurfaceMesh};
 use quantized_mesh::{WaterMask, WATER_MASK_SIDE};
 use rayon::prelude::*;
-use std::collections::HashMap;
-use tiling::{tile_size_deg, TileId, TileRange};
+use tiling::{TileId, TileRange};
 
 /// A tile's mesh: the level's mesh clipped to it (the first `covered`
 /// triangles) and the fill.
@@ -32,40 +31,16 @@ pub struct TilePatch {
     pub covered: usize,
 }
 
-/// The tiles of `range` cut from `mesh` (one level's mesh), in the range's
-/// order; computed in parallel, each from its own triangles, so the result
-/// does not depend on the thread count.
-pub fn level_patches(mesh: &SurfaceMesh, range: TileRange) -> Vec<TilePatch> {
-    let size = tile_size_deg(range.z);
-    let mut triangles_of: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
-    for (i, t) in mesh.triangles.iter().enumerate() {
-        let p = t.map(|v| mesh.lon_lat_deg[v as usize]);
-        let lo = [0, 1].map(|k| p.iter().map(|q| q[k]).fold(f64::INFINITY, f64::min));
-        let hi = [0, 1].map(|k| p.iter().map(|q| q[k]).fold(f64::NEG_INFINITY, f64::max));
-        let column = |lon: f64| ((lon + 180.0) / size).floor().max(0.0) as u32;
-        let row = |lat: f64| ((lat + 90.0) / size).floor().max(0.0) as u32;
-        for y in row(lo[1]).max(range.y[0])..=row(hi[1]).min(range.y[1]) {
-            for x in column(lo[0]).max(range.x[0])..=column(hi[0]).min(range.x[1]) {
-                triangles_of.entry((x, y)).or_default().push(i as u32);
-            }
-        }
+/// `tile` cut from `mesh` (its level's mesh, or the part of it a window
+/// of the grid holds around the tile).
+pub fn patch(mesh: &SurfaceMesh, tile: TileId) -> TilePatch {
+    let candidates: Vec<u32> = (0..mesh.triangles.len() as u32).collect();
+    let (mesh, covered) = tile_patch(mesh, &candidates, tile.bounds_deg());
+    TilePatch {
+        tile,
+        mesh,
+        covered,
     }
-    let tiles: Vec<TileId> = range.tiles().collect();
-    tiles
-        .into_par_iter()
-        .map(|tile| {
-            let candidates = triangles_of
-                .get(&(tile.x, tile.y))
-                .map(Vec::as_slice)
-                .unwrap_or(&[]);
-            let (mesh, covered) = tile_patch(mesh, candidates, tile.bounds_deg());
-            TilePatch {
-                tile,
-                mesh,
-                covered,
-            }
-        })
-        .collect()
 }
 
 /// The water mask of `patch`: water where the grid's `outline` (its
@@ -75,6 +50,21 @@ pub fn level_patches(mesh: &SurfaceMesh, range: TileRange) -> Vec<TilePatch> {
 pub fn water_mask(patch: &TilePatch, outline: &[[f64; 2]]) -> WaterMask {
     let bounds = patch.tile.bounds_deg();
     let [w, s, e, n] = bounds;
+    // Quick answers: a tile the data covers whole, or one clear of the outline.
+    let m = &patch.mesh;
+    let covered_area: f64 = m.triangles[..patch.covered]
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|v| m.lon_lat_deg[v as usize]);
+            ((b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1])) / 2.0
+        })
+        .sum();
+    let outline_box = bounds_of(outline);
+    let clear =
+        outline_box[0] >= e || outline_box[2] <= w || outline_box[1] >= n || outline_box[3] <= s;
+    if clear || covered_area >= (e - w) * (n - s) * (1.0 - 1e-9) {
+        return WaterMask::Land;
+    }
     let coverage = Coverage::new(&patch.mesh, patch.covered, bounds);
     let side = WATER_MASK_SIDE;
     let texels: Vec<u8> = (0..side * side)
@@ -100,6 +90,26 @@ pub fn water_mask(patch: &TilePatch, outline: &[[f64; 2]]) -> WaterMask {
     } else {
         WaterMask::Texels(texels)
     }
+}
+
+/// `[west, south, east, north]` of `points` (degrees).
+pub fn bounds_of(points: &[[f64; 2]]) -> [f64; 4] {
+    points.iter().fold(
+        [
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ],
+        |b, p| {
+            [
+                b[0].min(p[0]),
+                b[1].min(p[1]),
+                b[2].max(p[0]),
+                b[3].max(p[1]),
+            ]
+        },
+    )
 }
 
 /// Whether `p` lies inside `polygon` (even–odd rule).
@@ -170,7 +180,7 @@ mod tests {
             triangles: vec![[0, 1, 2], [0, 2, 3]],
         };
         let range = TileRange::covering(10, mesh.bounds_deg());
-        let patches = level_patches(&mesh, range);
+        let patches: Vec<TilePatch> = range.tiles().map(|t| patch(&mesh, t)).collect();
         assert_eq!(patches.len(), range.len());
         for p in &patches {
             let [w, s, e, n] = p.tile.bounds_deg();
