@@ -59,7 +59,8 @@ pub struct Summary {
     pub max_zoom: u32,
     pub tiles: usize,
     pub bytes: u64,
-    /// Triangles of each level's mesh, level 0 first.
+    /// Each level's triangles with data, as its tiles hold them (cut
+    /// where they cross tile lines), level 0 first.
     pub level_triangles: Vec<usize>,
     /// What the heights are measured from, as written.
     pub heights: String,
@@ -267,6 +268,9 @@ impl Grid<'_> {
     }
 }
 
+/// Tiles encoded before they are written.
+const TILES_A_BATCH: usize = 256;
+
 /// What every tile of an export shares.
 struct TileSet {
     /// Each level's available tiles, level 0 first.
@@ -291,34 +295,38 @@ impl TileSet {
         let (mut tiles, mut bytes, mut level_triangles) = (0, 0u64, Vec::new());
         for (z, range) in self.ranges.iter().enumerate() {
             let ids: Vec<TileId> = range.tiles().collect();
-            let encoded: Vec<Result<(TileId, Vec<u8>, usize)>> = ids
-                .par_iter()
-                .map(|&tile| {
-                    with_transforms(grid.crs_wkt, grid.vertical, |to_earth| {
-                        let patch = patch(&grid.tile_mesh(to_earth, tile)?, tile);
-                        let children = children_available(tile, self.ranges.get(z + 1));
-                        let extras = TileExtras {
-                            height_range_m: self.height_range_m,
-                            water: water_mask(&patch, &self.outline),
-                            children_available: &children,
-                        };
-                        bar.inc(1);
-                        Ok((tile, encode(tile, &patch.mesh, &extras), patch.covered))
-                    })
-                })
-                .collect();
             let mut triangles = 0;
-            for result in encoded {
-                let (tile, data, covered) = result?;
-                let dir = folder.join(format!("{z}/{}", tile.x));
-                std::fs::create_dir_all(&dir)
-                    .with_context(|| format!("{}: cannot write", dir.display()))?;
-                let path = dir.join(format!("{}.terrain", tile.y));
-                std::fs::write(&path, &data)
-                    .with_context(|| format!("{}: cannot write", path.display()))?;
-                tiles += 1;
-                bytes += data.len() as u64;
-                triangles += covered;
+            // A batch of tiles at a time, so that a level of any size holds
+            // only that many encoded tiles before they are written.
+            for batch in ids.chunks(TILES_A_BATCH) {
+                let encoded: Vec<Result<(TileId, Vec<u8>, usize)>> = batch
+                    .par_iter()
+                    .map(|&tile| {
+                        with_transforms(grid.crs_wkt, grid.vertical, |to_earth| {
+                            let patch = patch(&grid.tile_mesh(to_earth, tile)?, tile);
+                            let children = children_available(tile, self.ranges.get(z + 1));
+                            let extras = TileExtras {
+                                height_range_m: self.height_range_m,
+                                water: water_mask(&patch, &self.outline),
+                                children_available: &children,
+                            };
+                            bar.inc(1);
+                            Ok((tile, encode(tile, &patch.mesh, &extras), patch.covered))
+                        })
+                    })
+                    .collect();
+                for result in encoded {
+                    let (tile, data, covered) = result?;
+                    let dir = folder.join(format!("{z}/{}", tile.x));
+                    std::fs::create_dir_all(&dir)
+                        .with_context(|| format!("{}: cannot write", dir.display()))?;
+                    let path = dir.join(format!("{}.terrain", tile.y));
+                    std::fs::write(&path, &data)
+                        .with_context(|| format!("{}: cannot write", path.display()))?;
+                    tiles += 1;
+                    bytes += data.len() as u64;
+                    triangles += covered;
+                }
             }
             level_triangles.push(triangles);
         }
