@@ -10,7 +10,7 @@ use crate::progress;
 use anyhow::{bail, Context, Result};
 use gdal::spatial_ref::{AxisMappingStrategy, CoordTransform, SpatialRef};
 use rayon::prelude::*;
-use relevo_core::bundle::{Bundle, PYRAMID_FORMAT};
+use relevo_core::bundle::{Bundle, Crs, GridInfo, PYRAMID_FORMAT};
 use relevo_core::geo::TerrainFrame;
 use relevo_core::grid::vertex_normal_of;
 use relevo_core::lp::export::{MeshSource, Surface};
@@ -110,12 +110,7 @@ pub fn quantized_mesh(a: &Request) -> Result<Summary> {
         let pyramid = Pyramid::open(a.bundle)?;
         let source = PyramidMesh::new(&pyramid)?;
         let m = &pyramid.manifest;
-        let parts = ManifestParts {
-            crs_wkt: m.crs.wkt.clone(),
-            region: m.region.clone(),
-            valid_extent: m.grid.valid_extent,
-            height_range_m: m.grid.height_range_m.map(f64::from),
-        };
+        let parts = ManifestParts::of(&m.crs, &m.region, &m.grid);
         return export(a, &source, &parts, start).with_context(|| name.clone());
     }
     let bundle = Bundle::open(a.bundle)?;
@@ -128,12 +123,7 @@ pub fn quantized_mesh(a: &Request) -> Result<Summary> {
         drape: None,
     };
     let m = &bundle.manifest;
-    let parts = ManifestParts {
-        crs_wkt: m.crs.wkt.clone(),
-        region: m.region.clone(),
-        valid_extent: m.grid.valid_extent,
-        height_range_m: m.grid.height_range_m.map(f64::from),
-    };
+    let parts = ManifestParts::of(&m.crs, &m.region, &m.grid);
     export(a, &surface, &parts, start).with_context(|| name.clone())
 }
 
@@ -228,6 +218,19 @@ struct ManifestParts {
     height_range_m: [f64; 2],
 }
 
+impl ManifestParts {
+    /// The parts of a manifest's CRS, region name and grid (a single
+    /// grid's or a pyramid's level 0).
+    fn of(crs: &Crs, region: &str, grid: &GridInfo) -> ManifestParts {
+        ManifestParts {
+            crs_wkt: crs.wkt.clone(),
+            region: region.to_string(),
+            valid_extent: grid.valid_extent,
+            height_range_m: grid.height_range_m.map(f64::from),
+        }
+    }
+}
+
 /// The grid a tile's mesh is walked from.
 struct Grid<'a> {
     source: &'a dyn MeshSource,
@@ -290,7 +293,7 @@ impl TileSet {
         grid: &Grid,
         layer: &serde_json::Value,
     ) -> Result<(usize, u64, Vec<usize>)> {
-        let total: usize = self.ranges.iter().map(TileRange::len).sum();
+        let total: usize = self.ranges.iter().map(TileRange::tile_count).sum();
         let bar = progress::bar(total as u64, "tiles");
         let (mut tiles, mut bytes, mut level_triangles) = (0, 0u64, Vec::new());
         for (z, range) in self.ranges.iter().enumerate() {

@@ -27,11 +27,6 @@ pub struct SurfaceMesh {
 }
 
 impl SurfaceMesh {
-    /// `[west, south, east, north]` of its vertices, degrees.
-    pub fn bounds_deg(&self) -> [f64; 4] {
-        super::bounds_of(&self.lon_lat_deg)
-    }
-
     fn push(&mut self, lon_lat: [f64; 2], height_m: f64, normal: [f64; 3]) -> u32 {
         self.lon_lat_deg.push(lon_lat);
         self.height_m.push(height_m);

@@ -179,9 +179,9 @@ mod tests {
             normal: vec![[0.0, 0.0, 1.0]; 4],
             triangles: vec![[0, 1, 2], [0, 2, 3]],
         };
-        let range = TileRange::covering(10, mesh.bounds_deg());
+        let range = TileRange::covering(10, bounds_of(&mesh.lon_lat_deg));
         let patches: Vec<TilePatch> = range.tiles().map(|t| patch(&mesh, t)).collect();
-        assert_eq!(patches.len(), range.len());
+        assert_eq!(patches.len(), range.tile_count());
         for p in &patches {
             let [w, s, e, n] = p.tile.bounds_deg();
             let area: f64 = p
@@ -203,7 +203,7 @@ mod tests {
         assert!(patches
             .iter()
             .all(|p| water_mask(p, &outline) == WaterMask::Land));
-        let next = TileRange::covering(11, mesh.bounds_deg());
+        let next = TileRange::covering(11, bounds_of(&mesh.lon_lat_deg));
         let first = children_available(patches[0].tile, Some(&next));
         assert!(first[0][0]["startX"].as_u64().is_some());
         let far = TileId { z: 10, x: 0, y: 0 };

@@ -82,12 +82,9 @@ impl TileRange {
             .flat_map(move |y| (self.x[0]..=self.x[1]).map(move |x| TileId { z: self.z, x, y }))
     }
 
-    pub fn len(&self) -> usize {
+    /// The tiles it holds (at least one).
+    pub fn tile_count(&self) -> usize {
         (self.x[1] - self.x[0] + 1) as usize * (self.y[1] - self.y[0] + 1) as usize
-    }
-
-    pub fn is_empty(&self) -> bool {
-        false
     }
 }
 
@@ -128,10 +125,13 @@ mod tests {
             let [w, s, e, n] = t.bounds_deg();
             assert!(w < -34.85 && e > -34.95 && s < -7.95 && n > -8.05, "{t:?}");
         }
-        assert_eq!(r.len(), 3 * 4);
+        assert_eq!(r.tile_count(), 3 * 4);
         // A tile that only touches the range's edge is not in it.
-        assert_eq!(TileRange::covering(2, [-45.0, -45.0, 0.0, 0.0]).len(), 1);
-        assert_eq!(TileRange::covering(0, [1.0, 1.0, 2.0, 2.0]).len(), 2);
+        assert_eq!(
+            TileRange::covering(2, [-45.0, -45.0, 0.0, 0.0]).tile_count(),
+            1
+        );
+        assert_eq!(TileRange::covering(0, [1.0, 1.0, 2.0, 2.0]).tile_count(), 2);
         let child = TileId { z: 3, x: 5, y: 2 }.children()[3];
         assert_eq!(child, TileId { z: 4, x: 11, y: 5 });
     }
