@@ -52,7 +52,9 @@ fn run_together(commands: &[Vec<String>], stagger: Duration) -> Vec<Outcome> {
             let stderr = String::from_utf8_lossy(&out.stderr);
             if out.status.success() {
                 Outcome::Written
-            } else if stderr.contains("is being written by another command (pid ") {
+            } else if stderr.contains("is being written by another command (") {
+                // "(pid …)", or, in the instant before the holder records
+                // itself, "(its holder has not yet said who it is)".
                 Outcome::RefusedLocked
             } else if stderr.contains("already exists") || stderr.contains("appeared while") {
                 Outcome::RefusedExisting
