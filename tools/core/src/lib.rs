@@ -21,6 +21,9 @@
 //!   classification from samples, objects, the vegetation database.
 //! - [`cluster`]: vegetation clusters — impostors from models, the
 //!   quadtree with baked views, atlases, the cut chosen from a camera.
+//! - [`tiles3d`]: 3D Tiles 1.1 — terrain and instanced vegetation tiles,
+//!   `tileset.json`.
+//! - [`gltf`]: binary glTF containers, for meshes and 3D Tiles content.
 //! - [`zbuffer`]: the grid as geometry in the seven Z-buffer
 //!   representations the floating horizon is compared with.
 //! - [`bundle`]: the `NAME.relevo/` directory: manifest, artifacts, their checks.
@@ -35,6 +38,7 @@ pub mod camera;
 pub mod cluster;
 pub mod files;
 pub mod geo;
+pub mod gltf;
 pub mod golden;
 pub mod grid;
 pub mod horizon;
@@ -45,6 +49,7 @@ pub mod pyramid;
 pub mod raster;
 pub mod scene;
 pub mod terrain_tiles;
+pub mod tiles3d;
 pub mod validation;
 pub mod veg;
 pub mod zbuffer;

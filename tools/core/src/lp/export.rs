@@ -13,6 +13,7 @@ use super::metric::triangle_deviation;
 use super::vertices::terrain_position;
 use super::window::Rect;
 use crate::geo::{GeoTransform, TerrainFrame};
+use crate::gltf::{Glb, ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, FLOAT, UNSIGNED_INT};
 use crate::grid::vertex_normal_of;
 use crate::raster::png::encode_rgba;
 use crate::{Error, Result};
@@ -279,45 +280,29 @@ const RELEASE_CHUNK: usize = 1 << 16;
 
 /// glTF 2.0 binary container.
 pub fn to_glb(mesh: &ExportMesh, crs_wkt: &str) -> Result<Vec<u8>> {
-    let mut bin: Vec<u8> = Vec::new();
-    let mut views = Vec::new();
-    let mut add_view = |bin: &mut Vec<u8>, bytes: &[u8], target: Option<u32>| {
-        while !bin.len().is_multiple_of(4) {
-            bin.push(0);
-        }
-        let mut view = json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": bytes.len()});
-        if let Some(t) = target {
-            view["target"] = json!(t);
-        }
-        bin.extend_from_slice(bytes);
-        views.push(view);
-        views.len() - 1
-    };
-    let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
-    for p in &mesh.positions {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
-    let n = mesh.positions.len();
-    let position_view = add_view(&mut bin, bytemuck::cast_slice(&mesh.positions), Some(34962));
-    let normal_view = add_view(&mut bin, bytemuck::cast_slice(&mesh.normals), Some(34962));
-    let mut accessors = vec![
-        json!({"bufferView": position_view, "componentType": 5126, "count": n, "type": "VEC3", "min": lo, "max": hi}),
-        json!({"bufferView": normal_view, "componentType": 5126, "count": n, "type": "VEC3"}),
-    ];
-    let mut attributes = json!({"POSITION": 0, "NORMAL": 1});
+    let mut glb = Glb::default();
+    let mut attributes = json!({
+        "POSITION": glb.vec3(&mesh.positions, Some(ARRAY_BUFFER)),
+        "NORMAL": glb.vec3(&mesh.normals, Some(ARRAY_BUFFER)),
+    });
     if let Some(uvs) = &mesh.uvs {
-        let view = add_view(&mut bin, bytemuck::cast_slice(uvs), Some(34962));
-        accessors
-            .push(json!({"bufferView": view, "componentType": 5126, "count": n, "type": "VEC2"}));
-        attributes["TEXCOORD_0"] = json!(accessors.len() - 1);
+        attributes["TEXCOORD_0"] = json!(glb.accessor(
+            bytemuck::cast_slice(uvs),
+            Some(ARRAY_BUFFER),
+            FLOAT,
+            uvs.len(),
+            "VEC2",
+            json!({})
+        ));
     }
-    let index_view = add_view(&mut bin, bytemuck::cast_slice(&mesh.triangles), Some(34963));
-    accessors.push(json!({"bufferView": index_view, "componentType": 5125, "count": mesh.triangles.len() * 3, "type": "SCALAR"}));
-    let indices = accessors.len() - 1;
-
+    let indices = glb.accessor(
+        bytemuck::cast_slice(&mesh.triangles),
+        Some(ELEMENT_ARRAY_BUFFER),
+        UNSIGNED_INT,
+        mesh.triangles.len() * 3,
+        "SCALAR",
+        json!({}),
+    );
     let mut doc = json!({
         "asset": {"version": "2.0", "generator": concat!("relevo ", env!("CARGO_PKG_VERSION"))},
         "scene": 0,
@@ -329,37 +314,16 @@ pub fn to_glb(mesh: &ExportMesh, crs_wkt: &str) -> Result<Vec<u8>> {
         }],
         "meshes": [{"primitives": [{"attributes": attributes, "indices": indices, "mode": 4, "material": 0}]}],
         "materials": [{"pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 1.0}}],
-        "accessors": accessors,
     });
     if let Some(png) = &mesh.texture_png {
-        let view = add_view(&mut bin, png, None);
+        let view = glb.view(png, None);
         doc["images"] = json!([{"bufferView": view, "mimeType": "image/png"}]);
         doc["samplers"] =
             json!([{"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}]);
         doc["textures"] = json!([{"sampler": 0, "source": 0}]);
         doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = json!({"index": 0});
     }
-    while !bin.len().is_multiple_of(4) {
-        bin.push(0);
-    }
-    doc["bufferViews"] = json!(views);
-    doc["buffers"] = json!([{"byteLength": bin.len()}]);
-    let mut text = serde_json::to_vec(&doc).map_err(|e| Error::Input(e.to_string()))?;
-    while text.len() % 4 != 0 {
-        text.push(b' ');
-    }
-    let total = 12 + 8 + text.len() + 8 + bin.len();
-    let mut out = Vec::with_capacity(total);
-    out.extend_from_slice(b"glTF");
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&(total as u32).to_le_bytes());
-    out.extend_from_slice(&(text.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(&text);
-    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"BIN\0");
-    out.extend_from_slice(&bin);
-    Ok(out)
+    glb.finish(doc)
 }
 
 /// Wavefront OBJ text; `material` names the .mtl beside it when textured.
