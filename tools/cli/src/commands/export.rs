@@ -17,14 +17,29 @@ pub enum ExportCommand {
 
 Serve the folder over HTTP and point a client at it, e.g. CesiumJS:
   CesiumTerrainProvider.fromUrl(\"http://localhost:8000/olinda-terrain\")")]
-    QuantizedMesh(QuantizedMeshArgs),
+    QuantizedMesh(TilesArgs),
+    /// 3D Tiles 1.1: the terrain as glb tiles with the drape (JPEG), each
+    /// level's triangles chosen by the LP errors as for quantized-mesh, and
+    /// the vegetation as instanced glb tiles (`EXT_mesh_gpu_instancing`, a
+    /// mesh per class, each object's id, class and score as metadata).
+    #[command(
+        name = "3dtiles",
+        after_help = "Examples:
+  relevo export 3dtiles olinda.relevo --out olinda-3dtiles
+  relevo export 3dtiles alps.relevo --vertical egm2008 --out alps-3dtiles --force
+
+Writes tileset.json (both), terrain/tileset.json and vegetation/tileset.json;
+serve the folder over HTTP and load any of them, e.g. CesiumJS:
+  Cesium3DTileset.fromUrl(\"http://localhost:8000/olinda-3dtiles/tileset.json\")"
+    )]
+    Tiles3d(TilesArgs),
 }
 
 #[derive(clap::Args, Debug)]
-pub struct QuantizedMeshArgs {
+pub struct TilesArgs {
     /// The bundle (single grid or pyramid).
     pub bundle: PathBuf,
-    /// The folder to write (layer.json and one folder per level).
+    /// The folder to write.
     #[arg(long)]
     pub out: PathBuf,
     /// The finest level (default: the first whose 64 samples a tile are no
@@ -46,21 +61,24 @@ pub struct QuantizedMeshArgs {
 }
 
 pub fn run(command: ExportCommand) -> Result<()> {
-    match command {
-        ExportCommand::QuantizedMesh(a) => {
-            let summary = terrain_export::quantized_mesh(&terrain_export::Request {
-                bundle: &a.bundle,
-                out: &a.out,
-                max_zoom: a.max_zoom,
-                vertical: a.vertical,
-                force: a.force,
-            })?;
-            if a.json {
-                println!("{}", serde_json::to_string_pretty(&summary)?);
-            } else {
-                println!("{}", summary.line());
-            }
-            Ok(())
+    let (ExportCommand::QuantizedMesh(a) | ExportCommand::Tiles3d(a)) = &command;
+    let request = terrain_export::Request {
+        bundle: &a.bundle,
+        out: &a.out,
+        max_zoom: a.max_zoom,
+        vertical: a.vertical,
+        force: a.force,
+    };
+    let (json, line) = match &command {
+        ExportCommand::QuantizedMesh(_) => {
+            let summary = terrain_export::quantized_mesh::export(&request)?;
+            (serde_json::to_string_pretty(&summary)?, summary.line())
         }
-    }
+        ExportCommand::Tiles3d(_) => {
+            let summary = terrain_export::tiles3d::export(&request)?;
+            (serde_json::to_string_pretty(&summary)?, summary.line())
+        }
+    };
+    println!("{}", if a.json { json } else { line });
+    Ok(())
 }

@@ -244,19 +244,44 @@ fn rasterize(
 
 /// Run the Khronos validator (installed by scripts/setup-test) on a .glb.
 pub fn khronos_validate(path: &Path) -> serde_json::Value {
+    khronos_validate_all(&[path.to_path_buf()]).remove(0)
+}
+
+/// Run the Khronos validator on .glb files, in one process: each file's
+/// report, asserting none has errors.
+pub fn khronos_validate_all(paths: &[PathBuf]) -> Vec<serde_json::Value> {
     let script = repo("tools/js/validate-gltf.mjs");
     let out = Command::new("node")
         .arg(script)
-        .arg(path)
+        .args(paths)
         .output()
         .expect("node is installed by scripts/setup-test");
-    let report: serde_json::Value = serde_json::from_slice(&out.stdout)
-        .unwrap_or_else(|_| panic!("validator output: {}", String::from_utf8_lossy(&out.stderr)));
+    let reports: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|line| {
+            serde_json::from_str(line).unwrap_or_else(|_| {
+                panic!(
+                    "validator output: {line}\n{}",
+                    String::from_utf8_lossy(&out.stderr)
+                )
+            })
+        })
+        .collect();
+    assert_eq!(
+        reports.len(),
+        paths.len(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(
         out.status.success(),
-        "glTF validator found errors: {report}"
+        "glTF validator found errors: {:?}",
+        reports
+            .iter()
+            .filter(|r| r["numErrors"] != 0)
+            .collect::<Vec<_>>()
     );
-    report
+    reports
 }
 
 /// The real Grenoble DEM (Copernicus GLO-30, geographic).
@@ -344,25 +369,7 @@ pub fn grid_points_on_the_ellipsoid(bundle: &Path, step: usize) -> Vec<[f64; 3]>
     }
     let wkt = bundle.with_extension("wkt");
     std::fs::write(&wkt, manifest["crs"]["wkt"].as_str().unwrap()).unwrap();
-    let run = |args: &[&str], text: &str| -> String {
-        use std::io::Write;
-        let mut child = Command::new("gdaltransform")
-            .args(args)
-            .stdin(std::process::Stdio::piped())
-            .stdout(std::process::Stdio::piped())
-            .spawn()
-            .expect("gdal-bin is installed");
-        child
-            .stdin
-            .take()
-            .unwrap()
-            .write_all(text.as_bytes())
-            .unwrap();
-        let out = child.wait_with_output().unwrap();
-        assert!(out.status.success());
-        String::from_utf8(out.stdout).unwrap()
-    };
-    let geographic = run(
+    let geographic = gdaltransform(
         &[
             "-s_srs",
             wkt.to_str().unwrap(),
@@ -372,7 +379,7 @@ pub fn grid_points_on_the_ellipsoid(bundle: &Path, step: usize) -> Vec<[f64; 3]>
         &input,
     );
     // gdaltransform keeps longitude first for geographic CRSs.
-    let ellipsoidal = run(
+    let ellipsoidal = gdaltransform(
         &["-s_srs", "EPSG:4326+5773", "-t_srs", "EPSG:4979"],
         &geographic,
     );
@@ -383,4 +390,25 @@ pub fn grid_points_on_the_ellipsoid(bundle: &Path, step: usize) -> Vec<[f64; 3]>
             [v[0], v[1], v[2]]
         })
         .collect()
+}
+
+/// `gdaltransform ARGS` (PROJ's transforms from the command line) on the
+/// points of `input`, one `x y [z]` a line: its output lines.
+pub fn gdaltransform(args: &[&str], input: &str) -> String {
+    use std::io::Write;
+    let mut child = Command::new("gdaltransform")
+        .args(args)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("gdal-bin is installed");
+    // Written from another thread: the output fills its pipe while a long
+    // input is still being written.
+    let mut stdin = child.stdin.take().unwrap();
+    let input = input.to_string();
+    let writer = std::thread::spawn(move || stdin.write_all(input.as_bytes()).unwrap());
+    let out = child.wait_with_output().unwrap();
+    writer.join().unwrap();
+    assert!(out.status.success());
+    String::from_utf8(out.stdout).unwrap()
 }

@@ -28,10 +28,15 @@ const JPEG_QUALITY: u8 = 85;
 
 /// Texture size for a tile spanning `bounds_deg`, when the drape's pixels
 /// are `drape_pixel_deg` wide: as many texels as the drape has pixels across
-/// the tile, from 16 to [`MAX_TEXTURE_SIDE`] a side.
+/// the tile, rounded up to a power of two (which WebGL 1 clients need to
+/// mipmap), from 16 to [`MAX_TEXTURE_SIDE`] a side.
 pub fn texture_size(bounds_deg: [f64; 4], drape_pixel_deg: f64) -> (usize, usize) {
     let [w, s, e, n] = bounds_deg;
-    let side = |span: f64| ((span / drape_pixel_deg).ceil() as usize).clamp(16, MAX_TEXTURE_SIDE);
+    let side = |span: f64| {
+        ((span / drape_pixel_deg).ceil() as usize)
+            .next_power_of_two()
+            .clamp(16, MAX_TEXTURE_SIDE)
+    };
     (side(e - w), side(n - s))
 }
 
@@ -246,6 +251,7 @@ mod tests {
         let centres = texel_centres([0.0, 0.0, 2.0, 1.0], 2, 1);
         assert_eq!(centres, [[0.5, 0.5], [1.5, 0.5]]);
         assert_eq!(texture_size([0.0, 0.0, 1.0, 0.01], 0.001), (256, 16));
+        assert_eq!(texture_size([0.0, 0.0, 0.1, 0.04], 0.001), (128, 64));
         let jpeg = encode_jpeg(&[128; 16 * 16 * 3], 16, 16).unwrap();
         assert_eq!(&jpeg[..2], &[0xFF, 0xD8]);
     }

@@ -119,7 +119,7 @@ pub struct VegTile {
 }
 
 impl VegTile {
-    /// The content's path: `vegetation/{depth}/{x}/{y}.glb`.
+    /// The content's path: `{depth}/{x}/{y}.glb`.
     pub fn path(&self) -> String {
         format!("{}/{}/{}.glb", self.depth, self.x, self.y)
     }
@@ -194,17 +194,12 @@ pub fn region_of(objects: &[Instance]) -> Region {
     })
 }
 
-/// The tile tree of `root` for `tileset.json`, contents under `folder`.
-pub fn tiles(root: &VegTile, folder: &str) -> Tile {
-    let children = root.children.iter().map(|c| tiles(c, folder)).collect();
+/// The tile tree of `root` for `tileset.json`.
+pub fn tiles(root: &VegTile) -> Tile {
+    let children = root.children.iter().map(tiles).collect();
     Tile::over(
         format!("{}/{}/{}", root.depth, root.x, root.y),
-        (!root.objects.is_empty()).then(|| {
-            (
-                format!("{folder}/{}", root.path()),
-                region_of(&root.objects),
-            )
-        }),
+        (!root.objects.is_empty()).then(|| (root.path(), region_of(&root.objects))),
         root.geometric_error_m,
         children,
     )
@@ -452,8 +447,8 @@ mod tests {
         walk(&root, &mut ids, f32::MAX);
         ids.sort_unstable();
         assert_eq!(ids, (0..1000).collect::<Vec<_>>());
-        let tree = tiles(&root, "vegetation");
-        assert_eq!(tree.content.as_deref(), Some("vegetation/0/0/0.glb"));
+        let tree = tiles(&root);
+        assert_eq!(tree.content.as_deref(), Some("0/0/0.glb"));
         let r = tree.region;
         assert!(r.west_rad < 0.0 && r.min_height_m == 10.0);
         assert!((r.max_height_m - (10.0 + 7.0 * 0.8)).abs() < 1e-5, "{r:?}");

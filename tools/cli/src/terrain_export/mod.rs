@@ -1,9 +1,15 @@
-//! `relevo export quantized-mesh`, tile by tile: the window of the tile's
-//! level's LP mesh that meets it, its vertices taken to the ellipsoid
-//! through PROJ (the bundle's CRS to longitude and latitude, the geoid's
-//! heights to ellipsoidal ones), cut and encoded by
+//! `relevo export quantized-mesh` and `relevo export 3dtiles`, tile by
+//! tile: the window of the tile's level's LP mesh that meets it, its
+//! vertices taken to the ellipsoid through PROJ (the bundle's CRS to
+//! longitude and latitude, the geoid's heights to ellipsoidal ones), cut by
 //! `relevo_core::terrain_tiles`; the tiles written into a staging folder
 //! that replaces the output only when complete.
+//!
+//! - [`quantized_mesh`]: Cesium's terrain format.
+//! - [`tiles3d`]: 3D Tiles 1.1 with the drape and the vegetation.
+
+pub mod quantized_mesh;
+pub mod tiles3d;
 
 use crate::ingest::crs;
 use crate::progress;
@@ -13,23 +19,19 @@ use rayon::prelude::*;
 use relevo_core::bundle::{Bundle, Crs, GridInfo, PYRAMID_FORMAT};
 use relevo_core::geo::TerrainFrame;
 use relevo_core::grid::vertex_normal_of;
-use relevo_core::lp::export::{MeshSource, Surface};
-use relevo_core::lp::extract::{mask_boundaries, walk, GridMesh, MeshWalk, VertexBits};
+use relevo_core::lp::export::{DrapeImage, MeshSource, Surface};
+use relevo_core::lp::extract::{walk, GridMesh, MeshWalk, VertexBits};
 use relevo_core::lp::window::Rect;
 use relevo_core::pyramid::mesh::PyramidMesh;
 use relevo_core::pyramid::Pyramid;
+use relevo_core::terrain_tiles::bounds_of;
 use relevo_core::terrain_tiles::clip::SurfaceMesh;
 use relevo_core::terrain_tiles::ellipsoid::east_north_up;
-use relevo_core::terrain_tiles::quantized_mesh::{encode, TileExtras};
 use relevo_core::terrain_tiles::tiling::{
     level_for_resolution, level_geometric_error_m, TileId, TileRange,
 };
-use relevo_core::terrain_tiles::{
-    available_json, bounds_of, children_available, patch, water_mask,
-};
-use serde::Serialize;
+use std::borrow::Cow;
 use std::path::Path;
-use std::time::Instant;
 
 /// The surface the bundle's heights are measured from.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -52,35 +54,6 @@ impl VerticalDatum {
     }
 }
 
-/// What an export wrote.
-#[derive(Debug, Serialize)]
-pub struct Summary {
-    pub out: String,
-    pub max_zoom: u32,
-    pub tiles: usize,
-    pub bytes: u64,
-    /// Each level's triangles with data, as its tiles hold them (cut
-    /// where they cross tile lines), level 0 first.
-    pub level_triangles: Vec<usize>,
-    /// What the heights are measured from, as written.
-    pub heights: String,
-    pub seconds: f64,
-}
-
-impl Summary {
-    pub fn line(&self) -> String {
-        format!(
-            "{}: levels 0–{}, {} tiles, {:.1} MB; {}; {:.1} s",
-            self.out,
-            self.max_zoom,
-            self.tiles,
-            self.bytes as f64 / 1e6,
-            self.heights,
-            self.seconds
-        )
-    }
-}
-
 /// What to export, and how.
 pub struct Request<'a> {
     /// The bundle (single grid or pyramid).
@@ -93,119 +66,6 @@ pub struct Request<'a> {
     pub vertical: VerticalDatum,
     /// Replace an earlier export.
     pub force: bool,
-}
-
-/// Export `a.bundle` as quantized-mesh tiles into `a.out`.
-pub fn quantized_mesh(a: &Request) -> Result<Summary> {
-    crate::output::check(&[a.out], a.force)?;
-    if a.out.exists() && !a.out.join("layer.json").is_file() {
-        bail!(
-            "{}: exists and holds no layer.json; refusing to replace it, even with --force",
-            a.out.display()
-        );
-    }
-    let start = Instant::now();
-    let name = a.bundle.display().to_string();
-    if relevo_core::bundle::format_of(a.bundle).as_deref() == Some(PYRAMID_FORMAT) {
-        let pyramid = Pyramid::open(a.bundle)?;
-        let source = PyramidMesh::new(&pyramid)?;
-        let m = &pyramid.manifest;
-        let parts = ManifestParts::of(&m.crs, &m.region, &m.grid);
-        return export(a, &source, &parts, start).with_context(|| name.clone());
-    }
-    let bundle = Bundle::open(a.bundle)?;
-    let (heights, mask, lp) = (bundle.heights()?, bundle.mask()?, bundle.lp()?);
-    let surface = Surface {
-        frame: bundle.frame(),
-        heights: &heights,
-        mask: &mask,
-        hierarchy: lp.hierarchy(),
-        drape: None,
-    };
-    let m = &bundle.manifest;
-    let parts = ManifestParts::of(&m.crs, &m.region, &m.grid);
-    export(a, &surface, &parts, start).with_context(|| name.clone())
-}
-
-fn export(
-    a: &Request,
-    source: &dyn MeshSource,
-    manifest: &ManifestParts,
-    start: Instant,
-) -> Result<Summary> {
-    if manifest.crs_wkt.trim().is_empty() {
-        bail!("the bundle has no coordinate reference system, so its tiles cannot be placed on the Earth");
-    }
-    let frame = source.frame();
-    let to_earth = ToEllipsoid::new(&manifest.crs_wkt, a.vertical)?;
-    let max_zoom = match a.max_zoom {
-        Some(z) if z > 24 => bail!("--max-zoom {z}: at most 24"),
-        Some(z) => z,
-        None => level_for_resolution(to_earth.cell_deg(&frame)?),
-    };
-    let last = (frame.side - 1) as f64;
-    let grid_box = bounds_of(&to_earth.outline(&frame, [[0.0, 0.0], [last, last]])?);
-    let data_outline = to_earth.outline_of_extent(manifest.valid_extent)?;
-    let bounds = bounds_of(&data_outline);
-    let (geoid_m, heights_note) = to_earth.geoid_range(bounds)?;
-    let tiles = TileSet {
-        ranges: (0..=max_zoom)
-            .map(|z| TileRange::covering(z, bounds))
-            .collect(),
-        // One quantization of heights for every tile, so that shared
-        // vertices decode alike: the bundle's heights, moved by the
-        // geoid's range over the region (with a margin for between its
-        // samples), and 0, where the fill lies.
-        height_range_m: {
-            let [lo, hi] = manifest.height_range_m;
-            let margin = 1.0 + 0.2 * (geoid_m[1] - geoid_m[0]);
-            [
-                (lo + geoid_m[0] - margin).min(0.0),
-                (hi + geoid_m[1] + margin).max(0.0),
-            ]
-        },
-        outline: data_outline,
-    };
-    let layer = serde_json::json!({
-        "tilejson": "2.1.0",
-        "name": manifest.region,
-        "description": format!("Relevo {}: {heights_note}", env!("CARGO_PKG_VERSION")),
-        "version": "1.0.0",
-        "format": "quantized-mesh-1.0",
-        "scheme": "tms",
-        "tiles": ["{z}/{x}/{y}.terrain?v={version}"],
-        "projection": "EPSG:4326",
-        "bounds": bounds,
-        "minzoom": 0,
-        "maxzoom": max_zoom,
-        "available": available_json(&tiles.ranges),
-        // Clients that read availability from the tiles: each tile lists
-        // its children (CesiumJS reads the metadata extension only so).
-        "metadataAvailability": 1,
-        "extensions": ["octvertexnormals", "watermask", "metadata"],
-    });
-    // The mask's boundaries, once for every tile's walk.
-    let boundaries = mask_boundaries(frame.side, &|i| source.has_data(i));
-    let grid = Grid {
-        source,
-        frame,
-        boundaries: &boundaries,
-        grid_box,
-        crs_wkt: &manifest.crs_wkt,
-        vertical: a.vertical,
-        max_zoom,
-    };
-    let (count, bytes, level_triangles) =
-        write_folder(a.out, |staging| tiles.write(staging, &grid, &layer))?;
-    Ok(Summary {
-        out: a.out.display().to_string(),
-        max_zoom,
-        tiles: count,
-        bytes,
-        level_triangles,
-        heights: heights_note,
-        seconds: start.elapsed().as_secs_f64(),
-    })
 }
 
 /// What an export reads of a bundle's or a pyramid's manifest.
@@ -231,6 +91,163 @@ impl ManifestParts {
     }
 }
 
+/// Run `export` on the bundle at `path` — a single grid, with its drape
+/// (and the bundle itself, for what only single grids hold), or a pyramid
+/// read tile by tile — its errors named with the path.
+fn with_source<T>(
+    path: &Path,
+    export: impl FnOnce(&dyn MeshSource, &ManifestParts, Option<&Bundle>) -> Result<T>,
+) -> Result<T> {
+    let name = path.display().to_string();
+    if relevo_core::bundle::format_of(path).as_deref() == Some(PYRAMID_FORMAT) {
+        let pyramid = Pyramid::open(path)?;
+        let source = PyramidMesh::new(&pyramid)?;
+        let m = &pyramid.manifest;
+        let parts = ManifestParts::of(&m.crs, &m.region, &m.grid);
+        return export(&source, &parts, None).with_context(|| name.clone());
+    }
+    let bundle = Bundle::open(path)?;
+    let (heights, mask, lp) = (bundle.heights()?, bundle.mask()?, bundle.lp()?);
+    let drape = bundle.drape()?;
+    let surface = Surface {
+        frame: bundle.frame(),
+        heights: &heights,
+        mask: &mask,
+        hierarchy: lp.hierarchy(),
+        drape: drape.as_ref().map(|d| DrapeImage {
+            rgba: Cow::Borrowed(&d.rgba),
+            width: d.info.width,
+            height: d.info.height,
+            geotransform: d.info.geotransform,
+        }),
+    };
+    let m = &bundle.manifest;
+    let parts = ManifestParts::of(&m.crs, &m.region, &m.grid);
+    export(&surface, &parts, Some(&bundle)).with_context(|| name.clone())
+}
+
+/// Where a region lies on the Earth, as both exports need it.
+struct Placement {
+    to_earth: ToEllipsoid,
+    /// The finest level written.
+    max_zoom: u32,
+    /// The grid's square, and its data's extent, degrees.
+    grid_box: [f64; 4],
+    outline: Vec<[f64; 2]>,
+    /// `[west, south, east, north]` of the outline.
+    bounds: [f64; 4],
+    /// The geoid's lowest and highest height above the ellipsoid over the
+    /// region, metres, and what the heights written are measured from.
+    geoid_m: [f64; 2],
+    heights_note: String,
+}
+
+impl Placement {
+    fn of(a: &Request, frame: &TerrainFrame, manifest: &ManifestParts) -> Result<Placement> {
+        if manifest.crs_wkt.trim().is_empty() {
+            bail!("the bundle has no coordinate reference system, so its tiles cannot be placed on the Earth");
+        }
+        let to_earth = ToEllipsoid::new(&manifest.crs_wkt, a.vertical)?;
+        let max_zoom = match a.max_zoom {
+            Some(z) if z > 24 => bail!("--max-zoom {z}: at most 24"),
+            Some(z) => z,
+            None => level_for_resolution(to_earth.cell_deg(frame)?),
+        };
+        let last = (frame.side - 1) as f64;
+        let grid_box = bounds_of(&to_earth.outline(frame, [[0.0, 0.0], [last, last]])?);
+        let outline = to_earth.outline_of_extent(manifest.valid_extent)?;
+        let bounds = bounds_of(&outline);
+        let (geoid_m, heights_note) = to_earth.geoid_range(bounds)?;
+        Ok(Placement {
+            to_earth,
+            max_zoom,
+            grid_box,
+            outline,
+            bounds,
+            geoid_m,
+            heights_note,
+        })
+    }
+
+    /// The grid tiles are walked from.
+    fn grid<'a>(
+        &self,
+        a: &Request,
+        source: &'a dyn MeshSource,
+        manifest: &'a ManifestParts,
+        boundaries: &'a VertexBits,
+    ) -> Grid<'a> {
+        Grid {
+            source,
+            frame: source.frame(),
+            boundaries,
+            grid_box: self.grid_box,
+            crs_wkt: &manifest.crs_wkt,
+            vertical: a.vertical,
+            max_zoom: self.max_zoom,
+        }
+    }
+}
+
+/// Refuse to replace `out` unless it is an earlier export (holding
+/// `marker`) and `--force` is given.
+fn check_out(a: &Request, marker: &str) -> Result<()> {
+    crate::output::check(&[a.out], a.force)?;
+    if a.out.exists() && !a.out.join(marker).is_file() {
+        bail!(
+            "{}: exists and holds no {marker}; refusing to replace it, even with --force",
+            a.out.display()
+        );
+    }
+    Ok(())
+}
+
+/// Tiles made before they are written.
+const TILES_A_BATCH: usize = 256;
+
+/// Make every tile of `ranges` with `make` — in parallel, a batch at a
+/// time so that a level of any size holds only that many made tiles, each
+/// worker with its own PROJ transforms — and hand each to `take`, level by
+/// level, in the ranges' order.
+fn for_each_tile<T: Send>(
+    ranges: &[TileRange],
+    grid: &Grid,
+    make: impl Fn(&ToEllipsoid, TileId) -> Result<T> + Sync,
+    mut take: impl FnMut(TileId, T) -> Result<()>,
+) -> Result<()> {
+    let total: usize = ranges.iter().map(TileRange::tile_count).sum();
+    let bar = progress::bar(total as u64, "tiles");
+    for range in ranges {
+        let ids: Vec<TileId> = range.tiles().collect();
+        for batch in ids.chunks(TILES_A_BATCH) {
+            let made: Vec<Result<T>> = batch
+                .par_iter()
+                .map(|&tile| {
+                    let result = with_transforms(grid.crs_wkt, grid.vertical, |to_earth| {
+                        make(to_earth, tile)
+                    });
+                    bar.inc(1);
+                    result
+                })
+                .collect();
+            for (&tile, result) in batch.iter().zip(made) {
+                take(tile, result?)?;
+            }
+        }
+    }
+    bar.finish_and_clear();
+    Ok(())
+}
+
+/// Write `bytes` to `folder/relative`, making its folders.
+fn write_file(folder: &Path, relative: &str, bytes: &[u8]) -> Result<()> {
+    let path = folder.join(relative);
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot write", dir.display()))?;
+    }
+    std::fs::write(&path, bytes).with_context(|| format!("{}: cannot write", path.display()))
+}
+
 /// The grid a tile's mesh is walked from.
 struct Grid<'a> {
     source: &'a dyn MeshSource,
@@ -249,17 +266,12 @@ impl Grid<'_> {
     /// level) that meet the tile, read by a window walk — exactly the
     /// whole level's triangles there, so neighbours cut the same mesh.
     fn tile_mesh(&self, to_earth: &ToEllipsoid, tile: TileId) -> Result<SurfaceMesh> {
-        let Some(window) = to_earth.window(tile.bounds_deg(), self.grid_box, &self.frame)? else {
+        let Some(window) = self.window(to_earth, tile)? else {
             return Ok(SurfaceMesh::default());
-        };
-        let max_error = if tile.z == self.max_zoom {
-            0.0
-        } else {
-            level_geometric_error_m(tile.z) as f32
         };
         let mesh = walk(&MeshWalk {
             side: self.frame.side,
-            max_error,
+            max_error: self.max_error(tile),
             error: &|i| self.source.error(i),
             has_data: Some(&|i| self.source.has_data(i)),
             boundaries: Some(self.boundaries),
@@ -269,74 +281,20 @@ impl Grid<'_> {
         .unwrap_or_default();
         to_earth.surface(self.source, &self.frame, &mesh)
     }
-}
 
-/// Tiles encoded before they are written.
-const TILES_A_BATCH: usize = 256;
+    /// The vertices a walk for `tile` reads; `None` off the grid.
+    fn window(&self, to_earth: &ToEllipsoid, tile: TileId) -> Result<Option<Rect>> {
+        to_earth.window(tile.bounds_deg(), self.grid_box, &self.frame)
+    }
 
-/// What every tile of an export shares.
-struct TileSet {
-    /// Each level's available tiles, level 0 first.
-    ranges: Vec<TileRange>,
-    height_range_m: [f64; 2],
-    /// The grid's data extent, degrees (water where it holds no data).
-    outline: Vec<[f64; 2]>,
-}
-
-impl TileSet {
-    /// Write each level's tiles, cut from `grid` (tiles in parallel, each
-    /// worker with its own PROJ transforms), and `layer.json` into
-    /// `folder`: the tiles and bytes written, and each level's triangles.
-    fn write(
-        &self,
-        folder: &Path,
-        grid: &Grid,
-        layer: &serde_json::Value,
-    ) -> Result<(usize, u64, Vec<usize>)> {
-        let total: usize = self.ranges.iter().map(TileRange::tile_count).sum();
-        let bar = progress::bar(total as u64, "tiles");
-        let (mut tiles, mut bytes, mut level_triangles) = (0, 0u64, Vec::new());
-        for (z, range) in self.ranges.iter().enumerate() {
-            let ids: Vec<TileId> = range.tiles().collect();
-            let mut triangles = 0;
-            // A batch of tiles at a time, so that a level of any size holds
-            // only that many encoded tiles before they are written.
-            for batch in ids.chunks(TILES_A_BATCH) {
-                let encoded: Vec<Result<(TileId, Vec<u8>, usize)>> = batch
-                    .par_iter()
-                    .map(|&tile| {
-                        with_transforms(grid.crs_wkt, grid.vertical, |to_earth| {
-                            let patch = patch(&grid.tile_mesh(to_earth, tile)?, tile);
-                            let children = children_available(tile, self.ranges.get(z + 1));
-                            let extras = TileExtras {
-                                height_range_m: self.height_range_m,
-                                water: water_mask(&patch, &self.outline),
-                                children_available: &children,
-                            };
-                            bar.inc(1);
-                            Ok((tile, encode(tile, &patch.mesh, &extras), patch.covered))
-                        })
-                    })
-                    .collect();
-                for result in encoded {
-                    let (tile, data, covered) = result?;
-                    let dir = folder.join(format!("{z}/{}", tile.x));
-                    std::fs::create_dir_all(&dir)
-                        .with_context(|| format!("{}: cannot write", dir.display()))?;
-                    let path = dir.join(format!("{}.terrain", tile.y));
-                    std::fs::write(&path, &data)
-                        .with_context(|| format!("{}: cannot write", path.display()))?;
-                    tiles += 1;
-                    bytes += data.len() as u64;
-                    triangles += covered;
-                }
-            }
-            level_triangles.push(triangles);
+    /// The LP tolerance of `tile`'s level, metres: the level's geometric
+    /// error, 0 (every vertex) on the last level.
+    fn max_error(&self, tile: TileId) -> f32 {
+        if tile.z == self.max_zoom {
+            0.0
+        } else {
+            level_geometric_error_m(tile.z) as f32
         }
-        bar.finish_and_clear();
-        let text = serde_json::to_string_pretty(layer)?;
-        std::fs::write(folder.join("layer.json"), &text)?;
-        Ok((tiles, bytes + text.len() as u64, level_triangles))
     }
 }
 
@@ -555,6 +513,32 @@ impl ToEllipsoid {
         }))
     }
 
+    /// Points of the bundle's CRS with heights as the bundle holds them on
+    /// the ellipsoid: longitude, latitude (degrees), height above it
+    /// (metres).
+    fn to_ellipsoid(&self, world: &[[f64; 3]]) -> Result<Vec<[f64; 3]>> {
+        let mut xs: Vec<f64> = world.iter().map(|p| p[0]).collect();
+        let mut ys: Vec<f64> = world.iter().map(|p| p[1]).collect();
+        let mut zs: Vec<f64> = world.iter().map(|p| p[2]).collect();
+        let mut flat = vec![0.0; world.len()];
+        self.horizontal
+            .transform_coords(&mut xs, &mut ys, &mut flat)?;
+        if let Some((t, _)) = &self.vertical {
+            let (mut lon, mut lat) = (xs.clone(), ys.clone());
+            t.transform_coords(&mut lon, &mut lat, &mut zs)?;
+        }
+        Ok((0..world.len()).map(|i| [xs[i], ys[i], zs[i]]).collect())
+    }
+
+    /// Longitudes and latitudes (degrees) in the bundle's CRS.
+    fn to_world(&self, lon_lat_deg: &[[f64; 2]]) -> Result<Vec<[f64; 2]>> {
+        let (mut xs, mut ys): (Vec<f64>, Vec<f64>) =
+            lon_lat_deg.iter().map(|p| (p[0], p[1])).unzip();
+        let mut zs = vec![0.0; xs.len()];
+        self.inverse.transform_coords(&mut xs, &mut ys, &mut zs)?;
+        Ok(xs.into_iter().zip(ys).map(|(x, y)| [x, y]).collect())
+    }
+
     /// `mesh` on the ellipsoid: its vertices through PROJ, normals from the
     /// grid in each vertex's east/north/up frame, triangles turned
     /// counter-clockwise in longitude and latitude.
@@ -564,28 +548,21 @@ impl ToEllipsoid {
         frame: &TerrainFrame,
         mesh: &GridMesh,
     ) -> Result<SurfaceMesh> {
-        let n = mesh.vertices.len();
-        let (mut xs, mut ys) = (Vec::with_capacity(n), Vec::with_capacity(n));
-        let mut zs: Vec<f64> = Vec::with_capacity(n);
-        for &[c, r] in &mesh.vertices {
-            let (x, y) = frame.world_from_vertex(c as f64, r as f64);
-            xs.push(x);
-            ys.push(y);
-            zs.push(source.height(c as usize, r as usize) as f64);
-        }
-        let mut flat = vec![0.0; n];
-        self.horizontal
-            .transform_coords(&mut xs, &mut ys, &mut flat)?;
-        if let Some((t, _)) = &self.vertical {
-            let (mut lon, mut lat) = (xs.clone(), ys.clone());
-            t.transform_coords(&mut lon, &mut lat, &mut zs)?;
-        }
+        let world: Vec<[f64; 3]> = mesh
+            .vertices
+            .iter()
+            .map(|&[c, r]| {
+                let (x, y) = frame.world_from_vertex(c as f64, r as f64);
+                [x, y, source.height(c as usize, r as usize) as f64]
+            })
+            .collect();
+        let on_earth = self.to_ellipsoid(&world)?;
         let cell = frame.cell_size_m;
         let normal = mesh
             .vertices
             .iter()
-            .zip(xs.iter().zip(&ys))
-            .map(|(&[c, r], (&lon, &lat))| {
+            .zip(&on_earth)
+            .map(|(&[c, r], &[lon, lat, _])| {
                 let local = vertex_normal_of(
                     &|c, r| source.height(c, r),
                     frame.side,
@@ -598,8 +575,8 @@ impl ToEllipsoid {
             })
             .collect();
         let mut out = SurfaceMesh {
-            lon_lat_deg: xs.iter().zip(&ys).map(|(&x, &y)| [x, y]).collect(),
-            height_m: zs,
+            lon_lat_deg: on_earth.iter().map(|p| [p[0], p[1]]).collect(),
+            height_m: on_earth.iter().map(|p| p[2]).collect(),
             normal,
             triangles: Vec::with_capacity(mesh.triangles.len()),
         };
