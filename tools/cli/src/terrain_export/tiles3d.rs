@@ -19,7 +19,7 @@ use relevo_core::bundle::Bundle;
 use relevo_core::cluster::store;
 use relevo_core::lp::export::MeshSource;
 use relevo_core::lp::extract::mask_boundaries;
-use relevo_core::terrain_tiles::tiling::{level_geometric_error_m, TileId, TileRange};
+use relevo_core::terrain_tiles::tiling::{TileId, TileRange};
 use relevo_core::terrain_tiles::{bounds_of, patch};
 use relevo_core::tiles3d::terrain::{self, TileTexture};
 use relevo_core::tiles3d::tileset::{self, Refine, Tile};
@@ -101,6 +101,14 @@ fn export_source(
         (s + n) / 2.0,
         (lo + hi) / 2.0 + (place.geoid_m[0] + place.geoid_m[1]) / 2.0,
     );
+    // The error of drawing none of a tileset: the region's size (its
+    // diagonal), so that a client draws it wherever the region is in view.
+    let region_m = {
+        let metres_per_deg = 111_320.0;
+        let dx = (e - w) * metres_per_deg * ((s + n) / 2.0).to_radians().cos();
+        let dy = (n - s) * metres_per_deg;
+        (dx * dx + dy * dy).sqrt()
+    };
     let vegetation = match bundle {
         Some(b) => vegetation_of(b, &place.to_earth)?,
         None => None,
@@ -110,11 +118,12 @@ fn export_source(
     let drape_pixel_deg = drape_pixel_deg(source, &place.to_earth)?;
     let (terrain_tiles, vegetation_tiles, bytes) = write_folder(a.out, |folder| {
         let (terrain, count, mut bytes) =
-            write_terrain(folder, &grid, &ranges, &local, drape_pixel_deg)?;
+            write_terrain(folder, &grid, &ranges, &local, region_m, drape_pixel_deg)?;
         let mut children = vec![("terrain/tileset.json", terrain)];
         let mut vegetation_tiles = 0;
         if let Some((classes, objects)) = &vegetation {
-            let (tree, n, b) = write_vegetation(folder, classes, objects.clone(), &local)?;
+            let (tree, n, b) =
+                write_vegetation(folder, classes, objects.clone(), &local, region_m)?;
             children.push(("vegetation/tileset.json", tree));
             vegetation_tiles = n;
             bytes += b;
@@ -123,19 +132,19 @@ fn export_source(
         let root = Tile::over(
             "root".into(),
             None,
-            0.0,
+            region_m,
             children
                 .iter()
                 .map(|(uri, t)| Tile {
                     name: t.name.clone(),
                     region: t.region,
-                    geometric_error_m: t.geometric_error_m,
+                    geometric_error_m: region_m.max(t.geometric_error_m),
                     content: Some(uri.to_string()),
                     children: vec![],
                 })
                 .collect(),
         );
-        bytes += write_tileset(folder, &root, "tileset.json", Refine::Add, None)?;
+        bytes += write_tileset(folder, &root, "tileset.json", Refine::Add, None, region_m)?;
         Ok((count, vegetation_tiles, bytes))
     })?;
     Ok(Summary {
@@ -151,21 +160,22 @@ fn export_source(
     })
 }
 
-/// Write the tileset files of `root` into `folder` (`path` the root's):
-/// their bytes.
+/// Write the tileset files of `root` into `folder` (`path` the root's; see
+/// [`tileset::files`]): their bytes.
 fn write_tileset(
     folder: &Path,
     root: &Tile,
     path: &str,
     refine: Refine,
     transform: Option<[f64; 16]>,
+    unrendered_error_m: f64,
 ) -> Result<u64> {
     let mut bytes = 0;
     let dir = Path::new(path).parent().unwrap_or(Path::new(""));
     let name = Path::new(path)
         .file_name()
         .map_or(path.into(), |n| n.to_string_lossy());
-    for (file, json) in tileset::files(root, &name, refine, transform) {
+    for (file, json) in tileset::files(root, &name, refine, transform, unrendered_error_m) {
         let text = serde_json::to_string(&json)?;
         write_file(folder, &dir.join(&file).to_string_lossy(), text.as_bytes())?;
         bytes += text.len() as u64;
@@ -207,6 +217,7 @@ fn write_terrain(
     grid: &Grid,
     ranges: &[TileRange],
     local: &LocalFrame,
+    region_m: f64,
     drape_pixel_deg: Option<f64>,
 ) -> Result<(Tile, usize, u64)> {
     let mut records = TerrainRecords::new();
@@ -237,20 +248,16 @@ fn write_terrain(
     if children.is_empty() {
         bail!("no terrain tile holds data: the mask covers nothing");
     }
-    // The root has no content: its error, a level coarser than its
-    // children's, makes clients refine it from any distance they see it.
-    let root = Tile::over(
-        "root".into(),
-        None,
-        level_geometric_error_m(first.z.saturating_sub(1)),
-        children,
-    );
+    // The root has no content: its error, the region's size, makes
+    // clients refine it wherever they see it.
+    let root = Tile::over("root".into(), None, region_m, children);
     bytes += write_tileset(
         folder,
         &root,
         "terrain/tileset.json",
         Refine::Replace,
         Some(local.transform()),
+        region_m,
     )?;
     Ok((root, count, bytes))
 }
@@ -408,6 +415,7 @@ fn write_vegetation(
     classes: &[ClassMesh],
     objects: Vec<Instance>,
     local: &LocalFrame,
+    region_m: f64,
 ) -> Result<(Tile, usize, u64)> {
     let points: Vec<[f64; 2]> = objects.iter().map(|o| [o.lon_deg, o.lat_deg]).collect();
     let root = vegetation::quadtree(objects, bounds_of(&points), TILE_CAPACITY);
@@ -437,6 +445,7 @@ fn write_vegetation(
         "vegetation/tileset.json",
         Refine::Add,
         Some(local.transform()),
+        region_m,
     )?;
     Ok((tree, count, bytes))
 }

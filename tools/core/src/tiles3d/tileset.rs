@@ -75,27 +75,32 @@ pub const SUBTREE_LEVELS: usize = 6;
 /// The JSON files of the tree under `root`: `(path, document)`, the root's
 /// file first at `root_path`, external tilesets beside it as
 /// `subtree_{name}.json` (the name's `/` as `_`). `transform` is the root's
-/// (column-major 4 × 4).
+/// (column-major 4 × 4); `unrendered_error_m` the error of drawing none of
+/// the tileset, which clients compare with their screen-space error
+/// before they draw even the root (CesiumJS skips a tileset whose error is
+/// under its threshold).
 pub fn files(
     root: &Tile,
     root_path: &str,
     refine: Refine,
     transform: Option<[f64; 16]>,
+    unrendered_error_m: f64,
 ) -> Vec<(String, Value)> {
     let mut out = Vec::new();
     let mut json = tile_json(root, refine, 0, &mut out);
     if let Some(m) = transform {
         json["transform"] = json!(m);
     }
-    out.insert(0, (root_path.to_string(), document(root, json)));
+    let error = unrendered_error_m.max(root.geometric_error_m);
+    out.insert(0, (root_path.to_string(), document(error, json)));
     out
 }
 
 /// A tileset document with `root_json` as its root.
-fn document(root: &Tile, root_json: Value) -> Value {
+fn document(geometric_error_m: f64, root_json: Value) -> Value {
     json!({
         "asset": {"version": "1.1", "generator": concat!("relevo ", env!("CARGO_PKG_VERSION"))},
-        "geometricError": root.geometric_error_m,
+        "geometricError": geometric_error_m,
         "root": root_json,
     })
 }
@@ -127,7 +132,7 @@ fn tile_json(tile: &Tile, refine: Refine, depth: usize, files: &mut Vec<(String,
             // over it with the same volume and error.
             let path = subtree_path(c);
             let root = tile_json(c, refine, 0, files);
-            files.push((path.clone(), document(c, root)));
+            files.push((path.clone(), document(c.geometric_error_m, root)));
             json!({
                 "boundingVolume": c.region.to_json(),
                 "geometricError": c.geometric_error_m,
@@ -168,7 +173,7 @@ mod tests {
     fn deep_trees_are_cut_into_external_tilesets() {
         let root = chain(14);
         assert_eq!(root.count(), 15);
-        let files = files(&root, "tileset.json", Refine::Replace, None);
+        let files = files(&root, "tileset.json", Refine::Replace, None, 100.0);
         let names: Vec<&str> = files.iter().map(|f| f.0.as_str()).collect();
         assert_eq!(
             names,
@@ -184,6 +189,7 @@ mod tests {
         assert_eq!(t["content"]["uri"], "subtree_6_0_0.json");
         assert_eq!(files[2].1["root"]["content"]["uri"], "6.glb");
         assert_eq!(files[2].1["asset"]["version"], "1.1");
+        assert_eq!(files[0].1["geometricError"], 100.0);
     }
 
     #[test]

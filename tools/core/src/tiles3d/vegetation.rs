@@ -6,9 +6,11 @@
 //! (`EXT_instance_features`, `EXT_structural_metadata`).
 //!
 //! Tiles refine by adding: a tile holds the largest objects of its cell (at
-//! most a tile's capacity), its children the rest, so a far view shows the
-//! tallest trees and a near one every tree. A tile's geometric error is the
-//! height of the tallest object it leaves to its descendants.
+//! most a tile's capacity, a spread sample of equals), its children the
+//! rest, so a far view shows the tallest trees, thinned, and a near one
+//! every tree. A tile's geometric error is what leaving its descendants out
+//! costs: the larger of the kept objects' spacing (the gaps between them)
+//! and the height of the tallest object left out.
 
 use super::tileset::Tile;
 use super::{y_up, LocalFrame, Region};
@@ -38,7 +40,8 @@ pub struct Instance {
 }
 
 /// A class's mesh in glTF's axes (x east, y up, z south), scaled to a crown
-/// diameter of 1: a triangle soup with flat normals and the model's colours.
+/// diameter of 1: a triangle soup with flat normals and the model's colours,
+/// simplified to at most [`MAX_CLASS_TRIANGLES`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct ClassMesh {
     pub name: String,
@@ -49,20 +52,52 @@ pub struct ClassMesh {
     pub colours: Vec<[f32; 3]>,
 }
 
+/// Triangles a class's mesh keeps at most: every instance draws them, and a
+/// tile holds thousands of instances (the built-in stand has 6 356, which
+/// at 4 096 a tile would be 26 M triangles).
+pub const MAX_CLASS_TRIANGLES: usize = 256;
+
+/// A corner of the model's triangle soup: position and colour.
+type Corner = ([f32; 3], [f32; 3]);
+
 impl ClassMesh {
     /// The mesh of `model` (x east, y north, z up, foot at the origin).
     pub fn of(name: &str, model: &Model) -> ClassMesh {
         let (diameter, _) = model.size();
         let scale = if diameter > 0.0 { 1.0 / diameter } else { 1.0 };
+        let gltf = |p: [f32; 3]| [p[0] * scale, p[2] * scale, -p[1] * scale];
+        let soup: Vec<[Corner; 3]> = model
+            .triangles
+            .iter()
+            .map(|t| {
+                [0, 1, 2].map(|k| {
+                    let texel = t
+                        .texture
+                        .and_then(|i| model.textures.get(i as usize))
+                        .map_or([255; 4], |tex| tex.sample(t.uv[k][0], t.uv[k][1]));
+                    let colour = [0, 1, 2].map(|j| t.colour[k][j] * srgb_to_linear(texel[j]));
+                    (gltf(t.corners[k]), colour)
+                })
+            })
+            .collect();
+        // The finest clustering that meets the budget.
+        let simplified = [48, 32, 24, 16, 12, 8, 6, 4, 3, 2]
+            .into_iter()
+            .map(|cells| cluster_vertices(&soup, cells))
+            .find(|t| t.len() <= MAX_CLASS_TRIANGLES);
+        let triangles = if soup.len() <= MAX_CLASS_TRIANGLES {
+            soup
+        } else {
+            simplified.unwrap_or_default()
+        };
         let mut mesh = ClassMesh {
             name: name.to_string(),
-            positions: Vec::with_capacity(model.triangles.len() * 3),
-            normals: Vec::with_capacity(model.triangles.len() * 3),
-            colours: Vec::with_capacity(model.triangles.len() * 3),
+            positions: Vec::with_capacity(triangles.len() * 3),
+            normals: Vec::with_capacity(triangles.len() * 3),
+            colours: Vec::with_capacity(triangles.len() * 3),
         };
-        let gltf = |p: [f32; 3]| [p[0] * scale, p[2] * scale, -p[1] * scale];
-        for t in &model.triangles {
-            let [a, b, c] = t.corners.map(gltf);
+        for t in &triangles {
+            let [a, b, c] = t.map(|corner| corner.0);
             let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
             let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
             let n = [
@@ -74,19 +109,89 @@ impl ClassMesh {
             if length == 0.0 {
                 continue;
             }
-            for k in 0..3 {
-                mesh.positions.push([a, b, c][k]);
+            for corner in t {
+                mesh.positions.push(corner.0);
                 mesh.normals.push(n.map(|x| x / length));
-                let texel = t
-                    .texture
-                    .and_then(|i| model.textures.get(i as usize))
-                    .map_or([255; 4], |tex| tex.sample(t.uv[k][0], t.uv[k][1]));
-                mesh.colours
-                    .push([0, 1, 2].map(|j| t.colour[k][j] * srgb_to_linear(texel[j])));
+                mesh.colours.push(corner.1);
             }
         }
         mesh
     }
+}
+
+/// Vertex clustering (Rossignac and Borrel, 1993): the soup's corners
+/// snapped to the mean of their cell in a `cells`³ grid over its box,
+/// triangles whose corners fall in fewer than three cells dropped, each
+/// remaining set of three cells kept once, and the result stretched back
+/// to the soup's box.
+fn cluster_vertices(soup: &[[Corner; 3]], cells: usize) -> Vec<[Corner; 3]> {
+    let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
+    for corner in soup.iter().flatten() {
+        for k in 0..3 {
+            lo[k] = lo[k].min(corner.0[k]);
+            hi[k] = hi[k].max(corner.0[k]);
+        }
+    }
+    let cell_of = |p: [f32; 3]| {
+        let index = |k: usize| {
+            let span = (hi[k] - lo[k]).max(f32::MIN_POSITIVE);
+            (((p[k] - lo[k]) / span * cells as f32) as usize).min(cells - 1)
+        };
+        (index(2) * cells + index(1)) * cells + index(0)
+    };
+    // Each cell's mean corner.
+    let mut sums: std::collections::BTreeMap<usize, ([f64; 3], [f64; 3], f64)> =
+        std::collections::BTreeMap::new();
+    for &(p, c) in soup.iter().flatten() {
+        let e = sums.entry(cell_of(p)).or_insert(([0.0; 3], [0.0; 3], 0.0));
+        for k in 0..3 {
+            e.0[k] += p[k] as f64;
+            e.1[k] += c[k] as f64;
+        }
+        e.2 += 1.0;
+    }
+    let mean = |cell: usize| -> Corner {
+        let (p, c, n) = sums[&cell];
+        (p.map(|v| (v / n) as f32), c.map(|v| (v / n) as f32))
+    };
+    let mut seen = std::collections::BTreeSet::new();
+    let mut out = Vec::new();
+    for t in soup {
+        let ids = t.map(|corner| cell_of(corner.0));
+        if ids[0] == ids[1] || ids[1] == ids[2] || ids[0] == ids[2] {
+            continue;
+        }
+        let mut key = ids;
+        key.sort_unstable();
+        if seen.insert(key) {
+            out.push(ids.map(mean));
+        }
+    }
+    // Means pull the outline in; stretch the result back to the model's
+    // box, about the foot, so that the crown keeps its size.
+    let (mut new_lo, mut new_hi) = ([f32::MAX; 3], [f32::MIN; 3]);
+    for corner in out.iter().flatten() {
+        for k in 0..3 {
+            new_lo[k] = new_lo[k].min(corner.0[k]);
+            new_hi[k] = new_hi[k].max(corner.0[k]);
+        }
+    }
+    let stretch = |p: [f32; 3]| {
+        [0, 1, 2].map(|k| {
+            let span = new_hi[k] - new_lo[k];
+            if span > 0.0 {
+                lo[k] + (p[k] - new_lo[k]) / span * (hi[k] - lo[k])
+            } else {
+                p[k]
+            }
+        })
+    };
+    for t in &mut out {
+        for corner in t.iter_mut() {
+            corner.0 = stretch(corner.0);
+        }
+    }
+    out
 }
 
 /// An 8-bit sRGB value as linear 0–1.
@@ -114,7 +219,9 @@ pub struct VegTile {
     /// Ordered by class, then id: an object's feature id is its place here.
     pub objects: Vec<Instance>,
     pub children: Vec<VegTile>,
-    /// Height of the tallest object the descendants hold, metres.
+    /// What leaving the descendants out costs, metres: the larger of the
+    /// kept objects' spacing and the tallest descendant's height; 0 for a
+    /// leaf.
     pub geometric_error_m: f64,
 }
 
@@ -127,7 +234,8 @@ impl VegTile {
 
 /// The quadtree of `objects` over `bounds_deg` (`[west, south, east,
 /// north]`), at most `capacity` objects a tile: a tile keeps its cell's
-/// largest (by crown, then id) and splits the rest into quarters.
+/// largest (by crown; a spread sample of equals) and splits the rest into
+/// quarters.
 pub fn quadtree(objects: Vec<Instance>, bounds_deg: [f64; 4], capacity: usize) -> VegTile {
     split(objects, bounds_deg, capacity.max(1), (0, 0, 0))
 }
@@ -140,10 +248,32 @@ fn split(
 ) -> VegTile {
     let mut rest = Vec::new();
     if objects.len() > capacity && depth < MAX_DEPTH {
-        objects.sort_by(|a, b| b.diameter_m.total_cmp(&a.diameter_m).then(a.id.cmp(&b.id)));
+        // Ties in size go by a hash of the id, so that a tile keeps a
+        // sample spread over its cell rather than the first ids' corner.
+        objects.sort_by(|a, b| {
+            b.diameter_m
+                .total_cmp(&a.diameter_m)
+                .then(spread(a.id).cmp(&spread(b.id)))
+                .then(a.id.cmp(&b.id))
+        });
         rest = objects.split_off(capacity);
     }
-    let geometric_error_m = rest.iter().map(|o| o.height_m as f64).fold(0.0, f64::max);
+    // Leaving the rest out leaves gaps as wide as the kept objects'
+    // spacing and misses objects as tall as the tallest of the rest.
+    let geometric_error_m = if rest.is_empty() {
+        0.0
+    } else {
+        let metres_per_deg = 111_320.0;
+        let cell_m2 = (e - w)
+            * metres_per_deg
+            * ((s + n) / 2.0).to_radians().cos()
+            * (n - s)
+            * metres_per_deg;
+        let spacing_m = (cell_m2 / objects.len() as f64).sqrt();
+        rest.iter()
+            .map(|o| o.height_m as f64)
+            .fold(spacing_m, f64::max)
+    };
     let (mid_lon, mid_lat) = ((w + e) / 2.0, (s + n) / 2.0);
     let mut quarters: [Vec<Instance>; 4] = Default::default();
     for o in rest {
@@ -175,6 +305,14 @@ fn split(
         children,
         geometric_error_m,
     }
+}
+
+/// A pseudo-random order of ids (SplitMix64's finaliser).
+fn spread(id: u64) -> u64 {
+    let mut z = id.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
 }
 
 /// The region `objects` fill: their feet to their tops, and their crowns'
@@ -467,6 +605,28 @@ mod tests {
                 (lo.min(p[0]), hi.max(p[0]))
             });
         assert!(hi - lo <= 1.0 + 1e-4 && hi - lo > 0.5, "{lo} {hi}");
+        // The stand, 6 356 triangles, simplified within the budget and
+        // keeping the model's box (model x east, y north, z up).
+        let model = TreeKind::Stand.model(1);
+        let stand = ClassMesh::of("forest", &model);
+        let triangles = stand.positions.len() / 3;
+        assert!(
+            triangles <= MAX_CLASS_TRIANGLES && triangles > MAX_CLASS_TRIANGLES / 4,
+            "{triangles}"
+        );
+        let extent = |k: usize| {
+            let v = stand.positions.iter().map(|p| p[k]);
+            v.clone().fold(f32::MIN, f32::max) - v.fold(f32::MAX, f32::min)
+        };
+        let b = model.bounds();
+        let scale = 1.0 / model.size().0;
+        for (gltf_axis, model_axis) in [(0, 0), (1, 2), (2, 1)] {
+            let expected = (b[model_axis][1] - b[model_axis][0]) * scale;
+            assert!(
+                (extent(gltf_axis) - expected).abs() < 1e-4,
+                "axis {gltf_axis}"
+            );
+        }
         let mut objects = vec![object(1, -34.9, -8.0, 12.0), object(2, -34.8, -8.1, 20.0)];
         objects.sort_by_key(|o| (o.class, o.id));
         let frame = LocalFrame::at(-34.9, -8.0, 0.0);
