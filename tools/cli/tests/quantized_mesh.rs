@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::{grid_points_on_the_ellipsoid, relevo, relevo_ok, repo, sample_bundle};
+use common::{file_hashes, grid_points_on_the_ellipsoid, relevo, relevo_ok, repo, sample_bundle};
 use serde_json::Value;
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -303,29 +303,12 @@ fn assert_levels_within_error(js: &BTreeMap<TileKey, Value>, points: &[[f64; 3]]
     }
 }
 
-/// Every file under `dir`, relative, with its SHA-256.
-fn files(dir: &Path) -> BTreeMap<String, String> {
-    let mut out = BTreeMap::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for entry in std::fs::read_dir(&d).unwrap() {
-            let path = entry.unwrap().path();
-            if path.is_dir() {
-                stack.push(path);
-            } else {
-                let name = path.strip_prefix(dir).unwrap().display().to_string();
-                out.insert(name, common::sha256(&path));
-            }
-        }
-    }
-    out
-}
-
 #[test]
 fn a_pyramid_exports_the_same_tiles_as_its_single_grid_at_any_thread_count() {
     let dir = tempfile::tempdir().unwrap();
     // The sample region's DEM alone (a pyramid takes no imagery yet), as a
-    // single grid and as a pyramid of 33² tiles.
+    // single grid and as a pyramid of 33² tiles, both draped with the tint
+    // and hillshade derived from the heights.
     let dem = repo("data/olinda/olinda_dem_utm25s.tif");
     let prep = |name: &str, extra: &[&str]| {
         let out = dir.path().join(name);
@@ -341,12 +324,12 @@ fn a_pyramid_exports_the_same_tiles_as_its_single_grid_at_any_thread_count() {
         relevo_ok(&args);
         out
     };
-    let single = prep("single.relevo", &[]);
+    let single = prep("single.relevo", &["--terrain-drape"]);
     let pyramid = prep("tiles.relevo", &["--tiled", "--tile-size", "32"]);
-    let export = |bundle: &Path, name: &str, threads: &str| {
+    let export_as = |format: &str, bundle: &Path, name: &str, threads: &str| {
         let out = dir.path().join(name);
         let status = Command::new(env!("CARGO_BIN_EXE_relevo"))
-            .args(["export", "quantized-mesh"])
+            .args(["export", format])
             .arg(bundle)
             .arg("--out")
             .arg(&out)
@@ -358,7 +341,10 @@ fn a_pyramid_exports_the_same_tiles_as_its_single_grid_at_any_thread_count() {
             "{}",
             String::from_utf8_lossy(&status.stderr)
         );
-        files(&out)
+        file_hashes(&out)
+    };
+    let export = |bundle: &Path, name: &str, threads: &str| {
+        export_as("quantized-mesh", bundle, name, threads)
     };
     let from_grid = export(&single, "from_grid", "1");
     assert!(from_grid.len() > 20);
@@ -378,6 +364,13 @@ fn a_pyramid_exports_the_same_tiles_as_its_single_grid_at_any_thread_count() {
     assert_eq!(
         layer("from_pyramid")["available"],
         layer("from_grid")["available"]
+    );
+    // So are its 3D Tiles, their textures and tilesets included.
+    let tiles_from_grid = export_as("3dtiles", &single, "3d_from_grid", "1");
+    assert!(tiles_from_grid.keys().any(|f| f.ends_with(".glb")));
+    assert_eq!(
+        export_as("3dtiles", &pyramid, "3d_from_pyramid", "3"),
+        tiles_from_grid
     );
 }
 

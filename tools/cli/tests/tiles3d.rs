@@ -11,8 +11,8 @@
 mod common;
 
 use common::{
-    gdaltransform, grid_points_on_the_ellipsoid, khronos_validate_all, relevo, relevo_ok,
-    sample_bundle, sha256,
+    file_hashes, gdaltransform, grid_points_on_the_ellipsoid, khronos_validate_all, relevo,
+    relevo_ok, sample_bundle,
 };
 use serde_json::Value;
 use std::collections::HashMap;
@@ -159,29 +159,6 @@ fn with_contents(root: &TileInfo) -> Vec<&TileInfo> {
     out
 }
 
-/// The files under `dir`, relative to it, sorted.
-fn files_under(dir: &Path) -> Vec<String> {
-    let mut out = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let path = e.unwrap().path();
-            if path.is_dir() {
-                stack.push(path);
-            } else {
-                out.push(
-                    path.strip_prefix(dir)
-                        .unwrap()
-                        .to_string_lossy()
-                        .to_string(),
-                );
-            }
-        }
-    }
-    out.sort();
-    out
-}
-
 /// Points of the root's local frame (glTF y up: east, up, south) in ECEF.
 fn to_ecef(transform: &[f64], p: [f64; 3]) -> [f64; 3] {
     let local = [p[0], -p[2], p[1]];
@@ -235,8 +212,9 @@ fn the_sample_region_as_3d_tiles() {
     export(&bundle, &out, "3");
 
     // Every glb passes the Khronos validator.
-    let glbs: Vec<PathBuf> = files_under(&out)
-        .into_iter()
+    let written = file_hashes(&out);
+    let glbs: Vec<PathBuf> = written
+        .keys()
         .filter(|f| f.ends_with(".glb"))
         .map(|f| out.join(f))
         .collect();
@@ -259,11 +237,7 @@ fn the_sample_region_as_3d_tiles() {
     // Another thread count writes the same bytes.
     let again = dir.path().join("again");
     export(&bundle, &again, "1");
-    let files = files_under(&out);
-    assert_eq!(files, files_under(&again));
-    for f in &files {
-        assert_eq!(sha256(&out.join(f)), sha256(&again.join(f)), "{f}");
-    }
+    assert_eq!(file_hashes(&again), written);
 }
 
 /// Each terrain tile's surface, at every grid point it covers, within the
