@@ -5,31 +5,13 @@
 
 mod common;
 
-use common::{relevo, relevo_ok, repo, sample_bundle};
+use common::{file_hashes, relevo, relevo_ok, repo, sample_bundle};
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
 
-/// Every file of the bundle with its bytes (manifest included).
-fn contents(bundle: &Path) -> BTreeMap<String, Vec<u8>> {
-    let mut files = BTreeMap::new();
-    let mut stack = vec![bundle.to_path_buf()];
-    while let Some(dir) = stack.pop() {
-        for entry in std::fs::read_dir(&dir).unwrap() {
-            let path = entry.unwrap().path();
-            if path.is_dir() {
-                stack.push(path);
-            } else {
-                let name = path.strip_prefix(bundle).unwrap().display().to_string();
-                files.insert(name, std::fs::read(&path).unwrap());
-            }
-        }
-    }
-    files
-}
-
-fn cluster_files(bundle: &Path) -> BTreeMap<String, Vec<u8>> {
-    contents(bundle)
+fn cluster_files(bundle: &Path) -> BTreeMap<String, String> {
+    file_hashes(bundle)
         .into_iter()
         .filter(|(name, _)| name.starts_with("clusters/"))
         .collect()
@@ -67,7 +49,7 @@ fn bake_repeats_prep_byte_for_byte_on_any_thread_count() {
 
     // Another model and a smaller budget: different atlases, still valid,
     // the rest of the bundle as it was.
-    let before = contents(&bundle);
+    let before = file_hashes(&bundle);
     let report = relevo_ok([
         "bake".as_ref(),
         bundle.as_os_str(),
@@ -79,7 +61,7 @@ fn bake_repeats_prep_byte_for_byte_on_any_thread_count() {
     ]);
     let report: serde_json::Value = serde_json::from_str(&report).unwrap();
     assert!(report["atlas_bytes"].as_u64().unwrap() <= 32 << 20);
-    let after = contents(&bundle);
+    let after = file_hashes(&bundle);
     for (name, bytes) in &before {
         if !name.starts_with("clusters/") && name != "manifest.json" {
             assert!(after.get(name) == Some(bytes), "{name} changed");
@@ -98,7 +80,7 @@ fn bake_repeats_prep_byte_for_byte_on_any_thread_count() {
 fn bad_models_and_budgets_are_refused_leaving_the_bundle_as_it_was() {
     let dir = tempfile::tempdir().unwrap();
     let bundle = sample_bundle(dir.path());
-    let before = contents(&bundle);
+    let before = file_hashes(&bundle);
     let write = |name: &str, bytes: &[u8]| {
         let p = dir.path().join(name);
         std::fs::write(&p, bytes).unwrap();
@@ -143,7 +125,10 @@ fn bad_models_and_budgets_are_refused_leaving_the_bundle_as_it_was() {
         for w in words {
             assert!(stderr.contains(w), "{flags:?}: {w:?} not in {stderr}");
         }
-        assert!(contents(&bundle) == before, "{flags:?} changed the bundle");
+        assert!(
+            file_hashes(&bundle) == before,
+            "{flags:?} changed the bundle"
+        );
         assert!(
             !dir.path().join("olinda.relevo.tmp").exists(),
             "{flags:?} left a staging folder"

@@ -234,8 +234,9 @@ pub fn parse_records<T: bytemuck::Pod>(bytes: &[u8], count: usize) -> Result<Vec
     Ok(bytemuck::pod_collect_to_vec(bytes))
 }
 
-/// The bundle's clusters with their pages decoded, when it has them.
-pub fn read(bundle: &Bundle) -> Result<Option<(ClusterIndex, Clusters)>> {
+/// The bundle's cluster index, quadtree and frames, checked, without the
+/// atlas pages, when it has them.
+pub fn read_tree(bundle: &Bundle) -> Result<Option<(ClusterIndex, Quadtree, Vec<AtlasFrame>)>> {
     let Some(index) = read_index(bundle)? else {
         return Ok(None);
     };
@@ -250,6 +251,14 @@ pub fn read(bundle: &Bundle) -> Result<Option<(ClusterIndex, Clusters)>> {
             format!("{problem}; the clusters cannot be read"),
         ));
     }
+    Ok(Some((index, tree, frames)))
+}
+
+/// The bundle's clusters with their pages decoded, when it has them.
+pub fn read(bundle: &Bundle) -> Result<Option<(ClusterIndex, Clusters)>> {
+    let Some((index, tree, frames)) = read_tree(bundle)? else {
+        return Ok(None);
+    };
     let texels: u64 = index
         .pages
         .iter()
