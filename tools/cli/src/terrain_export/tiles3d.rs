@@ -19,9 +19,9 @@ use relevo_core::bundle::Bundle;
 use relevo_core::cluster::store;
 use relevo_core::lp::export::MeshSource;
 use relevo_core::lp::extract::mask_boundaries;
-use relevo_core::terrain_tiles::tiling::{TileId, TileRange};
+use relevo_core::terrain_tiles::tiling::{level_geometric_error_m, TileId, TileRange};
 use relevo_core::terrain_tiles::{bounds_of, patch};
-use relevo_core::tiles3d::terrain::{self, TileTexture};
+use relevo_core::tiles3d::terrain::{self, Skirt, TileTexture};
 use relevo_core::tiles3d::tileset::{self, Refine, Tile};
 use relevo_core::tiles3d::vegetation::{self, ClassMesh, Instance, VegTile, TILE_CAPACITY};
 use relevo_core::tiles3d::{LocalFrame, Region};
@@ -324,8 +324,8 @@ fn terrain_tile(
                 .collect();
             let bounds = bounds_of(&corners);
             let (width, height) = terrain::texture_size(bounds, pixel_deg);
-            let centres = terrain::texel_centres(bounds, width, height);
-            let world = to_earth.to_world(&centres)?;
+            let lattice = to_earth.to_world(&terrain::lattice(bounds))?;
+            let world = terrain::texel_world(width, height, &lattice);
             let rgb = match grid.source.drape(window)? {
                 Some(drape) => terrain::drape_rgb(&drape, &world),
                 None => vec![128; width * height * 3],
@@ -337,8 +337,14 @@ fn terrain_tile(
         }
         None => None,
     };
-    Ok(terrain::glb(&p.mesh, p.covered, local, texture.as_ref())?
-        .map(|(glb, region)| (glb, region, error_m as f64)))
+    let skirt = Skirt {
+        bounds_deg: tile.bounds_deg(),
+        depth_m: terrain::skirt_depth_m(level_geometric_error_m(tile.z)),
+    };
+    Ok(
+        terrain::glb(&p.mesh, p.covered, local, texture.as_ref(), skirt)?
+            .map(|(glb, region)| (glb, region, error_m as f64)),
+    )
 }
 
 /// The vegetation of a single-grid bundle on the ellipsoid, with its
@@ -458,4 +464,50 @@ fn write_vegetation(
         region_m,
     )?;
     Ok((tree, count, bytes))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::terrain_export::VerticalDatum;
+
+    #[test]
+    fn texels_placed_by_the_lattice_are_where_proj_puts_them() {
+        // A level-7 tile (1.4°) in UTM zone 31 north, the largest tiles a
+        // region's drape is sampled for, and a level-12 one.
+        let to_earth = ToEllipsoid::new(
+            &crate::ingest::crs::parse("EPSG:32631")
+                .unwrap()
+                .to_wkt()
+                .unwrap(),
+            VerticalDatum::Ellipsoid,
+        )
+        .unwrap();
+        for bounds in [
+            [4.21875, 44.296875, 5.625, 45.703125],
+            [5.0, 45.0, 5.0439453125, 45.0439453125],
+        ] {
+            let lattice = to_earth.to_world(&terrain::lattice(bounds)).unwrap();
+            let (width, height) = (256, 256);
+            let placed = terrain::texel_world(width, height, &lattice);
+            let [w, s, e, n] = bounds;
+            let centres: Vec<[f64; 2]> = (0..width * height)
+                .map(|i| {
+                    [
+                        w + ((i % width) as f64 + 0.5) / width as f64 * (e - w),
+                        n - ((i / width) as f64 + 0.5) / height as f64 * (n - s),
+                    ]
+                })
+                .collect();
+            let exact = to_earth.to_world(&centres).unwrap();
+            let worst = placed
+                .iter()
+                .zip(&exact)
+                .map(|(a, b)| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt())
+                .fold(0.0, f64::max);
+            // Within a tenth of a texel (over 600 m at level 7, 19 cm at 12).
+            let texel_m = (n - s) * 111_320.0 / height as f64;
+            assert!(worst < 0.1 * texel_m, "{worst} m off, texels {texel_m} m");
+        }
+    }
 }
