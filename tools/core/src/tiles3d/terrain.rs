@@ -34,8 +34,8 @@ pub fn texture_size(bounds_deg: [f64; 4], drape_pixel_deg: f64) -> (usize, usize
     let [w, s, e, n] = bounds_deg;
     let side = |span: f64| {
         ((span / drape_pixel_deg).ceil() as usize)
-            .next_power_of_two()
             .clamp(16, MAX_TEXTURE_SIDE)
+            .next_power_of_two()
     };
     (side(e - w), side(n - s))
 }
@@ -402,6 +402,7 @@ mod tests {
         assert!((texels[7][1] - (-2000.0 * 40.25)).abs() < 1e-6);
         assert_eq!(texture_size([0.0, 0.0, 1.0, 0.01], 0.001), (256, 16));
         assert_eq!(texture_size([0.0, 0.0, 0.1, 0.04], 0.001), (128, 64));
+        assert_eq!(texture_size([0.0, 0.0, 1.0, 1.0], 0.0), (256, 256));
         let jpeg = encode_jpeg(&[128; 16 * 16 * 3], 16, 16).unwrap();
         assert_eq!(&jpeg[..2], &[0xFF, 0xD8]);
     }
