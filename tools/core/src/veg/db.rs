@@ -2,7 +2,9 @@
 //! `id;x;y;class;size;score` (the seed's position-and-type text file,
 //! extended with size and score). x, y are world coordinates of the image's
 //! CRS (pixel coordinates when the image is not georeferenced); size is the
-//! object's diameter in the same units; score is the classifier's, in [0.5, 1].
+//! object's diameter on the ground, metres (its pixels times the pixel's
+//! size, whatever units x and y are in); score is the classifier's, in
+//! [0.5, 1].
 
 use crate::{Error, Result};
 
