@@ -4,7 +4,9 @@
 //! runs relevo-core's vegetation pipeline on the drape in the background;
 //! its objects are overlaid by class; accepting writes the samples and the
 //! database into the bundle and re-bakes its clusters, atomically, and the
-//! 3D view reloads them.
+//! 3D view reloads them. With truth boxes loaded, each detection is scored
+//! as a round of the correction loop (relevo-core's protocol figures), and
+//! the rectangles added since the round before are drawn apart.
 
 use anyhow::Context;
 use eframe::egui;
@@ -71,6 +73,26 @@ pub struct SamplesTab {
     /// The samples file the *load* button reads (CSV of drape pixels, or
     /// GeoJSON polygons in the drape's CRS).
     pub samples_path: String,
+    /// The truth boxes file (Pascal VOC or CSV, drape pixels) and the boxes
+    /// read from it.
+    pub truth_path: String,
+    pub truth: Option<Vec<[f64; 4]>>,
+    /// Each detection's figures against the truth, in order: the rounds.
+    pub rounds: Vec<Round>,
+    /// Detections run, the marks the last was given, and where those it
+    /// added to the one before start (`samples[added_from..marks]`).
+    runs: usize,
+    marks: usize,
+    added_from: usize,
+}
+
+/// One detection scored against the truth boxes.
+#[derive(Debug, Clone)]
+pub struct Round {
+    /// Marks it ran with, and how many of them were new.
+    pub marks: usize,
+    pub added: usize,
+    pub scores: relevo_core::veg::protocol::Scores,
 }
 
 impl SamplesTab {
@@ -101,6 +123,12 @@ impl SamplesTab {
             status: String::new(),
             problem: None,
             samples_path: String::new(),
+            truth_path: String::new(),
+            truth: None,
+            rounds: Vec::new(),
+            runs: 0,
+            marks: 0,
+            added_from: 0,
         };
         // The samples the bundle keeps, to go on from.
         let kept = opened.as_ref().and_then(|b| {
@@ -144,8 +172,66 @@ impl SamplesTab {
         relevo_core::veg::samples::to_csv(&rectangles, usize::MAX, usize::MAX)
     }
 
+    /// Read the truth boxes of the file at `truth_path` (drape pixels);
+    /// rounds from here on are scored against them. On failure `problem`
+    /// says why, naming the file.
+    pub fn load_truth(&mut self) {
+        let path = PathBuf::from(self.truth_path.trim());
+        let boxes = relevo_core::files::read_to_string(&path).and_then(|text| {
+            relevo_core::veg::eval::parse_truth(&text)
+                .map_err(|e| relevo_core::Error::Input(format!("{}: {e}", path.display())))
+        });
+        match boxes {
+            Ok(boxes) => {
+                self.status = format!("{} truth boxes read from {}", boxes.len(), path.display());
+                self.truth = Some(relevo_core::veg::eval::bounds(&boxes));
+                self.rounds.clear();
+                self.problem = None;
+            }
+            Err(e) => self.problem = Some(format!("{e:#}")),
+        }
+    }
+
+    /// The last detection against the truth boxes, when they are loaded
+    /// and the drape's georeferencing is known: the detections taken to
+    /// drape pixels, their sizes to pixels of the drape.
+    fn score_round(&mut self) {
+        let (Some(truth), Some(g)) = (&self.truth, self.to_pixel) else {
+            return;
+        };
+        let (cell_w, cell_h) = g.cell_size();
+        let pixel_m = cell_w.abs().min(cell_h.abs());
+        let detections: Vec<relevo_core::veg::eval::Detection> = self
+            .detections
+            .iter()
+            .filter_map(|o| {
+                let (x, y) = g.invert(o.x, o.y)?;
+                Some(relevo_core::veg::eval::Detection {
+                    x,
+                    y,
+                    diameter: o.size / pixel_m,
+                    score: o.score,
+                })
+            })
+            .collect();
+        self.rounds.push(Round {
+            marks: self.marks,
+            added: self.marks - self.added_from,
+            scores: relevo_core::veg::protocol::Scores::of(&detections, truth),
+        });
+    }
+
     /// Start detection on the drape with the marked samples.
     pub fn detect(&mut self) {
+        // The marks this round adds: those since the round before (all of
+        // them for the first, or when marks were deleted since).
+        self.added_from = if self.runs > 0 && self.samples.len() >= self.marks {
+            self.marks
+        } else {
+            0
+        };
+        self.marks = self.samples.len();
+        self.runs += 1;
         let bundle = self.bundle.clone();
         let csv = self.samples_csv();
         let options = self.options.clone();
@@ -177,6 +263,7 @@ impl SamplesTab {
                 self.detections = found.objects;
                 self.pending_overlay = Some(found.overlay);
                 self.fresh = true;
+                self.score_round();
             }
             Ok(Err(e)) => self.status = e,
             Err(_) => {
@@ -232,6 +319,21 @@ impl SamplesTab {
                     self.load_samples();
                 }
             });
+            ui.horizontal(|ui| {
+                let label = ui.label("truth boxes");
+                ui.text_edit_singleline(&mut self.truth_path)
+                    .labelled_by(label.id);
+                if ui.button("load truth").clicked() {
+                    self.load_truth();
+                }
+            });
+            for (k, round) in self.rounds.iter().enumerate() {
+                let (a, b) = (&round.scores.iou_0_4, &round.scores.iou_0_5);
+                ui.label(format!(
+                    "round {k}: {} marks (+{}) · IoU 0.4: P {:.2} R {:.2} F1 {:.3} · IoU 0.5: F1 {:.3}",
+                    round.marks, round.added, a.precision, a.recall, a.f1, b.f1
+                ));
+            }
             ui.horizontal(|ui| {
                 let label = ui.label("class");
                 ui.text_edit_singleline(&mut self.class)
@@ -359,20 +461,23 @@ impl SamplesTab {
                         }
                     }
                 }
-                for (class, [x0, y0, x1, y1]) in &self.samples {
+                // The marks the last round added to the one before, in
+                // orange.
+                let added = self.added_from..self.marks;
+                for (k, (class, [x0, y0, x1, y1])) in self.samples.iter().enumerate() {
                     let r = egui::Rect::from_min_max(egui::pos2(*x0, *y0), egui::pos2(*x1, *y1));
-                    painter.rect_stroke(
-                        r,
-                        0.0,
-                        (1.0, egui::Color32::WHITE),
-                        egui::StrokeKind::Outside,
-                    );
+                    let colour = if added.contains(&k) && self.runs > 1 {
+                        egui::Color32::from_rgb(255, 150, 30)
+                    } else {
+                        egui::Color32::WHITE
+                    };
+                    painter.rect_stroke(r, 0.0, (1.0, colour), egui::StrokeKind::Outside);
                     painter.text(
                         r.left_top(),
                         egui::Align2::LEFT_BOTTOM,
                         class,
                         egui::FontId::proportional(6.0),
-                        egui::Color32::WHITE,
+                        colour,
                     );
                 }
                 // A rectangle follows the pointer while it is dragged (also
@@ -482,7 +587,7 @@ pub fn detect(
     let samples: Vec<Sample> = relevo_core::veg::samples::parse_csv(samples_csv, w, h)?;
     let extraction =
         pipeline::extract_watched(&image, &samples, options, pipeline::RegionMap::Keep, watch)?;
-    let overlay = pipeline::overlay(&image, &extraction, &options.negative_class)?;
+    let overlay = pipeline::overlay(&image, &extraction, &samples, &options.negative_class)?;
     Ok(Detection {
         objects: extraction.objects,
         overlay,
@@ -503,8 +608,9 @@ pub fn bundle_options(bundle: &Bundle) -> VegOptions {
 
 /// The samples tab as an image for inspection (`relevo-view render --tab
 /// samples`): detection with the samples CSV at `samples` (drape pixels)
-/// on the drape, relevo-core's overlay, and the sample rectangles outlined
-/// in white. RGBA8, its size and the objects found. Errors name the file.
+/// on the drape and relevo-core's overlay, the sample rectangles outlined
+/// (white, black for counter-examples). RGBA8, its size and the objects
+/// found. Errors name the file.
 pub fn render_tab(bundle: &Path, samples: &Path) -> anyhow::Result<(Vec<u8>, [usize; 2], usize)> {
     let opened = Bundle::open(bundle)?;
     let options = bundle_options(&opened);
@@ -514,21 +620,8 @@ pub fn render_tab(bundle: &Path, samples: &Path) -> anyhow::Result<(Vec<u8>, [us
         })?;
     let [w, h] = [drape.width, drape.height];
     let samples_csv = relevo_core::files::read_to_string(samples)?;
-    let rectangles = relevo_core::veg::samples::parse_csv(&samples_csv, w, h)
+    relevo_core::veg::samples::parse_csv(&samples_csv, w, h)
         .with_context(|| samples.display().to_string())?;
     let found = detect(bundle, &samples_csv, &options, &Watch::default())?;
-    let mut rgba = found.overlay;
-    for sample in rectangles {
-        let [x0, y0, x1, y1] = sample.bounds();
-        let (x0, x1) = (x0.max(0.0) as usize, (x1 as usize).min(w - 1));
-        let (y0, y1) = (y0.max(0.0) as usize, (y1 as usize).min(h - 1));
-        for y in y0..=y1 {
-            for x in x0..=x1 {
-                if y == y0 || y == y1 || x == x0 || x == x1 {
-                    rgba[(y * w + x) * 4..(y * w + x) * 4 + 4].copy_from_slice(&[255; 4]);
-                }
-            }
-        }
-    }
-    Ok((rgba, [w, h], found.objects.len()))
+    Ok((found.overlay, [w, h], found.objects.len()))
 }

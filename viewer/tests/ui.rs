@@ -307,6 +307,69 @@ fn broken_samples_and_an_unwritable_bundle_are_reported_in_the_window() {
     assert_eq!(std::fs::read(&staging).unwrap(), b"not a directory");
 }
 
+/// With truth boxes loaded, each detection is a round: its figures are
+/// shown, with the marks it ran with and how many were new.
+#[test]
+fn the_samples_tab_scores_each_round_against_truth_boxes() {
+    let dir = tempfile::tempdir().unwrap();
+    let bundle = common::grenoble_bundle_with_drape(dir.path());
+    let mut harness = samples_tab_of(&bundle);
+    let marks = dir.path().join("marks.csv");
+    std::fs::write(&marks, "forest;100;116;140;150\nother;140;60;180;90\n").unwrap();
+    let tab = harness.state_mut().samples_tab().unwrap();
+    tab.samples_path = marks.display().to_string();
+    tab.options.density_per_ha = 1.0 / 45.0;
+    harness.get_by_label("load").click();
+    harness.run_steps(2);
+    // Truth: the first detection's own objects as boxes of their size (in
+    // drape pixels), so the first round scores 1; a broken file is named.
+    detect(&mut harness);
+    let bad = dir.path().join("truth.txt");
+    std::fs::write(&bad, "1,2,3\n").unwrap();
+    let tab = harness.state_mut().samples_tab().unwrap();
+    tab.truth_path = bad.display().to_string();
+    harness.get_by_label("load truth").click();
+    harness.run_steps(2);
+    assert!(problem_shown(&mut harness).contains("truth.txt"));
+    let opened = relevo_core::bundle::Bundle::open(&bundle).unwrap();
+    let g = opened.manifest.color.as_ref().unwrap().geotransform;
+    let pixel_m = g.cell_size().0.abs().min(g.cell_size().1.abs());
+    let tab = harness.state_mut().samples_tab().unwrap();
+    let boxes: Vec<String> = tab
+        .detections
+        .iter()
+        .map(|o| {
+            let (x, y) = g.invert(o.x, o.y).unwrap();
+            let r = o.size / pixel_m / 2.0;
+            format!("{},{},{},{}", x - r, y - r, x + r, y + r)
+        })
+        .collect();
+    assert!(!boxes.is_empty());
+    let truth = dir.path().join("truth.csv");
+    std::fs::write(&truth, boxes.join("\n")).unwrap();
+    tab.truth_path = truth.display().to_string();
+    harness.get_by_label("load truth").click();
+    harness.run_steps(2);
+    detect(&mut harness);
+    harness.run_steps(2);
+    let tab = harness.state_mut().samples_tab().unwrap();
+    assert_eq!(tab.rounds.len(), 1, "{:?}", tab.problem);
+    assert_eq!((tab.rounds[0].marks, tab.rounds[0].added), (2, 0));
+    assert!((tab.rounds[0].scores.iou_0_4.f1 - 1.0).abs() < 1e-9);
+    // A counter-example over some of the truth: the next round counts it
+    // as new and scores lower.
+    tab.samples.push(("other".into(), [0.0, 0.0, 90.0, 90.0]));
+    // (Laid out again first: the new rectangle's row moves the buttons.)
+    harness.run_steps(2);
+    detect(&mut harness);
+    harness.run_steps(2);
+    let tab = harness.state_mut().samples_tab().unwrap();
+    assert_eq!(tab.rounds.len(), 2, "{} {:?}", tab.status, tab.problem);
+    assert_eq!((tab.rounds[1].marks, tab.rounds[1].added), (3, 1));
+    assert!(tab.rounds[1].scores.iou_0_4.recall < 1.0);
+    harness.get_by_label_contains("round 1: 3 marks (+1)");
+}
+
 /// The window on `bundle` with its samples tab open.
 fn samples_tab_of(bundle: &std::path::Path) -> Harness<'static, ViewerApp> {
     let mut harness = window(bundle);

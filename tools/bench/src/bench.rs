@@ -283,10 +283,15 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
         drop(runs_done);
         let report = &tiled.report;
         let steps = tiled.steps;
-        let points = |e: &relevo_core::veg::pipeline::Extraction| -> Vec<(f64, f64, f32)> {
-            e.objects.iter().map(|o| (o.x, o.y, o.score)).collect()
+        let f1 = |e: &relevo_core::veg::pipeline::Extraction| {
+            eval::evaluate(
+                &eval::Detection::of_objects(&e.objects, 1.0),
+                &truth,
+                eval::Criterion::Centre,
+            )
+            .f1
         };
-        let tiled_f1 = eval::evaluate(&points(&tiled), &truth);
+        let tiled_f1 = f1(&tiled);
         // The same image analysed whole (one tile), up to 25 Mpx: how far
         // the tiled result is from it.
         let whole = if report.tiles > 1 && mpx <= 25.0 {
@@ -309,7 +314,7 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
                 .count();
             Some(
                 json!({"ms": ms, "objects": r.objects.len(), "found_again_by_tiles": again,
-                        "f1": eval::evaluate(&points(&r), &truth).f1}),
+                        "f1": f1(&r)}),
             )
         } else {
             None
@@ -328,7 +333,7 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
                    "total_ms": total_ms, "total_mpx_s": mpx / total_ms * 1e3,
                    "segment_ms_summed": report.segment_ms, "classify_ms_summed": report.classify_ms,
                    "place_ms_summed": report.detect_ms, "segment_steps_summed": steps,
-                   "objects": report.objects, "f1": tiled_f1.f1, "whole": whole,
+                   "objects": report.objects, "f1": tiled_f1, "whole": whole,
                    "cli": cli,
                    "felzenszwalb": felzenszwalb,
                    "felzenszwalb_mpx_s": fz_ms.map(|ms| mpx / ms * 1e3)}),
@@ -337,7 +342,7 @@ pub fn veg(repo: &Path, data: &Path, runs: usize, max_side: usize, json_lines: b
                 report.tiles,
                 mpx / total_ms * 1e3,
                 report.objects,
-                tiled_f1.f1,
+                tiled_f1,
                 report.segment_ms,
                 steps.split_ms,
                 steps.adjacency_ms,
@@ -641,19 +646,27 @@ fn veg_accuracy(
     options: &relevo_core::veg::pipeline::VegOptions,
     json_lines: bool,
 ) -> Result<Option<MarkedCrop>> {
+    use relevo_core::veg::detect::Placement;
     use relevo_core::veg::pipeline::extract;
     use relevo_core::veg::{baseline, eval};
     let mut yellowstone = None;
-    for crop in crate::veg_protocol::annotated(repo, data)? {
+    for crop in relevo::veg_io::annotated_crops(repo, data)? {
         let (name, image, samples, truth) = (crop.name, crop.image, crop.samples, crop.truth);
         let result = extract(&image, &samples, options)?;
-        let ours: Vec<(f64, f64, f32)> =
-            result.objects.iter().map(|o| (o.x, o.y, o.score)).collect();
-        // Baseline components must be at least a crown of the smallest radius.
-        let min_area = (std::f64::consts::PI * (options.crown_min_radius_m / 0.1).powi(2)) as usize;
-        let theirs = baseline::excess_green(&image.image, min_area);
-        let e = eval::evaluate(&ours, &truth);
-        let b = eval::evaluate(&theirs, &truth);
+        let ours = eval::Detection::of_objects(&result.objects, image.pixel_m);
+        // The baseline places crowns as the extraction did (spacing, radius).
+        let Placement::Crowns {
+            spacing_px,
+            min_radius_px,
+            ..
+        } = result.report.placement
+        else {
+            anyhow::bail!("{name}: crowns were not placed");
+        };
+        let theirs = baseline::excess_green_crowns(&image.image, spacing_px, min_radius_px);
+        let centre = eval::Criterion::Centre;
+        let e = eval::evaluate(&ours, &truth, centre);
+        let b = eval::evaluate(&theirs, &truth, centre);
         // The same away from the samples: boxes and detections whose centre
         // lies in a marked rectangle are left out (a marked crown is easy).
         let marked = |x: f64, y: f64| samples.iter().any(|s| s.contains(x, y));
@@ -662,11 +675,11 @@ fn veg_accuracy(
             .filter(|b| !marked((b[0] + b[2]) / 2.0, (b[1] + b[3]) / 2.0))
             .copied()
             .collect();
-        let unmarked = |d: &[(f64, f64, f32)]| -> Vec<(f64, f64, f32)> {
-            d.iter().filter(|p| !marked(p.0, p.1)).copied().collect()
+        let unmarked = |d: &[eval::Detection]| -> Vec<eval::Detection> {
+            d.iter().filter(|p| !marked(p.x, p.y)).copied().collect()
         };
-        let e_away = eval::evaluate(&unmarked(&ours), &unmarked_truth);
-        let b_away = eval::evaluate(&unmarked(&theirs), &unmarked_truth);
+        let e_away = eval::evaluate(&unmarked(&ours), &unmarked_truth, centre);
+        let b_away = eval::evaluate(&unmarked(&theirs), &unmarked_truth, centre);
         emit(
             json_lines,
             json!({"bench": "veg-accuracy", "image": name, "boxes": truth.len(),

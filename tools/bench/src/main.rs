@@ -138,13 +138,23 @@ enum BenchCommand {
         #[arg(long, default_value_t = 10000)]
         max_side: usize,
     },
-    /// Vegetation across images: options tuned on one annotated image and
-    /// reported on the other, both ways; the defaults on both and on
+    /// Vegetation on images it was not tuned on: leave each annotated crop
+    /// out, choose the options on the others and score it (IoU 0.4 and
+    /// 0.5), beside the defaults and the excess-green + local-maximum
+    /// baseline; the simulated user's correction loop; the defaults on
     /// contrast-changed copies.
     #[command(after_help = "Examples:
   relevo-bench veg-protocol
-  relevo-bench veg-protocol --json")]
-    VegProtocol(BenchArgs),
+  relevo-bench veg-protocol --json
+  relevo-bench veg-protocol --rounds-dir rounds   # each round's marks as samples CSV")]
+    VegProtocol {
+        #[command(flatten)]
+        common: BenchArgs,
+        /// Write the marks of each crop's correction rounds there, as
+        /// samples CSV (`{crop}_round{k}.csv`), to look at or detect with.
+        #[arg(long, value_name = "DIR")]
+        rounds_dir: Option<PathBuf>,
+    },
     /// The viewer's vegetation on the GPU found (lavapipe without one), at
     /// 1280×720: the seed's tables 4.1–4.5 (billboards against sprites,
     /// culling along a flight, texture sizes, list/blobs/quadtree, large
@@ -304,7 +314,10 @@ fn main() -> ExitCode {
             common: a,
             max_side,
         } => bench::veg(&a.repo, &a.data, a.runs.max(1), max_side, a.json),
-        BenchCommand::VegProtocol(a) => veg_protocol::run(&a.repo, &a.data, a.json),
+        BenchCommand::VegProtocol {
+            common: a,
+            rounds_dir,
+        } => veg_protocol::run(&a.repo, &a.data, rounds_dir.as_deref(), a.json),
         BenchCommand::Hierarchy {
             common: a,
             max_side,

@@ -27,6 +27,91 @@ const STRIP_ROWS: usize = 256;
 /// Most cells of the view stretch percentiles are taken from.
 const STRETCH_VIEW_CELLS: usize = 1 << 22;
 
+/// What a band holds, as vegetation extraction tells it from the band's
+/// colour interpretation or description.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum BandRole {
+    Red,
+    Green,
+    Blue,
+    NearInfrared,
+}
+
+impl BandRole {
+    /// The role GDAL's colour interpretation (by name, so that those newer
+    /// than this binary read as unknown) or the band's description names.
+    fn of(band: &gdal::raster::RasterBand) -> Option<BandRole> {
+        use gdal::Metadata;
+        // SAFETY: the band handle is valid while `band` lives; the name is
+        // a static string GDAL owns.
+        let interpretation = unsafe {
+            let c = gdal_sys::GDALGetRasterColorInterpretation(band.c_rasterband());
+            let name = gdal_sys::GDALGetColorInterpretationName(c);
+            if name.is_null() {
+                String::new()
+            } else {
+                std::ffi::CStr::from_ptr(name)
+                    .to_string_lossy()
+                    .to_lowercase()
+            }
+        };
+        let description = band.description().unwrap_or_default().to_lowercase();
+        let says = |words: &[&str]| {
+            words.iter().any(|w| {
+                interpretation == *w
+                    || description
+                        .split(|c: char| !c.is_alphanumeric())
+                        .any(|d| d == *w)
+            })
+        };
+        let near_infrared = says(&["nir", "nir1"])
+            || description.contains("near infrared")
+            || description.contains("near-infrared");
+        if near_infrared {
+            Some(BandRole::NearInfrared)
+        } else if says(&["red"]) {
+            Some(BandRole::Red)
+        } else if says(&["green"]) {
+            Some(BandRole::Green)
+        } else if says(&["blue"]) {
+            Some(BandRole::Blue)
+        } else {
+            None
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            BandRole::Red => "red",
+            BandRole::Green => "green",
+            BandRole::Blue => "blue",
+            BandRole::NearInfrared => "near-infrared",
+        }
+    }
+}
+
+/// The bands analysed when none are asked for (1-based), from each band's
+/// role: red, green and blue and the near-infrared band when the image has
+/// one — a band named so, or the untagged fourth band after red, green and
+/// blue, as 4-band aerial imagery (NAIP) carries it; otherwise the first
+/// three.
+fn default_bands(roles: &[Option<BandRole>]) -> Vec<usize> {
+    let find = |role: BandRole| roles.iter().position(|&r| r == Some(role)).map(|i| i + 1);
+    let rgb = [BandRole::Red, BandRole::Green, BandRole::Blue].map(find);
+    let near_infrared = find(BandRole::NearInfrared).or_else(|| {
+        (roles.len() == 4 && rgb == [Some(1), Some(2), Some(3)] && roles[3].is_none()).then_some(4)
+    });
+    match (rgb, near_infrared) {
+        ([Some(r), Some(g), Some(b)], Some(n)) => vec![r, g, b, n],
+        (_, Some(n)) if roles.len() >= 3 => {
+            let mut bands: Vec<usize> = (1..=3).filter(|&b| b != n).collect();
+            bands.push(n);
+            bands
+        }
+        _ => (1..=roles.len().min(3)).collect(),
+    }
+}
+
 /// Read `bands` (1-based) of `path` whole; see [`ImageReader`].
 pub fn read_image(
     path: &Path,
@@ -46,6 +131,8 @@ pub fn read_image(
 pub struct ImageReader {
     path: std::path::PathBuf,
     bands: Vec<usize>,
+    /// What each analysed band is ("red", "near-infrared", "band 5").
+    pub band_roles: Vec<String>,
     /// Per band, the values stretched to 0 and 255.
     ranges: Vec<(f64, f64)>,
     /// 8-bit bands copied as they are.
@@ -70,9 +157,18 @@ impl ImageReader {
         pixel_m: Option<f64>,
     ) -> Result<ImageReader> {
         let source = gdalio::open(path)?;
+        let roles: Vec<Option<BandRole>> = (1..=source.bands)
+            .map(|b| {
+                source
+                    .dataset
+                    .rasterband(b)
+                    .ok()
+                    .and_then(|band| BandRole::of(&band))
+            })
+            .collect();
         let bands: Vec<usize> = match bands {
             Some(b) => b.to_vec(),
-            None => (1..=source.bands.min(3)).collect(),
+            None => default_bands(&roles),
         };
         if bands.is_empty() || bands.len() > relevo_core::veg::MAX_BANDS {
             bail!(
@@ -144,9 +240,17 @@ impl ImageReader {
                 1.0
             }
         };
+        let band_roles = bands
+            .iter()
+            .map(|&b| match roles[b - 1] {
+                Some(role) => format!("{b} {}", role.name()),
+                None => format!("{b}"),
+            })
+            .collect();
         Ok(ImageReader {
             path: path.to_path_buf(),
             bands,
+            band_roles,
             ranges,
             as_bytes,
             byte_nodata,
@@ -303,6 +407,77 @@ fn read_byte_strip(
         }
     }
     Ok(())
+}
+
+/// The annotated NEON crops (0.1 m RGB) vegetation extraction is measured
+/// on (`relevo-bench veg-protocol`, the regression tests): name, image and
+/// truth stem under the shared data folder, the samples a user marked on
+/// it (in this repository).
+pub const ANNOTATED_CROPS: [(&str, &str, &str); 3] = [
+    (
+        "yellowstone",
+        "trees/2019_YELL_2_541000_4977000_image_crop",
+        "data/trees/yellowstone_samples.csv",
+    ),
+    (
+        "soap_061",
+        "trees/SOAP_061",
+        "data/trees/soap_061_samples.csv",
+    ),
+    (
+        "yellowstone_meadow",
+        "trees/2019_YELL_2_528000_4978000_image_crop2",
+        "data/trees/yellowstone_meadow_samples.csv",
+    ),
+];
+
+/// The annotated crops ([`ANNOTATED_CROPS`]) with their samples and truth
+/// boxes, from the repository `repo` and the shared data folder `data`.
+pub fn annotated_crops(
+    repo: &Path,
+    data: &Path,
+) -> Result<Vec<relevo_core::veg::protocol::Annotated>> {
+    ANNOTATED_CROPS
+        .into_iter()
+        .map(|(name, stem, samples)| {
+            annotated_crop(
+                name,
+                &data.join(format!("{stem}.png")),
+                &data.join(format!("{stem}.xml")),
+                &repo.join(samples),
+                0.1,
+            )
+        })
+        .collect()
+}
+
+/// An annotated crop for [`relevo_core::veg::protocol`]: the image (its
+/// first three bands, pixels of `pixel_m` metres where it is not
+/// georeferenced), the samples a user marked on it and its truth boxes
+/// (Pascal VOC, or CSV lines `xmin,ymin,xmax,ymax[,class]`).
+pub fn annotated_crop(
+    name: &str,
+    image: &Path,
+    truth: &Path,
+    samples: &Path,
+    pixel_m: f64,
+) -> Result<relevo_core::veg::protocol::Annotated> {
+    use relevo_core::veg::eval;
+    let image = read_image(image, None, None, Some(pixel_m))?;
+    let (w, h) = (image.image.width, image.image.height);
+    let samples = relevo_core::veg::samples::read_file(samples, None, w, h)?;
+    let text = relevo_core::files::read_to_string(truth)?;
+    let boxes = eval::parse_truth(&text).map_err(|e| anyhow!("{}: {e}", truth.display()))?;
+    Ok(relevo_core::veg::protocol::Annotated {
+        name: name.into(),
+        image,
+        samples,
+        truth: eval::bounds(&boxes),
+        truth_classes: boxes
+            .iter()
+            .map(|b| b.class.clone().unwrap_or_default().to_lowercase())
+            .collect(),
+    })
 }
 
 /// Write the objects as points of a GeoPackage layer `vegetation` (QGIS,
@@ -472,4 +647,41 @@ pub fn write_labels(path: &Path, image: &VegImage, extraction: &Extraction) -> R
         height: image.image.height,
     };
     gdalio::write_geotiff(path, &raster, &grid, GdalDataType::UInt32, Some(0.0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn near_infrared_is_analysed_by_default_where_the_bands_tell_it() {
+        use BandRole::{Blue, Green, NearInfrared, Red};
+        // NAIP and 4-band aerial imagery: R, G, B tagged, the fourth not.
+        assert_eq!(
+            default_bands(&[Some(Red), Some(Green), Some(Blue), None]),
+            [1, 2, 3, 4]
+        );
+        // Landsat-like stacks with descriptions, in any order.
+        assert_eq!(
+            default_bands(&[Some(Blue), Some(Green), Some(Red), Some(NearInfrared), None]),
+            [3, 2, 1, 4]
+        );
+        // A named near-infrared band without colour tags.
+        assert_eq!(
+            default_bands(&[None, None, None, None, Some(NearInfrared)]),
+            [1, 2, 3, 5]
+        );
+        // RGB, an RGB with an untagged fifth band, untagged bands: the
+        // first three.
+        assert_eq!(
+            default_bands(&[Some(Red), Some(Green), Some(Blue)]),
+            [1, 2, 3]
+        );
+        assert_eq!(
+            default_bands(&[Some(Red), Some(Green), Some(Blue), None, None]),
+            [1, 2, 3]
+        );
+        assert_eq!(default_bands(&[None; 6]), [1, 2, 3]);
+        assert_eq!(default_bands(&[None]), [1]);
+    }
 }

@@ -233,6 +233,7 @@ impl VegPlan {
         // As one extraction gathers them: by row, then column, tile order
         // kept among equals.
         found.sort_by(|a, b| a.y.total_cmp(&b.y).then(a.x.total_cmp(&b.x)));
+        let found = self.model.marked_places.hold(found);
         let objects =
             world_objects(
                 &found,

@@ -22,7 +22,7 @@ fn bake_repeats_prep_byte_for_byte_on_any_thread_count() {
     let dir = tempfile::tempdir().unwrap();
     let bundle = sample_bundle(dir.path());
     let info = relevo_ok(["info".as_ref(), bundle.as_os_str()]);
-    assert!(info.contains("clusters     11769 objects"), "{info}");
+    assert!(info.contains("clusters     11764 objects"), "{info}");
     assert!(
         info.contains("class forest") && info.contains("procedural:stand"),
         "{info}"

@@ -39,10 +39,13 @@ Examples:
     /// Precision, recall and F1 of detections against truth boxes (pixels).
     #[command(
         after_help = "A detection is a true positive when its centre falls inside a truth box not
-yet matched, taking detections from the highest score down.
+yet matched (or, with --iou, when its crown box, a square of its size, overlaps
+one by at least that intersection over union), taking detections from the
+highest score down.
 
 Examples:
   relevo veg eval --detections trees.csv --truth crop.xml
+  relevo veg eval --detections trees.csv --truth crop.xml --iou 0.4 --pixel-size 0.1
   relevo veg eval --detections trees.csv --truth boxes.csv --json
   relevo veg eval --detections trees.csv --truth crop.xml --matches matches.geojson"
     )]
@@ -54,6 +57,15 @@ Examples:
         /// xmin,ymin,xmax,ymax[,class].
         #[arg(long)]
         truth: PathBuf,
+        /// Match by crown box: at least this intersection over union
+        /// (0.4 and 0.5 are usual) instead of the centre inside the box.
+        #[arg(long, value_name = "MIN")]
+        iou: Option<f64>,
+        /// Metres per unit of x and y: the pixel size where detections and
+        /// truth are in pixels (a crop that is not georeferenced); sizes are
+        /// metres. Default 1 (x and y in metres).
+        #[arg(long, default_value_t = 1.0)]
+        pixel_size: f64,
         /// Also write the matches as GeoJSON: detections (matched or not)
         /// and truth boxes (found or missed), in the inputs' coordinates.
         #[arg(long, value_name = "FILE.geojson")]
@@ -75,7 +87,10 @@ pub struct VegDetectArgs {
     /// Marked samples: .csv (pixel rectangles) or .geojson (polygons).
     #[arg(long, required_unless_present = "plan")]
     pub samples: Option<PathBuf>,
-    /// Bands to analyse, 1-based (1 to 4), e.g. 3,2,1 or 1,2,3,4. Default: the first three.
+    /// Bands to analyse, 1-based (1 to 4), e.g. 3,2,1 or 1,2,3,4. Default:
+    /// red, green, blue and near-infrared when the image has a band named
+    /// so (or an untagged fourth band after red, green, blue, as NAIP);
+    /// else the first three.
     #[arg(long, value_delimiter = ',')]
     pub bands: Option<Vec<usize>>,
     /// Percentiles LOW,HIGH stretched to 0..255 (default: none for 8-bit, 2,98 otherwise).
@@ -219,10 +234,30 @@ pub fn run(command: VegCommand) -> Result<()> {
         VegCommand::Eval {
             detections,
             truth,
+            iou,
+            pixel_size,
             matches,
             force,
             json,
-        } => score(&detections, &truth, matches.as_deref(), force, json),
+        } => {
+            let criterion = match iou {
+                None => eval::Criterion::Centre,
+                Some(min) if min > 0.0 && min <= 1.0 => eval::Criterion::Iou { min },
+                Some(min) => bail!("--iou: {min} is not an overlap between 0 (excluded) and 1"),
+            };
+            if !(pixel_size.is_finite() && pixel_size > 0.0) {
+                bail!("--pixel-size: {pixel_size} is not a positive size in metres");
+            }
+            score(
+                &detections,
+                &truth,
+                criterion,
+                pixel_size,
+                matches.as_deref(),
+                force,
+                json,
+            )
+        }
     }
 }
 
@@ -238,7 +273,10 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
         .chain(a.labels.iter())
         .chain(a.overlay.iter());
     output::check(&outputs.map(PathBuf::as_path).collect::<Vec<_>>(), a.force)?;
-    let image = veg_io::read_image(image_path, a.bands.as_deref(), a.stretch, a.pixel_size)?;
+    let reader =
+        veg_io::ImageReader::open(image_path, a.bands.as_deref(), a.stretch, a.pixel_size)?;
+    let band_roles = reader.band_roles.clone();
+    let image = reader.whole()?;
     let samples = samples::read_file(
         samples_path,
         image.geotransform,
@@ -272,7 +310,7 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
         veg_io::write_labels(&outputs.pending(path), &image, &extraction)?;
     }
     if let Some(path) = &a.overlay {
-        let rgba = pipeline::overlay(&image, &extraction, &options.negative_class)?;
+        let rgba = pipeline::overlay(&image, &extraction, &samples, &options.negative_class)?;
         let png = encode_rgba(&rgba, image.image.width, image.image.height)?;
         output::write_atomic(&outputs.pending(path), &png)?;
     }
@@ -284,6 +322,7 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
     let r = &extraction.report;
     if a.json {
         let mut report = serde_json::to_value(r)?;
+        report["bands"] = serde_json::to_value(&band_roles)?;
         if let Some((figures, baseline)) = &land_cover {
             report["land_cover"] = serde_json::to_value(figures)?;
             report["land_cover_excess_green"] = serde_json::to_value(baseline)?;
@@ -294,6 +333,15 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
             "{}: {}×{} px of {:.2} m, {} leaves → {} regions, {} objects ({:.0} ms split-and-merge, {:.0} ms classify, {:.0} ms place)",
             image_path.display(), r.width, r.height, r.pixel_m, r.leaves, r.regions, r.objects,
             r.segment_ms, r.classify_ms, r.detect_ms
+        );
+        println!(
+            "  bands analysed: {}{}",
+            band_roles.join(", "),
+            if a.bands.is_none() {
+                " (the default: red, green, blue and near-infrared when the image has it)"
+            } else {
+                ""
+            }
         );
         if let (relevo_core::veg::detect::Placement::Crowns { spacing_px, .. }, None) =
             (r.placement, options.crown_spacing_m)
@@ -498,6 +546,8 @@ fn class_kinds(extraction: &pipeline::Extraction) -> impl Iterator<Item = (&str,
 fn score(
     detections: &Path,
     truth: &Path,
+    criterion: eval::Criterion,
+    metres_per_unit: f64,
     matches_out: Option<&Path>,
     force: bool,
     json: bool,
@@ -509,14 +559,13 @@ fn score(
     let objects = db::from_csv(&read(detections)?)
         .map_err(|e| anyhow::anyhow!("{}: {e}", detections.display()))?;
     let text = read(truth)?;
-    let boxes = if text.trim_start().starts_with('<') {
-        eval::parse_voc(&text)
-    } else {
-        eval::parse_box_csv(&text)
-    }
-    .map_err(|e| anyhow::anyhow!("{}: {e}", truth.display()))?;
-    let points: Vec<(f64, f64, f32)> = objects.iter().map(|o| (o.x, o.y, o.score)).collect();
-    let found = eval::matches(&points, &eval::bounds(&boxes));
+    let boxes =
+        eval::parse_truth(&text).map_err(|e| anyhow::anyhow!("{}: {e}", truth.display()))?;
+    let found = eval::matches(
+        &eval::Detection::of_objects(&objects, metres_per_unit),
+        &eval::bounds(&boxes),
+        criterion,
+    );
     let e = eval::Evaluation::of(&found, boxes.len());
     let classes: Vec<&str> = objects.iter().map(|o| o.class.as_str()).collect();
     let per_class = eval::per_class(&classes, &boxes, &found);
@@ -529,6 +578,7 @@ fn score(
     if json {
         // The overall figures at the top (as before), the classes beside them.
         let mut report = serde_json::to_value(e)?;
+        report["criterion"] = serde_json::to_value(criterion)?;
         report["classes"] = serde_json::to_value(&per_class.classes)?;
         report["confusion"] = serde_json::to_value(&per_class.confusion)?;
         println!("{}", serde_json::to_string_pretty(&report)?);

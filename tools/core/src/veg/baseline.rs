@@ -1,41 +1,48 @@
 //! A simple baseline to measure the Haar-signature detector against: the
 //! excess-green index ExG = 2g − r − b of chromatic coordinates (Woebbecke et
 //! al., "Color indices for weed identification", 1995), thresholded by Otsu's
-//! method, and one object per 4-connected component.
+//! method, with a crown at each local maximum of the smoothed index inside
+//! that mask (the local-maximum filtering of Wulder, Niemann & Goodenough
+//! 2000, as the detector places crowns).
 
+use super::detect::place_crowns;
+use super::eval::Detection;
 use super::Image;
 
-/// Objects `(x, y, score)` in pixel coordinates: the centroid of every
-/// 4-connected component of at least `min_area` pixels whose ExG exceeds the
-/// Otsu threshold; score is the component's area. Bands must be R, G, B.
-pub fn excess_green(image: &Image, min_area: usize) -> Vec<(f64, f64, f32)> {
+/// Crowns `spacing_px` apart at the local maxima of excess green inside
+/// its Otsu mask, each with a disc of at least `min_radius_px` of the mask
+/// around it: centre in pixels, score the smoothed index, and the
+/// diameter the window's, `spacing_px` (fixed-window local-maximum
+/// filtering takes the window as the expected crown). Bands must be R, G,
+/// B.
+pub fn excess_green_crowns(image: &Image, spacing_px: f32, min_radius_px: f32) -> Vec<Detection> {
     let (w, h) = (image.width, image.height);
-    let mut seen: Vec<bool> = excess_green_mask(image).iter().map(|&v| !v).collect();
-    let mut objects = Vec::new();
-    let mut stack = Vec::new();
-    for start in 0..w * h {
-        if seen[start] {
-            continue;
-        }
-        seen[start] = true;
-        stack.push(start);
-        let (mut n, mut sx, mut sy) = (0usize, 0.0f64, 0.0f64);
-        while let Some(i) = stack.pop() {
-            n += 1;
-            sx += (i % w) as f64 + 0.5;
-            sy += (i / w) as f64 + 0.5;
-            for j in crate::grid::neighbours4(i, w, h) {
-                if !seen[j] {
-                    seen[j] = true;
-                    stack.push(j);
-                }
-            }
-        }
-        if n >= min_area {
-            objects.push((sx / n as f64, sy / n as f64, n as f32));
-        }
-    }
-    objects
+    let outside: Vec<bool> = excess_green_mask(image).iter().map(|&v| !v).collect();
+    let mut value: Vec<f32> = image.pixels.chunks_exact(image.bands).map(exg).collect();
+    let crowns = place_crowns(
+        &mut value,
+        &mut Vec::new(),
+        &outside,
+        w,
+        h,
+        spacing_px,
+        min_radius_px,
+    );
+    crowns
+        .into_iter()
+        .map(|(i, _)| Detection {
+            x: (i % w) as f64 + 0.5,
+            y: (i / w) as f64 + 0.5,
+            diameter: spacing_px as f64,
+            score: value[i],
+        })
+        .collect()
+}
+
+/// Excess green of an R, G, B pixel, −1 to 2.
+fn exg(p: &[u8]) -> f32 {
+    let (r, g, b) = (p[0] as f32, p[1] as f32, p[2] as f32);
+    (2.0 * g - r - b) / (r + g + b).max(1.0)
 }
 
 /// Per pixel, row-major: whether its ExG exceeds the image's Otsu threshold
@@ -46,12 +53,7 @@ pub fn excess_green_mask(image: &Image) -> Vec<bool> {
     let bins: Vec<u8> = image
         .pixels
         .chunks_exact(image.bands)
-        .map(|p| {
-            let (r, g, b) = (p[0] as f32, p[1] as f32, p[2] as f32);
-            let sum = (r + g + b).max(1.0);
-            let exg = (2.0 * g - r - b) / sum;
-            (((exg + 1.0) / 3.0) * 255.0).round().clamp(0.0, 255.0) as u8
-        })
+        .map(|p| (((exg(p) + 1.0) / 3.0) * 255.0).round().clamp(0.0, 255.0) as u8)
         .collect();
     let threshold = otsu(&bins);
     bins.iter().map(|&v| v > threshold).collect()
@@ -101,19 +103,28 @@ mod tests {
     }
 
     #[test]
-    fn green_blobs_become_objects() {
-        // Two green squares on grey soil.
-        let (w, h) = (20, 10);
+    fn green_crowns_are_found_at_their_middles() {
+        // Two green crowns (darker, so less green, at their rims) on grey
+        // soil, 12 pixels apart.
+        let (w, h) = (30, 16);
         let mut px = vec![120u8; w * h * 3];
-        for (x0, y0) in [(2, 2), (12, 4)] {
-            for y in y0..y0 + 4 {
-                for x in x0..x0 + 4 {
-                    px[(y * w + x) * 3..(y * w + x) * 3 + 3].copy_from_slice(&[60, 160, 50]);
+        for (cx, cy) in [(8i64, 8i64), (20, 8)] {
+            for y in 0..h as i64 {
+                for x in 0..w as i64 {
+                    let d2 = (x - cx).pow(2) + (y - cy).pow(2);
+                    if d2 <= 16 {
+                        let i = (y as usize * w + x as usize) * 3;
+                        let g = 200 - 8 * d2 as u8;
+                        px[i..i + 3].copy_from_slice(&[60, g, 50]);
+                    }
                 }
             }
         }
         let image = Image::new(w, h, 3, px).unwrap();
-        let found = excess_green(&image, 4);
-        assert_eq!(found, vec![(4.0, 4.0, 16.0), (14.0, 6.0, 16.0)]);
+        let mut found = excess_green_crowns(&image, 6.0, 1.0);
+        found.sort_by(|a, b| a.x.total_cmp(&b.x));
+        let centres: Vec<(f64, f64)> = found.iter().map(|d| (d.x, d.y)).collect();
+        assert_eq!(centres, [(8.5, 8.5), (20.5, 8.5)]);
+        assert!(found.iter().all(|d| d.diameter == 6.0));
     }
 }

@@ -35,13 +35,30 @@ pub fn sample_signatures(
     image: &Image,
     segmentation: &Segmentation,
     sample: &Sample,
+    crown: bool,
     window_px: u32,
 ) -> Vec<Vec<f32>> {
+    // A crown is round: the corners of the rectangle around it are what
+    // it stands on, so its regions are those centred in the inscribed
+    // ellipse.
+    let [x0, y0, x1, y1] = sample.bounds();
+    let (cx, cy, rx, ry) = (
+        (x0 + x1) / 2.0,
+        (y0 + y1) / 2.0,
+        (x1 - x0) / 2.0,
+        (y1 - y0) / 2.0,
+    );
+    let in_crown = |x: f64, y: f64| {
+        !crown || ((x - cx) / rx.max(0.5)).powi(2) + ((y - cy) / ry.max(0.5)).powi(2) <= 1.0
+    };
     let mut inside: Vec<usize> = segmentation
         .regions
         .iter()
         .enumerate()
-        .filter(|(_, r)| sample.contains(r.centroid[0] as f64, r.centroid[1] as f64))
+        .filter(|(_, r)| {
+            let (x, y) = (r.centroid[0] as f64, r.centroid[1] as f64);
+            sample.contains(x, y) && in_crown(x, y)
+        })
         .map(|(k, _)| k)
         .collect();
     if let Some(k) = dominant_region(segmentation, sample) {

@@ -28,6 +28,15 @@ pub enum Placement {
         spacing_px: f32,
         /// Crowns whose disc radius is smaller are dropped (pixels).
         min_radius_px: f32,
+        /// A crown's size is its disc of vegetation's diameter times this:
+        /// learnt from the marked crowns (their marks' sides over the discs
+        /// measured in them), 1 when nothing tells.
+        #[serde(default = "unit_gain")]
+        size_gain: f32,
+        /// Largest size a crown is given (pixels): half again the largest
+        /// marked crown; none when no crown was marked.
+        #[serde(default)]
+        max_size_px: Option<f32>,
     },
     /// Objects on a jittered grid inside vegetation regions.
     Fill {
@@ -36,6 +45,11 @@ pub enum Placement {
         /// Size given to every object (pixels).
         diameter_px: f32,
     },
+}
+
+/// The size gain of crowns placed before it was learnt.
+fn unit_gain() -> f32 {
+    1.0
 }
 
 /// A detected object in pixel coordinates.
@@ -120,6 +134,8 @@ pub fn detect(
         Placement::Crowns {
             spacing_px,
             min_radius_px,
+            size_gain,
+            max_size_px,
         } => {
             let DetectBuffers {
                 outside,
@@ -137,40 +153,62 @@ pub fn detect(
                     .par_chunks_exact(image.bands)
                     .map(|px| super::opponent(px)[0]),
             );
-            let blur = (0.3 * spacing_px).round() as usize;
-            // The blur writes every row's means before it reads them.
-            rows.resize(w * h, 0.0);
-            box_blur(value, rows, w, h, blur);
-            box_blur(value, rows, w, h, blur);
-            value.par_iter_mut().zip(outside).for_each(|(v, &out)| {
-                if out {
-                    *v = f32::MIN;
-                }
-            });
-            // Candidates: maxima of their (2r+1)² window (each is first a
-            // 3×3 maximum, a cheap test that few pixels pass) with a disc of
-            // vegetation of at least the smallest radius around them.
-            let r = (spacing_px.max(1.0) / 2.0).ceil() as usize;
-            let limit = (2.0 * spacing_px).ceil().max(2.0) as usize;
-            let min_radius = min_radius_px.max(1.0);
-            let mut candidates: Vec<(usize, f32)> = local_maxima(value, outside, w, h)
-                .into_par_iter()
-                .filter(|&i| is_window_max(value, w, h, i % w, i / w, r))
-                .map(|i| (i, vegetation_radius(outside, w, h, i, limit)))
-                .filter(|&(_, radius)| radius >= min_radius)
-                .collect();
-            candidates.sort_by(|a, b| value[b.0].total_cmp(&value[a.0]).then(a.0.cmp(&b.0)));
-            let kept = suppress(&candidates, w, spacing_px.max(1.0));
+            let kept = place_crowns(value, rows, outside, w, h, spacing_px, min_radius_px);
             kept.into_iter()
                 .map(|(i, radius)| {
                     let (x, y) = (i % w, i / w);
-                    object(x as f64 + 0.5, y as f64 + 0.5, 2.0 * radius)
+                    let size_px = (2.0 * radius * size_gain).min(max_size_px.unwrap_or(f32::MAX));
+                    object(x as f64 + 0.5, y as f64 + 0.5, size_px)
                 })
                 .collect()
         }
     };
     objects.sort_by(|a, b| a.y.total_cmp(&b.y).then(a.x.total_cmp(&b.x)));
     objects
+}
+
+/// Crown centres on a `w`×`h` grid of `value`s (brightness, a greenness
+/// index: larger at a crown's top), outside the cells marked `outside`:
+/// the values are smoothed over about a third of `spacing_px`, a centre is
+/// the maximum of its window of `spacing_px` inside the mask with a disc of
+/// at least `min_radius_px` of mask around it, and centres are kept from
+/// the highest value down, at least `spacing_px` apart (Wulder, Niemann &
+/// Goodenough 2000). Returns each centre's cell index and disc radius
+/// (pixels), best first; `value` is left smoothed (−∞-like outside) and
+/// `rows` is scratch of the same size.
+pub fn place_crowns(
+    value: &mut [f32],
+    rows: &mut Vec<f32>,
+    outside: &[bool],
+    w: usize,
+    h: usize,
+    spacing_px: f32,
+    min_radius_px: f32,
+) -> Vec<(usize, f32)> {
+    let blur = (0.3 * spacing_px).round() as usize;
+    // The blur writes every row's means before it reads them.
+    rows.resize(w * h, 0.0);
+    box_blur(value, rows, w, h, blur);
+    box_blur(value, rows, w, h, blur);
+    value.par_iter_mut().zip(outside).for_each(|(v, &out)| {
+        if out {
+            *v = f32::MIN;
+        }
+    });
+    // Candidates: maxima of their (2r+1)² window (each is first a
+    // 3×3 maximum, a cheap test that few pixels pass) with a disc of
+    // vegetation of at least the smallest radius around them.
+    let r = (spacing_px.max(1.0) / 2.0).ceil() as usize;
+    let limit = (2.0 * spacing_px).ceil().max(2.0) as usize;
+    let min_radius = min_radius_px.max(1.0);
+    let mut candidates: Vec<(usize, f32)> = local_maxima(value, outside, w, h)
+        .into_par_iter()
+        .filter(|&i| is_window_max(value, w, h, i % w, i / w, r))
+        .map(|i| (i, vegetation_radius(outside, w, h, i, limit)))
+        .filter(|&(_, radius)| radius >= min_radius)
+        .collect();
+    candidates.sort_by(|a, b| value[b.0].total_cmp(&value[a.0]).then(a.0.cmp(&b.0)));
+    suppress(&candidates, w, spacing_px.max(1.0))
 }
 
 /// Replace each cell of `values` by the mean over the `(2r+1)²` window

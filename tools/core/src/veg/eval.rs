@@ -1,6 +1,7 @@
 //! Accuracy of detections against truth boxes: a detection is a true
-//! positive when its centre falls inside a truth box not yet matched, taking
-//! detections greedily from the highest score. Beside the overall figures:
+//! positive when its centre falls inside a truth box not yet matched, or
+//! when its crown box overlaps one by a given intersection over union,
+//! taking detections greedily from the highest score. Beside the overall figures:
 //! per class (a confusion of detection classes against truth classes, with
 //! each class's precision and recall) and the matches as GeoJSON, so a user
 //! sees where detection fails.
@@ -37,32 +38,108 @@ pub struct Evaluation {
     pub f1: f64,
 }
 
-/// Match `(x, y, score)` detections to `[xmin, ymin, xmax, ymax]` boxes
-/// and score the result (`matches`, [`Evaluation::of`]).
-pub fn evaluate(detections: &[(f64, f64, f32)], truth: &[[f64; 4]]) -> Evaluation {
-    Evaluation::of(&matches(detections, truth), truth.len())
+/// A detection as the evaluation sees it: its centre and crown diameter
+/// in the truth boxes' units, and its score.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Detection {
+    pub x: f64,
+    pub y: f64,
+    pub diameter: f64,
+    pub score: f32,
 }
 
-/// For each detection, the truth box it matches. Detections are taken from
-/// the highest score; among the free boxes holding its centre, the one
-/// whose middle is nearest wins.
-pub fn matches(detections: &[(f64, f64, f32)], truth: &[[f64; 4]]) -> Vec<Option<usize>> {
+impl Detection {
+    /// The database's objects as detections, their sizes (metres) turned
+    /// into the units of x and y, of which there are `metres_per_unit`
+    /// metres (1 where x and y are metres; the pixel size where they are
+    /// pixels).
+    pub fn of_objects(objects: &[VegObject], metres_per_unit: f64) -> Vec<Detection> {
+        objects
+            .iter()
+            .map(|o| Detection {
+                x: o.x,
+                y: o.y,
+                diameter: o.size / metres_per_unit,
+                score: o.score,
+            })
+            .collect()
+    }
+
+    /// The crown's box `[xmin, ymin, xmax, ymax]`: a square of its diameter.
+    pub fn bounds(&self) -> [f64; 4] {
+        let r = self.diameter / 2.0;
+        [self.x - r, self.y - r, self.x + r, self.y + r]
+    }
+}
+
+/// When a detection matches a truth box.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[serde(tag = "by", rename_all = "lowercase")]
+pub enum Criterion {
+    /// Its centre lies in the box.
+    Centre,
+    /// Its crown box overlaps the box by at least this intersection over
+    /// union (0.4 and 0.5 are the usual thresholds for tree crowns, e.g.
+    /// the NeonTreeEvaluation benchmark's 0.4).
+    Iou { min: f64 },
+}
+
+/// Match `detections` to `[xmin, ymin, xmax, ymax]` boxes under
+/// `criterion` and score the result (`matches`, [`Evaluation::of`]).
+pub fn evaluate(detections: &[Detection], truth: &[[f64; 4]], criterion: Criterion) -> Evaluation {
+    Evaluation::of(&matches(detections, truth, criterion), truth.len())
+}
+
+/// Intersection over union of two boxes `[xmin, ymin, xmax, ymax]`.
+pub fn iou(a: [f64; 4], b: [f64; 4]) -> f64 {
+    let w = (a[2].min(b[2]) - a[0].max(b[0])).max(0.0);
+    let h = (a[3].min(b[3]) - a[1].max(b[1])).max(0.0);
+    let inter = w * h;
+    let area = |r: [f64; 4]| (r[2] - r[0]) * (r[3] - r[1]);
+    let union = area(a) + area(b) - inter;
+    if union > 0.0 {
+        inter / union
+    } else {
+        0.0
+    }
+}
+
+/// For each detection, the truth box it matches. Detections are taken
+/// greedily from the highest score; each takes, among the boxes still free
+/// that `criterion` accepts, the best: the one whose middle is nearest its
+/// centre ([`Criterion::Centre`]), or the largest overlap
+/// ([`Criterion::Iou`]).
+pub fn matches(
+    detections: &[Detection],
+    truth: &[[f64; 4]],
+    criterion: Criterion,
+) -> Vec<Option<usize>> {
     let mut order: Vec<usize> = (0..detections.len()).collect();
-    order.sort_by(|&a, &b| detections[b].2.total_cmp(&detections[a].2).then(a.cmp(&b)));
+    order.sort_by(|&a, &b| {
+        detections[b]
+            .score
+            .total_cmp(&detections[a].score)
+            .then(a.cmp(&b))
+    });
     let mut matched = vec![false; truth.len()];
     let mut found = vec![None; detections.len()];
     for k in order {
-        let (x, y, _) = detections[k];
+        let d = detections[k];
+        // How well box `b` fits (higher is better), `None` when it does not.
+        let fit = |b: &[f64; 4]| match criterion {
+            Criterion::Centre => {
+                (b[0] <= d.x && d.x <= b[2] && b[1] <= d.y && d.y <= b[3]).then(|| {
+                    -(((b[0] + b[2]) / 2.0 - d.x).powi(2) + ((b[1] + b[3]) / 2.0 - d.y).powi(2))
+                })
+            }
+            Criterion::Iou { min } => Some(iou(d.bounds(), *b)).filter(|&v| v >= min && v > 0.0),
+        };
         let best = truth
             .iter()
             .enumerate()
-            .filter(|(t, b)| !matched[*t] && b[0] <= x && x <= b[2] && b[1] <= y && y <= b[3])
-            .min_by(|(_, a), (_, b)| {
-                let d = |b: &[f64; 4]| {
-                    ((b[0] + b[2]) / 2.0 - x).powi(2) + ((b[1] + b[3]) / 2.0 - y).powi(2)
-                };
-                d(a).total_cmp(&d(b))
-            });
+            .filter(|(t, _)| !matched[*t])
+            .filter_map(|(t, b)| fit(b).map(|f| (t, f)))
+            .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)));
         if let Some((t, _)) = best {
             matched[t] = true;
             found[k] = Some(t);
@@ -295,6 +372,16 @@ pub fn land_cover<'a>(
         .collect()
 }
 
+/// Truth boxes from Pascal VOC XML (`text` starting with `<`) or CSV
+/// lines `xmin,ymin,xmax,ymax[,class]`.
+pub fn parse_truth(text: &str) -> Result<Vec<TruthBox>> {
+    if text.trim_start().starts_with('<') {
+        parse_voc(text)
+    } else {
+        parse_box_csv(text)
+    }
+}
+
 /// Boxes of a Pascal VOC annotation (`<object><bndbox><xmin>…`).
 pub fn parse_voc(text: &str) -> Result<Vec<TruthBox>> {
     let doc =
@@ -377,8 +464,14 @@ mod tests {
         // Two detections in the first box: the better one matches, the other
         // is a false positive; the second box is missed.
         let e = evaluate(
-            &[(5.0, 5.0, 0.6), (4.0, 4.0, 0.9), (50.0, 50.0, 1.0)],
+            &[(5.0, 5.0, 0.6), (4.0, 4.0, 0.9), (50.0, 50.0, 1.0)].map(|(x, y, score)| Detection {
+                x,
+                y,
+                diameter: 10.0,
+                score,
+            }),
             &truth,
+            Criterion::Centre,
         );
         assert_eq!(
             (e.true_positives, e.false_positives, e.false_negatives),
@@ -386,7 +479,33 @@ mod tests {
         );
         assert!((e.precision - 1.0 / 3.0).abs() < 1e-12 && (e.recall - 0.5).abs() < 1e-12);
         assert!((e.f1 - 0.4).abs() < 1e-12);
-        assert_eq!(evaluate(&[], &truth).f1, 0.0);
+        assert_eq!(evaluate(&[], &truth, Criterion::Centre).f1, 0.0);
+    }
+
+    #[test]
+    fn iou_matching_takes_the_best_overlap_above_the_threshold() {
+        assert!((iou([0.0, 0.0, 2.0, 2.0], [1.0, 0.0, 3.0, 2.0]) - 1.0 / 3.0).abs() < 1e-12);
+        assert_eq!(iou([0.0, 0.0, 1.0, 1.0], [2.0, 2.0, 3.0, 3.0]), 0.0);
+        let truth = [[0.0, 0.0, 10.0, 10.0], [8.0, 0.0, 18.0, 10.0]];
+        let at = |x: f64, diameter: f64, score: f32| Detection {
+            x,
+            y: 5.0,
+            diameter,
+            score,
+        };
+        // The best detection overlaps the second box most (IoU 0.82 vs
+        // 0.18); the next takes the first box (0.73); a crown far too small
+        // for its box (0.04) matches nothing, though by centre it would.
+        let d = [at(12.0, 10.0, 0.9), at(4.0, 9.0, 0.8), at(15.0, 2.0, 0.5)];
+        assert_eq!(
+            matches(&d, &truth, Criterion::Iou { min: 0.4 }),
+            [Some(1), Some(0), None]
+        );
+        let tiny = [at(5.0, 2.0, 0.5)];
+        assert_eq!(matches(&tiny, &truth, Criterion::Iou { min: 0.4 }), [None]);
+        assert_eq!(matches(&tiny, &truth, Criterion::Centre), [Some(0)]);
+        let f = evaluate(&d, &truth, Criterion::Iou { min: 0.5 });
+        assert_eq!((f.true_positives, f.false_positives), (2, 1));
     }
 
     #[test]
@@ -400,8 +519,13 @@ mod tests {
             bounds,
             class: Some(class.into()),
         });
-        let detections = [(5.0, 5.0, 0.9), (60.0, 5.0, 0.8), (25.0, 5.0, 0.7)];
-        let m = matches(&detections, &bounds(&truth));
+        let detections = [(5.0, 0.9), (60.0, 0.8), (25.0, 0.7)].map(|(x, score)| Detection {
+            x,
+            y: 5.0,
+            diameter: 8.0,
+            score,
+        });
+        let m = matches(&detections, &bounds(&truth), Criterion::Centre);
         assert_eq!(m, vec![Some(0), None, Some(1)]);
         let p = per_class(&["tree", "tree", "dead"], &truth, &m);
         let figures = |c: &str| p.classes.iter().find(|f| f.class == c).unwrap().clone();
@@ -424,13 +548,13 @@ mod tests {
         let objects: Vec<VegObject> = detections
             .iter()
             .enumerate()
-            .map(|(k, &(x, y, score))| VegObject {
+            .map(|(k, d)| VegObject {
                 id: k as u64,
-                x,
-                y,
+                x: d.x,
+                y: d.y,
                 class: "tree".into(),
                 size: 1.0,
-                score,
+                score: d.score,
             })
             .collect();
         let geojson: serde_json::Value =

@@ -16,7 +16,9 @@
 //! - [`tiles`]: cutting a large image into tiles with a margin of context.
 //! - [`pipeline`]: the whole extraction on one image, tile by tile (options,
 //!   report, overlay), as every program runs it.
-//! - [`baseline`]: excess-green detection, to measure against.
+//! - [`baseline`]: excess-green crowns, to measure against.
+//! - [`protocol`]: leave-one-image-out figures and the correction loop of a
+//!   simulated user.
 
 /// `$body` with `$n` a constant equal to the band count `$bands` (1, 2 or
 /// 3; [`MAX_BANDS`] for any more): one compiled body per band count, so the
@@ -52,6 +54,7 @@ pub mod detect;
 pub mod eval;
 pub mod haar;
 pub mod pipeline;
+pub mod protocol;
 pub mod samples;
 pub mod segment;
 pub mod spacing;

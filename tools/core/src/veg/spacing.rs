@@ -5,9 +5,13 @@
 //! neighbouring crowns merge. Each marked crown is cut with its
 //! neighbourhood from the segmentation it was learnt on, classified with the
 //! learnt classifier, and crowns are placed on it at every candidate spacing.
+//!
+//! The same marked crowns tell how large crowns are: the size a crown is
+//! given is scaled so that the crowns placed in the marks measure as the
+//! marks do.
 
 use super::classify::{Classifier, Label};
-use super::detect::{detect, DetectBuffers, Placement};
+use super::detect::{detect, DetectBuffers, Object, Placement};
 use super::haar::region_signature;
 use super::samples::Sample;
 use super::segment::{SegmentSteps, Segmentation};
@@ -86,8 +90,8 @@ impl MarkedCrown {
         }
     }
 
-    /// Crown centres placed inside the mark.
-    fn centres(&self, classes: &[Label], vegetation: &[bool], placement: Placement) -> usize {
+    /// The crowns placed inside the mark, with the regions' `classes`.
+    fn crowns(&self, classes: &[Label], vegetation: &[bool], placement: Placement) -> Vec<Object> {
         detect(
             &self.image,
             &self.segmentation,
@@ -98,10 +102,23 @@ impl MarkedCrown {
             [0, 0],
             &mut DetectBuffers::default(),
         )
-        .iter()
+        .into_iter()
         .filter(|o| self.sample.contains(o.x, o.y))
-        .count()
+        .collect()
     }
+}
+
+/// Each marked crown's regions classified by `classifier`.
+fn classified(crowns: &[MarkedCrown], classifier: &Classifier) -> Vec<Vec<Label>> {
+    crowns
+        .iter()
+        .map(|c| {
+            c.signatures
+                .iter()
+                .map(|s| classifier.classify(s))
+                .collect()
+        })
+        .collect()
 }
 
 /// The smallest of [`CROWN_SPACINGS_M`], at least a pixel of `pixel_m`, at
@@ -114,15 +131,7 @@ pub fn learn_spacing_m(
     pixel_m: f64,
     min_radius_px: f32,
 ) -> f64 {
-    let classes: Vec<Vec<Label>> = crowns
-        .iter()
-        .map(|c| {
-            c.signatures
-                .iter()
-                .map(|s| classifier.classify(s))
-                .collect()
-        })
-        .collect();
+    let classes = classified(crowns, classifier);
     CROWN_SPACINGS_M
         .into_iter()
         .filter(|&s| s >= pixel_m)
@@ -130,13 +139,78 @@ pub fn learn_spacing_m(
             let placement = Placement::Crowns {
                 spacing_px: (spacing_m / pixel_m) as f32,
                 min_radius_px,
+                size_gain: 1.0,
+                max_size_px: None,
             };
             crowns
                 .iter()
                 .zip(&classes)
-                .all(|(crown, classes)| crown.centres(classes, vegetation, placement) <= 1)
+                .all(|(crown, classes)| crown.crowns(classes, vegetation, placement).len() <= 1)
         })
         .unwrap_or(MAX_CROWN_SPACING_M)
+}
+
+/// Bounds of a learnt size gain: a marked crown is never taken to say that
+/// crowns are more than this many times larger or smaller than measured.
+pub const MAX_SIZE_GAIN: f32 = 4.0;
+
+/// How much larger the marked crowns are than the crowns placed in them
+/// measure at `spacing_px`: the median, over marked crowns holding exactly
+/// one placed crown, of the mark's mean side over that crown's diameter
+/// (within [`MAX_SIZE_GAIN`] either way); 1 when no marked crown holds one.
+/// A person marks a crown's extent, while placement measures the disc of
+/// vegetation around its top, smaller where shadow or gaps cut into it.
+pub fn learn_size_gain(
+    crowns: &[MarkedCrown],
+    classifier: &Classifier,
+    vegetation: &[bool],
+    spacing_px: f32,
+    min_radius_px: f32,
+) -> f32 {
+    let classes = classified(crowns, classifier);
+    let placement = Placement::Crowns {
+        spacing_px,
+        min_radius_px,
+        size_gain: 1.0,
+        max_size_px: None,
+    };
+    let mut ratios: Vec<f32> = crowns
+        .iter()
+        .zip(&classes)
+        .filter_map(|(crown, classes)| {
+            let [x0, y0, x1, y1] = crown.sample.bounds();
+            match crown.crowns(classes, vegetation, placement)[..] {
+                [one] if one.size_px > 0.0 => {
+                    Some(((x1 - x0 + y1 - y0) / 2.0) as f32 / one.size_px)
+                }
+                _ => None,
+            }
+        })
+        .collect();
+    ratios.sort_by(f32::total_cmp);
+    match ratios.len() {
+        0 => 1.0,
+        n => {
+            let median = if n % 2 == 1 {
+                ratios[n / 2]
+            } else {
+                (ratios[n / 2 - 1] + ratios[n / 2]) / 2.0
+            };
+            median.clamp(1.0 / MAX_SIZE_GAIN, MAX_SIZE_GAIN)
+        }
+    }
+}
+
+/// The largest size a crown may be given (pixels): half again the largest
+/// marked crown's mean side; `None` when no crown was marked.
+pub fn max_crown_size_px(crowns: &[MarkedCrown]) -> Option<f32> {
+    crowns
+        .iter()
+        .map(|c| {
+            let [x0, y0, x1, y1] = c.sample.bounds();
+            (1.5 * (x1 - x0 + y1 - y0) / 2.0) as f32
+        })
+        .max_by(f32::total_cmp)
 }
 
 /// Pixels of neighbourhood a marked crown is cut with: placement at the
@@ -150,7 +224,7 @@ pub fn margin_px(pixel_m: f64) -> usize {
 mod tests {
     use super::*;
     use crate::testdata;
-    use crate::veg::pipeline::{extract, VegOptions};
+    use crate::veg::pipeline::{extract, Model, VegOptions};
 
     /// On SOAP_061 a marked dead crown (several bright branches) holds
     /// three centres at 2 m and one at 2.5 m: the spacing learnt is 2.5 m;
@@ -172,18 +246,18 @@ mod tests {
         };
         assert!((extract_at(None).1 - 2.5).abs() < 1e-6);
         for (spacing_m, most) in [(2.0, 3), (2.5, 1)] {
-            let (found, used_m) = extract_at(Some(spacing_m));
-            assert!((used_m - spacing_m).abs() < 1e-6);
+            assert!((extract_at(Some(spacing_m)).1 - spacing_m).abs() < 1e-6);
+            // The crowns placed before the marks are held (one in each).
+            let options = VegOptions {
+                crown_spacing_m: Some(spacing_m),
+                ..VegOptions::default()
+            };
+            let model = Model::learn(&image, image.pixel_m, &samples, &options, 1.0).unwrap();
+            let placed = model.analyse(&image, model.tiles()).unwrap();
             let in_marked_crowns = samples
                 .iter()
                 .filter(|s| s.class != "other")
-                .map(|s| {
-                    found
-                        .objects
-                        .iter()
-                        .filter(|o| s.contains(o.x, o.y))
-                        .count()
-                })
+                .map(|s| placed.iter().filter(|o| s.contains(o.x, o.y)).count())
                 .max()
                 .unwrap();
             assert_eq!(in_marked_crowns, most, "{spacing_m} m");

@@ -132,6 +132,8 @@ mod tests {
         let crowns = Placement::Crowns {
             spacing_px: 25.0,
             min_radius_px: 5.0,
+            size_gain: 1.0,
+            max_size_px: None,
         };
         assert_eq!(Tiling::for_placement(crowns, CORE_PX).margin_px, 128);
         assert_eq!(Tiling::for_placement(crowns, 300).core_px, 320);
