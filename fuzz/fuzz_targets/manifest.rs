@@ -8,8 +8,8 @@ use relevo_core::bundle::{write_terrain_bundle, Bundle, Crs};
 use relevo_core::cluster::store;
 use relevo_core::geo::GeoTransform;
 use relevo_core::grid::HeightGrid;
-use std::path::PathBuf;
 use relevo_core::validation::validate;
+use std::path::PathBuf;
 use std::sync::OnceLock;
 
 /// A 17×17 terrain bundle (once per process) whose manifest each input replaces.

@@ -73,7 +73,11 @@ fn pyramid_dir() -> &'static (tempfile::TempDir, PathBuf, Vec<Vec<u8>>) {
         };
         pyramid::write_pyramid(&target, &grid, description, options, &|_| {}).expect("a pyramid");
         let mut originals = vec![std::fs::read(target.join("manifest.json")).expect("manifest")];
-        originals.extend(FILES.iter().map(|f| std::fs::read(target.join(f)).expect("tile file")));
+        originals.extend(
+            FILES
+                .iter()
+                .map(|f| std::fs::read(target.join(f)).expect("tile file")),
+        );
         (dir, target, originals)
     })
 }
@@ -126,7 +130,12 @@ fn read_everything(dir: &std::path::Path) {
     let _ = relevo_core::pyramid::render::render(&p, &camera, &options, levels);
     let _ = p.level0_window(Rect::whole(p.layout.side));
     if let Ok(source) = relevo_core::pyramid::mesh::PyramidMesh::new(&p) {
-        let window = Rect { c0: 3, r0: 5, width: 40, height: 21 };
+        let window = Rect {
+            c0: 3,
+            r0: 5,
+            width: 40,
+            height: 21,
+        };
         for (max_error, window) in [(0.5, None), (5.0, Some(window))] {
             let _ = relevo_core::lp::export::build(&source, max_error, false, window);
         }
@@ -156,7 +165,8 @@ fuzz_target!(|data: &[u8]| {
     let (offset, bytes) = rest.split_at(4);
     let i = file as usize % FILES.len();
     let mut content = originals[i + 1].clone();
-    let at = u32::from_le_bytes([offset[0], offset[1], offset[2], offset[3]]) as usize % content.len();
+    let at =
+        u32::from_le_bytes([offset[0], offset[1], offset[2], offset[3]]) as usize % content.len();
     let end = (at + bytes.len()).min(content.len());
     content[at..end].copy_from_slice(&bytes[..end - at]);
     if std::fs::write(dir.join(FILES[i]), &content).is_ok() {

@@ -1,11 +1,11 @@
 //! Ground-truth boxes for `veg eval`: Pascal VOC XML and box CSV, then
-//! matched against a few detections.
+//! matched against a few detections by centre and by crown-box overlap.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
 use relevo_core::veg::db::VegObject;
 use relevo_core::veg::eval::{
-    bounds, matches, matches_geojson, parse_box_csv, parse_voc, per_class, Evaluation,
+    bounds, matches, matches_geojson, parse_truth, per_class, Criterion, Detection, Evaluation,
 };
 
 fuzz_target!(|data: &[u8]| {
@@ -25,10 +25,13 @@ fuzz_target!(|data: &[u8]| {
             score,
         })
         .collect();
-    for truth in [parse_voc(text), parse_box_csv(text)].into_iter().flatten() {
-        let found = matches(&detections, &bounds(&truth));
-        let _ = Evaluation::of(&found, truth.len());
-        let _ = per_class(&["Alive", "Dead", "tree"], &truth, &found);
-        let _ = matches_geojson(&objects, &truth, &found);
+    let crowns = Detection::of_objects(&objects, 0.1);
+    if let Ok(truth) = parse_truth(text) {
+        for criterion in [Criterion::Centre, Criterion::Iou { min: 0.4 }] {
+            let found = matches(&crowns, &bounds(&truth), criterion);
+            let _ = Evaluation::of(&found, truth.len());
+            let _ = per_class(&["Alive", "Dead", "tree"], &truth, &found);
+            let _ = matches_geojson(&objects, &truth, &found);
+        }
     }
 });

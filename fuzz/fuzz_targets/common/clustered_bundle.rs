@@ -36,7 +36,10 @@ pub fn clustered_bundle() -> &'static Clustered {
             geotransform: GeoTransform::north_up(0.0, 1280.0, 20.0, 20.0),
         };
         let path = dir.path().join("fuzz.relevo");
-        let crs = Crs { wkt: String::new(), epsg: None };
+        let crs = Crs {
+            wkt: String::new(),
+            epsg: None,
+        };
         write_terrain_bundle(&path, "fuzz", &grid, 20.0, crs, false).expect("a bundle");
         let database: Vec<VegObject> = (0..60)
             .map(|k| VegObject {
@@ -57,10 +60,19 @@ pub fn clustered_bundle() -> &'static Clustered {
         };
         let lock = BundleLock::acquire(&path).expect("the lock");
         let bundle = Bundle::open(&path).expect("the bundle");
-        let new = NewVegetation { database: Some(&database), samples_csv: None };
-        let (_, clusters, _) =
-            store::rewrite_bundle(lock, &bundle, &new, &Default::default(), &options, &|_, _| {})
-                .expect("clusters");
+        let new = NewVegetation {
+            database: Some(&database),
+            samples_csv: None,
+        };
+        let (_, clusters, _) = store::rewrite_bundle(
+            lock,
+            &bundle,
+            &new,
+            &Default::default(),
+            &options,
+            &|_, _| {},
+        )
+        .expect("clusters");
         let file = |name: &str| std::fs::read(path.join("clusters").join(name)).expect("a file");
         Clustered {
             files: [
@@ -103,7 +115,11 @@ pub fn open_and_walk(files: [&[u8]; 4], counts_from_lengths: bool) {
     }
     let pages = &clustered_bundle().pages;
     let sizes_match = index.pages.len() == pages.len()
-        && index.pages.iter().zip(pages).all(|(p, q)| (p.width, p.height) == (q.width, q.height));
+        && index
+            .pages
+            .iter()
+            .zip(pages)
+            .all(|(p, q)| (p.width, p.height) == (q.width, q.height));
     if !sizes_match {
         return;
     }

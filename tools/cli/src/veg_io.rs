@@ -90,18 +90,24 @@ impl BandRole {
     }
 }
 
+/// `roles` with the untagged fourth band of an image whose first three are
+/// red, green and blue taken as near-infrared, as 4-band aerial imagery
+/// (NAIP) carries it.
+fn with_near_infrared_inferred(mut roles: Vec<Option<BandRole>>) -> Vec<Option<BandRole>> {
+    use BandRole::{Blue, Green, NearInfrared, Red};
+    if let [Some(Red), Some(Green), Some(Blue), fourth @ None] = roles.as_mut_slice() {
+        *fourth = Some(NearInfrared);
+    }
+    roles
+}
+
 /// The bands analysed when none are asked for (1-based), from each band's
 /// role: red, green and blue and the near-infrared band when the image has
-/// one — a band named so, or the untagged fourth band after red, green and
-/// blue, as 4-band aerial imagery (NAIP) carries it; otherwise the first
-/// three.
+/// one; otherwise the first three.
 fn default_bands(roles: &[Option<BandRole>]) -> Vec<usize> {
     let find = |role: BandRole| roles.iter().position(|&r| r == Some(role)).map(|i| i + 1);
     let rgb = [BandRole::Red, BandRole::Green, BandRole::Blue].map(find);
-    let near_infrared = find(BandRole::NearInfrared).or_else(|| {
-        (roles.len() == 4 && rgb == [Some(1), Some(2), Some(3)] && roles[3].is_none()).then_some(4)
-    });
-    match (rgb, near_infrared) {
+    match (rgb, find(BandRole::NearInfrared)) {
         ([Some(r), Some(g), Some(b)], Some(n)) => vec![r, g, b, n],
         (_, Some(n)) if roles.len() >= 3 => {
             let mut bands: Vec<usize> = (1..=3).filter(|&b| b != n).collect();
@@ -157,15 +163,17 @@ impl ImageReader {
         pixel_m: Option<f64>,
     ) -> Result<ImageReader> {
         let source = gdalio::open(path)?;
-        let roles: Vec<Option<BandRole>> = (1..=source.bands)
-            .map(|b| {
-                source
-                    .dataset
-                    .rasterband(b)
-                    .ok()
-                    .and_then(|band| BandRole::of(&band))
-            })
-            .collect();
+        let roles = with_near_infrared_inferred(
+            (1..=source.bands)
+                .map(|b| {
+                    source
+                        .dataset
+                        .rasterband(b)
+                        .ok()
+                        .and_then(|band| BandRole::of(&band))
+                })
+                .collect(),
+        );
         let bands: Vec<usize> = match bands {
             Some(b) => b.to_vec(),
             None => default_bands(&roles),
@@ -657,10 +665,9 @@ mod tests {
     fn near_infrared_is_analysed_by_default_where_the_bands_tell_it() {
         use BandRole::{Blue, Green, NearInfrared, Red};
         // NAIP and 4-band aerial imagery: R, G, B tagged, the fourth not.
-        assert_eq!(
-            default_bands(&[Some(Red), Some(Green), Some(Blue), None]),
-            [1, 2, 3, 4]
-        );
+        let naip = with_near_infrared_inferred(vec![Some(Red), Some(Green), Some(Blue), None]);
+        assert_eq!(naip[3], Some(NearInfrared));
+        assert_eq!(default_bands(&naip), [1, 2, 3, 4]);
         // Landsat-like stacks with descriptions, in any order.
         assert_eq!(
             default_bands(&[Some(Blue), Some(Green), Some(Red), Some(NearInfrared), None]),
@@ -677,10 +684,9 @@ mod tests {
             default_bands(&[Some(Red), Some(Green), Some(Blue)]),
             [1, 2, 3]
         );
-        assert_eq!(
-            default_bands(&[Some(Red), Some(Green), Some(Blue), None, None]),
-            [1, 2, 3]
-        );
+        let five =
+            with_near_infrared_inferred(vec![Some(Red), Some(Green), Some(Blue), None, None]);
+        assert_eq!(default_bands(&five), [1, 2, 3]);
         assert_eq!(default_bands(&[None; 6]), [1, 2, 3]);
         assert_eq!(default_bands(&[None]), [1]);
     }

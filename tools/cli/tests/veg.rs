@@ -360,7 +360,8 @@ fn eval_reads_csv_boxes_and_refuses_bad_files() {
 }
 
 /// 16-bit Landsat 8 (B4, B3, B2 as one 3-band file) with GeoJSON samples in
-/// the image CRS, and the 8-bit R, G, B, NIR image with all four bands.
+/// the image CRS, and the 8-bit R, G, B, NIR image with all four bands (by
+/// default: the report names them).
 #[test]
 fn sixteen_bit_and_four_band_inputs_with_geojson_samples() {
     let dir = tempfile::tempdir().unwrap();
@@ -437,6 +438,29 @@ fn sixteen_bit_and_four_band_inputs_with_geojson_samples() {
     let report: serde_json::Value = serde_json::from_str(&text).unwrap();
     assert_eq!(report["width"], 515);
     assert!(report["regions"].as_u64().unwrap() > 1);
+    let rgbn_bands = ["1 red", "2 green", "3 blue", "4 near-infrared"];
+    assert_eq!(report["bands"], serde_json::json!(rgbn_bands));
+    // Without --bands the near-infrared band (untagged after red, green,
+    // blue) is analysed too, and the report names it; the first three only
+    // when asked.
+    let default = dir.path().join("rgbn_default.csv");
+    let text = veg_detect_ok(&rgbn, &samples, &default, &["--json"]);
+    let report: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(report["bands"], serde_json::json!(rgbn_bands));
+    assert_eq!(
+        std::fs::read(&default).unwrap(),
+        std::fs::read(dir.path().join("rgbn_db.csv")).unwrap()
+    );
+    let text = veg_detect_ok(
+        &rgbn,
+        &samples,
+        &dir.path().join("rgb_db.csv"),
+        &["--bands", "1,2,3"],
+    );
+    assert!(
+        text.contains("bands analysed: 1 red, 2 green, 3 blue\n"),
+        "{text}"
+    );
     let out = veg_detect(
         &rgbn,
         &samples,
