@@ -553,7 +553,9 @@ pub struct Model {
     /// Class names, in the classifier's order.
     pub classes: Vec<String>,
     marked: Vec<(String, Vec<f32>)>,
-    /// The places the samples mark, which the gathered objects are held to.
+    /// The places the samples mark, which the gathered objects are held to
+    /// (none in a plan written before marks were held).
+    #[serde(default)]
     pub marked_places: MarkedPlaces,
 }
 
@@ -981,7 +983,7 @@ fn gather(
 /// a person who marks a counter-example says no vegetation is there, and
 /// one who marks a crown (when crowns are placed) says one is. Kept with a plan's [`Model`], so that
 /// its jobs' objects are held to them as one extraction's are.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct MarkedPlaces {
     /// Each sample's polygon (pixels) and its class index, `None` for the
     /// negative class; vegetation samples only when crowns are placed (in
