@@ -119,7 +119,9 @@ impl Region {
         }
     }
 
-    /// Whether `other` lies inside this region.
+    /// Whether `other` lies inside this region (what the tests check of
+    /// the trees built).
+    #[cfg(test)]
     pub fn contains(&self, other: &Region) -> bool {
         self.west_rad <= other.west_rad
             && self.south_rad <= other.south_rad
@@ -129,7 +131,8 @@ impl Region {
             && self.max_height_m >= other.max_height_m
     }
 
-    /// Whether no point was added.
+    /// Whether no point was added (tests).
+    #[cfg(test)]
     pub fn is_empty(&self) -> bool {
         self.west_rad > self.east_rad
     }

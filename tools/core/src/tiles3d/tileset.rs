@@ -62,7 +62,8 @@ impl Tile {
         }
     }
 
-    /// Tiles in the tree, this one included.
+    /// Tiles in the tree, this one included (tests).
+    #[cfg(test)]
     pub fn count(&self) -> usize {
         1 + self.children.iter().map(Tile::count).sum::<usize>()
     }
