@@ -199,8 +199,8 @@ impl SamplesTab {
         let (Some(truth), Some(g)) = (&self.truth, self.to_pixel) else {
             return;
         };
-        let (cell_w, cell_h) = g.cell_size();
-        let pixel_m = cell_w.abs().min(cell_h.abs());
+        // The drape's pixel size, as its detection took it.
+        let pixel_m = g.smallest_cell_side();
         let detections: Vec<relevo_core::veg::eval::Detection> = self
             .detections
             .iter()

@@ -333,7 +333,7 @@ fn the_samples_tab_scores_each_round_against_truth_boxes() {
     assert!(problem_shown(&mut harness).contains("truth.txt"));
     let opened = relevo_core::bundle::Bundle::open(&bundle).unwrap();
     let g = opened.manifest.color.as_ref().unwrap().geotransform;
-    let pixel_m = g.cell_size().0.abs().min(g.cell_size().1.abs());
+    let pixel_m = g.smallest_cell_side();
     let tab = harness.state_mut().samples_tab().unwrap();
     let boxes: Vec<String> = tab
         .detections

@@ -228,8 +228,7 @@ impl ImageReader {
             None => String::new(),
         };
         let ground = source.geotransform.map(|g| {
-            let (w, h) = g.cell_size();
-            let cell = w.abs().min(h.abs());
+            let cell = g.smallest_cell_side();
             // Geographic CRS: degrees to metres along a meridian.
             match &source.srs {
                 Some(srs) if srs.is_geographic() => cell * 111_320.0,

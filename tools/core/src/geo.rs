@@ -67,6 +67,13 @@ impl GeoTransform {
         (t[1].hypot(t[4]), t[2].hypot(t[5]))
     }
 
+    /// The shorter side of a cell, in world units: the ground size of a
+    /// pixel as vegetation extraction takes it.
+    pub fn smallest_cell_side(&self) -> f64 {
+        let (w, h) = self.cell_size();
+        w.min(h)
+    }
+
     /// World bounding box `[xmin, ymin, xmax, ymax]` of a `width`×`height` grid.
     pub fn bounds(&self, width: usize, height: usize) -> [f64; 4] {
         let corners = [

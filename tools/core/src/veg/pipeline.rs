@@ -246,12 +246,11 @@ impl VegImage {
             .flat_map(|p| [p[0], p[1], p[2]])
             .collect();
         let valid: Vec<bool> = rgba.chunks_exact(4).map(|p| p[3] == 255).collect();
-        let (cell_w, cell_h) = geotransform.cell_size();
         Ok(VegImage {
             image: Image::new(width, height, 3, pixels)?,
             crs_wkt: crs_wkt.to_string(),
             geotransform: Some(geotransform),
-            pixel_m: cell_w.abs().min(cell_h.abs()),
+            pixel_m: geotransform.smallest_cell_side(),
             valid: valid.iter().any(|v| !v).then_some(valid),
         })
     }

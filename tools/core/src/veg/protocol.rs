@@ -194,7 +194,9 @@ pub fn leave_one_out(images: &[Annotated], grid: &[(VegOptions, usize)]) -> Resu
                 .collect()
         })
         .collect();
+    // The defaults are a grid point: their scores are already there.
     let defaults = VegOptions::default();
+    let on_grid = grid.iter().position(|(o, _)| *o == defaults);
     images
         .iter()
         .enumerate()
@@ -210,7 +212,10 @@ pub fn leave_one_out(images: &[Annotated], grid: &[(VegOptions, usize)]) -> Resu
                 options: grid[g].0.clone(),
                 chosen_on_f1,
                 chosen: scores[g][h],
-                defaults: Scores::of(&image.detect(&image.samples, &defaults)?, &image.truth),
+                defaults: match on_grid {
+                    Some(d) => scores[d][h],
+                    None => Scores::of(&image.detect(&image.samples, &defaults)?, &image.truth),
+                },
                 baseline_spacing_m: spacing_m,
                 baseline: Scores::of(&baseline_crowns(&image.image, spacing_m), &image.truth),
             })
