@@ -518,7 +518,7 @@ fn the_hud_counts_the_objects_in_view_and_impostors_stand_on_the_mesh_drawn() {
                     "{what}: {hud}"
                 );
                 if mode == TerrainMode::Mesh {
-                    let hierarchy = scene.lp.hierarchy();
+                    let hierarchy = scene.lp.as_ref().unwrap().hierarchy();
                     let params = settings.refine_params(&camera);
                     for instance in scene.vegetation.as_ref().unwrap().list.instances() {
                         let [x, y, z] = instance.foot.map(f64::from);
@@ -526,8 +526,10 @@ fn the_hud_counts_the_objects_in_view_and_impostors_stand_on_the_mesh_drawn() {
                         // Off the data (a cluster's centre over the
                         // padding) the impostor is left where it was.
                         let offset = relevo_core::lp::refine::mesh_height(
-                            &hierarchy,
-                            scene.terrain.heights(),
+                            &relevo_core::lp::refine::GridArrays::new(
+                                &hierarchy,
+                                scene.terrain.heights(),
+                            ),
                             &params,
                             x,
                             y,
@@ -842,4 +844,139 @@ fn the_viewer_refuses_hostile_bundles_by_name_when_it_opens_them() {
             assert!(message.contains(needle), "{}: {message}", forgery.display());
         }
     }
+}
+
+/// The Grenoble sample region (Copernicus GLO-30-derived DEM, 1025² grid,
+/// its drape derived from the heights) as a single-grid bundle and as a
+/// pyramid in tiles of 64 cells (16² tiles at level 0, five levels), both
+/// opened for the viewer.
+fn grenoble_both(dir: &Path) -> (Scene, Scene) {
+    let toml = repo("data/grenoble/REGION.toml");
+    let single = prep_region(&toml, &dir.join("single.relevo"));
+    let region = relevo::prep::region::RegionSpec::load(&toml).unwrap();
+    let options = relevo::prep::tiled::TiledOptions {
+        tile_cells: 64,
+        force: false,
+        resume: false,
+    };
+    let pyramid = relevo::prep::tiled::prep_tiled(&region, &dir.join("tiled.relevo"), options)
+        .unwrap()
+        .bundle;
+    (
+        Scene::open(&single).unwrap(),
+        Scene::open(&pyramid).unwrap(),
+    )
+}
+
+/// Views over Grenoble: the home view, a low pass along the valley and a
+/// look straight down from above the middle.
+fn grenoble_flights(scene: &Scene) -> Vec<Flight> {
+    let mut flights = vec![Flight::home(scene)];
+    let extent = scene.extent_m();
+    for (x, y, above, heading, pitch) in [
+        (0.3, 0.45, 300.0, 20.0, -12.0),
+        (0.4, 0.6, 2500.0, 135.0, -70.0),
+    ] {
+        let mut f = Flight::home(scene);
+        f.position.x = x * extent;
+        f.position.y = y * extent;
+        f.position.z = scene.ground_height(f.position.x, f.position.y).unwrap() + above;
+        f.heading_deg = heading;
+        f.pitch_deg = pitch;
+        flights.push(f);
+    }
+    flights
+}
+
+/// A pyramid drawn in mesh mode with every tile the view needs (as
+/// headless renders wait for them) is the single grid's mesh: the same
+/// triangles, so the depth of every pixel equals the single grid's; the
+/// colour differs only by where the drape comes from (each tile's own,
+/// normals from each level's lattice).
+#[test]
+fn a_pyramids_mesh_has_the_single_grids_depth_pixel_for_pixel() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut single, mut tiled) = grenoble_both(dir.path());
+    let (device, queue) = lavapipe();
+    for (k, flight) in grenoble_flights(&single).iter().enumerate() {
+        for tau in [1.0, 4.0] {
+            let settings = Settings {
+                mode: TerrainMode::Mesh,
+                tau_px: tau,
+                texture: false,
+                ..Default::default()
+            };
+            let shot = Shot::new(SIZE);
+            let (a, sa) =
+                render_once(&device, &queue, &mut single, flight, &settings, &shot).unwrap();
+            let (b, sb) =
+                render_once(&device, &queue, &mut tiled, flight, &settings, &shot).unwrap();
+            assert_eq!(sa.triangles, sb.triangles, "view {k} τ={tau}");
+            let differ = a.depth.iter().zip(&b.depth).filter(|(x, y)| x != y).count();
+            assert_eq!(differ, 0, "view {k} τ={tau}: {differ} depths differ");
+            let paging = sb.paging.unwrap();
+            assert_eq!(paging.loading, 0, "view {k}");
+            assert!(paging.leaves > 1, "view {k}: {paging:?}");
+        }
+    }
+}
+
+/// While tiles load — a flight whose frames never wait, with a cache of
+/// a few tiles — no frame has a crack: looking down over the region with
+/// the sky a colour nothing else uses, no pixel of any frame is sky; and
+/// the tiles held besides those the view needs stay under the budget.
+#[test]
+fn a_pyramid_flown_while_tiles_load_never_shows_a_crack() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, mut tiled) = grenoble_both(dir.path());
+    let (device, queue) = lavapipe();
+    let tile_bytes = 65 * 65 * 17;
+    let budget = 40 * tile_bytes;
+    tiled.paged.as_mut().unwrap().set_budget(budget);
+    let mut settings = Settings {
+        mode: TerrainMode::Mesh,
+        tau_px: 1.0,
+        ..Default::default()
+    };
+    settings.raycast.sky = [255, 0, 255, 255];
+    let mut renderer = relevo_view::gpu::Renderer::new(&device, &queue, &tiled, SIZE);
+    let extent = tiled.extent_m();
+    let mut flight = Flight::home(&tiled);
+    let (mut frames, mut partial) = (0, 0);
+    for step in 0..60 {
+        let t = step as f64 / 60.0;
+        flight.position.x = extent * (0.15 + 0.35 * t);
+        flight.position.y = extent * (0.3 + 0.4 * (t * 6.0).sin().abs());
+        flight.position.z = tiled
+            .ground_height(flight.position.x, flight.position.y)
+            .unwrap()
+            + 1500.0
+            - 1200.0 * t;
+        flight.heading_deg = 360.0 * t;
+        flight.pitch_deg = -75.0;
+        let camera = flight.camera(&tiled, SIZE);
+        let stats = renderer
+            .render(&device, &queue, &mut tiled, &camera, &settings)
+            .unwrap();
+        let frame = renderer.targets.read(&device, &queue, false).unwrap();
+        let sky = frame
+            .rgba
+            .chunks_exact(4)
+            .filter(|p| p[..3] == [255, 0, 255])
+            .count();
+        assert_eq!(sky, 0, "frame {step}: {sky} sky pixels below the horizon");
+        let paging = stats.paging.unwrap();
+        partial += usize::from(paging.loading > 0);
+        frames += 1;
+        assert!(
+            paging.resident_bytes <= budget + 64 * tile_bytes,
+            "frame {step}: {paging:?}"
+        );
+    }
+    let paging = tiled.paged.as_ref().unwrap().stats();
+    assert!(
+        partial >= 5,
+        "{partial} of {frames} frames drawn while loading: {paging:?}"
+    );
+    assert!(paging.evicted_total > 0, "{paging:?}");
 }

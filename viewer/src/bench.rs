@@ -74,9 +74,17 @@ pub struct Record {
     pub refine_ms_p50: f64,
     pub raycast_ms_p50: f64,
     pub cut_ms_p50: f64,
-    /// Frames that waited for data being paged in: none for a single-grid
-    /// bundle, which is mapped whole.
-    pub paging_stalls: usize,
+    /// Frames of a pyramid drawn while a tile they wanted was still
+    /// loading (coarser tiles drawn in its place; no frame waits): none
+    /// for a single-grid bundle, which is mapped whole.
+    pub paging_stalls: u64,
+    /// A pyramid's tiles read and dropped during the flight, the most
+    /// resident at once and their memory, MB, and tile drapes uploaded.
+    pub tiles_loaded: u64,
+    pub tiles_evicted: u64,
+    pub tiles_resident_max: usize,
+    pub tile_cache_mb_max: f64,
+    pub tile_uploads: u64,
     /// The flight's first and last camera (`relevo render --camera`).
     pub start_camera: String,
     pub end_camera: String,
@@ -277,6 +285,8 @@ fn fly(
     wait_for_gpu(device)?;
     let mut times = Vec::new();
     let mut stats: Vec<FrameStats> = Vec::new();
+    let paging_of = |scene: &Scene| scene.paged.as_ref().map(|p| p.stats()).unwrap_or_default();
+    let paging_before = paging_of(scene);
     for (controls, follow) in LEGS {
         if follow && !flight.follow_terrain {
             // Down to the low pass's height, then keep it.
@@ -307,6 +317,7 @@ fn fly(
     let (triangles_p50, triangles_max) = count(|s| s.triangles);
     let (impostors_p50, impostors_max) = count(|s| s.impostors);
     let frame_ms_p50 = percentile(times.clone(), 50.0);
+    let paging = paging_of(scene);
     Ok(Record {
         bench: "view-flight",
         bundle: labels.bundle.to_string(),
@@ -328,7 +339,19 @@ fn fly(
         refine_ms_p50: field(|s| s.refine_ms),
         raycast_ms_p50: field(|s| s.raycast_ms),
         cut_ms_p50: field(|s| s.cut_ms),
-        paging_stalls: 0,
+        paging_stalls: paging.stalled_frames - paging_before.stalled_frames,
+        tiles_loaded: paging.loaded_total - paging_before.loaded_total,
+        tiles_evicted: paging.evicted_total - paging_before.evicted_total,
+        tiles_resident_max: stats
+            .iter()
+            .filter_map(|s| s.paging.map(|p| p.resident))
+            .max()
+            .unwrap_or(0),
+        tile_cache_mb_max: stats
+            .iter()
+            .filter_map(|s| s.paging.map(|p| p.resident_bytes as f64 / 1e6))
+            .fold(0.0, f64::max),
+        tile_uploads: stats.iter().map(|s| u64::from(s.tile_uploads)).sum(),
         start_camera,
         end_camera: flight.pose(scene, height).to_string(),
     })

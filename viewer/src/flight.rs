@@ -65,7 +65,7 @@ fn cruising_speed(scene: &Scene) -> f64 {
 impl Flight {
     /// The home view of the scene (see [`View::home`]).
     pub fn home(scene: &Scene) -> Flight {
-        let view = View::home(&scene.bundle.manifest.grid, [1280, 720]);
+        let view = View::home(&scene.grid, [1280, 720]);
         Flight::from_pose(scene, &view.pose(), 720).unwrap_or(Flight {
             position: DVec3::new(scene.extent_m() / 2.0, 0.0, 1000.0),
             heading_deg: 0.0,
@@ -111,7 +111,7 @@ impl Flight {
     /// its pitch within the raycaster's range for that viewport so that
     /// every mode draws the same view.
     pub fn camera(&self, scene: &Scene, size: [u32; 2]) -> Camera {
-        let cell = scene.frame.cell_size_m;
+        let cell = scene.grid.cell_size_m;
         let mut camera = Camera {
             position: self.position,
             heading_deg: self.heading_deg,

@@ -252,6 +252,7 @@ pub fn render_once(
     let size = shot.size;
     let camera = flight.camera(scene, size);
     let mut renderer = Renderer::new(device, queue, scene, size);
+    renderer.settle_tiles();
     let start = Instant::now();
     let stats = renderer.render(device, queue, scene, &camera, settings)?;
     wait_for_gpu(device)?;

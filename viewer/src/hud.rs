@@ -52,6 +52,21 @@ pub fn lines(r: &Readings) -> Vec<String> {
         Some([e, n, z]) => lines.push(format!("pointer E {e:.1}  N {n:.1}  ground {z:.1} m")),
         None => lines.push("pointer: sky".into()),
     }
+    if let Some(p) = &r.stats.paging {
+        let under = r
+            .pointer
+            .zip(r.scene)
+            .and_then(|([e, n, _], scene)| scene.tile_level_at(e, n))
+            .map_or(String::new(), |l| format!(", level {l} under the pointer"));
+        lines.push(format!(
+            "tiles: {} resident ({:.0} MB), {} loading, {} drawn down to level {}{under}",
+            p.resident,
+            p.resident_bytes as f64 / 1e6,
+            p.loading,
+            p.leaves,
+            p.finest_level,
+        ));
+    }
     let objects = match r.scene.and_then(|scene| scene.objects.as_ref()) {
         None => "objects: none loaded".to_string(),
         Some(o) if s.objects => format!(

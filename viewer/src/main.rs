@@ -17,6 +17,7 @@ use std::process::ExitCode;
   relevo-view olinda.relevo
   relevo-view olinda.relevo --objects data/olinda/objects.geojson --camera 290963,9112753,100,35
   relevo-view olinda.relevo --tour 90 --screenshot window.png   # scripted flight, screenshot, exit
+  relevo-view region.relevo --tile-cache 256M   # a pyramid (prep --tiled): tiles paged as you fly
   relevo-view render olinda.relevo --mode raycast --size 1920x1080 --out shot.png
   relevo-view render olinda.relevo --mode mesh --tau 1 --wireframe --camera 289000,9111000,400,40,420 --out mesh.png
   relevo-view render alps.relevo --size 7680x4320 --depth depth.f32 --stats stats.json --out big.png
@@ -24,7 +25,7 @@ use std::process::ExitCode;
   relevo-view bench olinda.relevo --size 1920x1080 --json > gpu.jsonl    # frame times on this machine's GPU"
 )]
 struct Cli {
-    /// The bundle to open in the window.
+    /// The bundle or pyramid to open in the window.
     bundle: Option<PathBuf>,
     /// Objects to composite: a GeoJSON placement file (see docs/formats.md).
     #[arg(long, requires = "bundle")]
@@ -44,6 +45,11 @@ struct Cli {
     /// A bundle or frame estimated larger is refused before it is loaded.
     #[arg(long, global = true, value_parser = relevo_core::memory::parse_size)]
     max_memory: Option<u64>,
+    /// Memory a pyramid's tile cache may hold, e.g. 256M (default 1G): the
+    /// least recently used tiles are dropped above it and read again when
+    /// needed; the tiles the view needs are kept even above it.
+    #[arg(long, global = true, value_parser = relevo_core::memory::parse_size)]
+    tile_cache: Option<u64>,
     #[command(subcommand)]
     command: Option<Command>,
 }
@@ -78,6 +84,9 @@ fn main() -> ExitCode {
         .try_init();
     if let Some(bytes) = cli.max_memory {
         relevo_core::memory::set_budget(bytes);
+    }
+    if let Some(bytes) = cli.tile_cache {
+        relevo_view::scene::set_tile_cache(bytes);
     }
     let result = match cli.command {
         Some(Command::Render(args)) => relevo_view::headless::run(*args),

@@ -1,12 +1,15 @@
 //! The bundle the viewer shows, opened once through relevo-core: its frame,
 //! mapped heights and mask, the LP hierarchy over the mapped array, the
 //! raycaster's terrain (owned for the session), the drape and the
-//! vegetation clusters. Everything the
-//! viewer computes about terrain goes through these core types.
+//! vegetation clusters. A pyramid (`relevo prep --tiled`) is paged instead:
+//! the mesh reads the tiles core's `PagedPyramid` loads in the background
+//! for the camera, and the other renderers one coarser level of it that
+//! fits in memory. Everything the viewer computes about terrain goes
+//! through these core types.
 
 use crate::settings::{Settings, VegetationSelection};
 use anyhow::{Context, Result};
-use relevo_core::bundle::{Array, Bundle, LpArray};
+use relevo_core::bundle::{Array, Bundle, GridInfo, LpArray, PYRAMID_FORMAT};
 use relevo_core::camera::Camera;
 use relevo_core::cluster::cut::{
     group_blobs, Blob, Blobs, CutOptions, DrawList, ObjectList, QuadtreeCut, Selection,
@@ -14,9 +17,27 @@ use relevo_core::cluster::cut::{
 use relevo_core::cluster::{store, Clusters};
 use relevo_core::geo::TerrainFrame;
 use relevo_core::horizon::{self, Terrain};
-use relevo_core::lp::refine::{mesh_height, Refiner};
+use relevo_core::lp::refine::{mesh_height, GridArrays, Refiner};
+use relevo_core::lp::window::Rect;
 use relevo_core::objects::{read_placement, ObjectMesh};
+use relevo_core::pyramid::paging::PagedPyramid;
+use relevo_core::pyramid::Pyramid;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Memory a pyramid's tile cache may hold, bytes (`--tile-cache`).
+static TILE_CACHE_BYTES: AtomicU64 = AtomicU64::new(1 << 30);
+
+/// Set the memory a pyramid's tile cache may hold (the tiles the camera
+/// needs are kept even above it).
+pub fn set_tile_cache(bytes: u64) {
+    TILE_CACHE_BYTES.store(bytes, Ordering::Relaxed);
+}
+
+/// The largest side of the pyramid level other renderers than the mesh
+/// read whole (the raycast, the baselines, ground heights): 2049² is
+/// about 60 MB with its colour.
+const OVERVIEW_SIDE: usize = 2049;
 
 /// The drape image and the affine map from the terrain frame to its
 /// texture coordinates (u right, v down, both 0..1).
@@ -31,13 +52,21 @@ pub struct DrapeImage {
 /// An opened bundle with the per-session state of both renderers.
 pub struct Scene {
     pub path: PathBuf,
-    pub bundle: Bundle,
+    /// The level-0 grid.
+    pub grid: GridInfo,
+    /// The frame of `terrain` (of a pyramid: its overview level's, whose
+    /// terrain coordinates are level 0's).
     pub frame: TerrainFrame,
-    pub lp: LpArray,
+    /// A single grid's errors and radii (a pyramid's are in its tiles).
+    pub lp: Option<LpArray>,
+    /// A single grid's drape (a pyramid's is in its tiles).
     pub drape: Option<DrapeImage>,
     /// The heights and mask, read once, with the raycaster's colour
-    /// pyramid: every renderer reads the grid from here.
+    /// pyramid: every renderer but a pyramid's mesh reads the grid from
+    /// here (of a pyramid: the finest level of at most 2049² vertices).
     pub terrain: Terrain<'static>,
+    /// A pyramid's tiles, paged for the mesh.
+    pub paged: Option<PagedPyramid>,
     /// Reusable refinement and raycast buffers: nothing allocated per frame
     /// once warm.
     pub refiner: Refiner,
@@ -97,16 +126,25 @@ impl Vegetation {
         let params = settings.refine_params(camera);
         let hierarchy = lp.hierarchy();
         self.list.lift(&|x, y| {
-            mesh_height(&hierarchy, terrain.heights(), &params, x, y)
-                .zip(terrain.surface(x, y))
-                .map_or(0.0, |(mesh, grid)| mesh - grid)
+            mesh_height(
+                &GridArrays::new(&hierarchy, terrain.heights()),
+                &params,
+                x,
+                y,
+            )
+            .zip(terrain.surface(x, y))
+            .map_or(0.0, |(mesh, grid)| mesh - grid)
         });
     }
 }
 
 impl Scene {
-    /// Open the bundle at `path`; errors name the bundle and the problem.
+    /// Open the bundle or pyramid at `path`; errors name it and the
+    /// problem.
     pub fn open(path: &Path) -> Result<Scene> {
+        if relevo_core::bundle::format_of(path).as_deref() == Some(PYRAMID_FORMAT) {
+            return Scene::open_pyramid(path);
+        }
         let bundle = Bundle::open(path)?;
         let frame = bundle.frame();
         // The raycaster's copy, and the mesh mode's mip-mapped drape
@@ -164,15 +202,58 @@ impl Scene {
         };
         Ok(Scene {
             path: path.to_path_buf(),
-            bundle,
+            grid: bundle.manifest.grid.clone(),
             frame,
-            lp,
+            lp: Some(lp),
             drape,
             terrain,
+            paged: None,
             refiner: Refiner::new(),
             raycaster: horizon::Raycaster::default(),
             objects: None,
             vegetation,
+        })
+    }
+
+    /// Open the pyramid at `path`: its tiles paged for the mesh, its
+    /// overview level read whole for the other renderers.
+    fn open_pyramid(path: &Path) -> Result<Scene> {
+        let pyramid = Pyramid::open(path)?;
+        let grid = pyramid.manifest.grid.clone();
+        let levels = pyramid.layout.levels();
+        let level = (0..levels)
+            .find(|&l| (grid.side - 1) >> l < OVERVIEW_SIDE)
+            .unwrap_or(levels - 1);
+        let side = ((grid.side - 1) >> level) + 1;
+        let rect = Rect {
+            c0: 0,
+            r0: 0,
+            width: side,
+            height: side,
+        };
+        let (heights, mask) = pyramid.lattice_heights(level, rect)?;
+        let (rgba, geotransform) = pyramid.lattice_drape(level, rect)?;
+        let frame = TerrainFrame {
+            side,
+            cell_size_m: grid.cell_size_m * (1u64 << level) as f64,
+            geotransform,
+        };
+        let color = horizon::ColorSource::new(&rgba, side, side, &geotransform, &frame);
+        let terrain = Terrain::new(side, frame.cell_size_m, heights, mask, color);
+        let paged = PagedPyramid::new(pyramid, TILE_CACHE_BYTES.load(Ordering::Relaxed) as usize)
+            .with_context(|| path.display().to_string())?;
+        Ok(Scene {
+            path: path.to_path_buf(),
+            grid,
+            frame,
+            lp: None,
+            drape: None,
+            terrain,
+            paged: Some(paged),
+            refiner: Refiner::new(),
+            raycaster: horizon::Raycaster::default(),
+            objects: None,
+            vegetation: None,
         })
     }
 
@@ -188,6 +269,18 @@ impl Scene {
     /// or vegetation.
     pub fn has_objects(&self) -> bool {
         self.objects.is_some() || self.vegetation.is_some()
+    }
+
+    /// A pyramid's level the mesh under world point (east, north) was
+    /// last refined from.
+    pub fn tile_level_at(&self, east: f64, north: f64) -> Option<u32> {
+        let frame = TerrainFrame {
+            side: self.grid.side,
+            cell_size_m: self.grid.cell_size_m,
+            geotransform: self.grid.geotransform,
+        };
+        let (c, r) = frame.vertex_from_world(east, north)?;
+        self.paged.as_ref()?.level_at(c, r)
     }
 
     /// Side of the terrain frame's square, metres.

@@ -545,7 +545,7 @@ fn refinement(
     runs: usize,
 ) -> Result<Refinement> {
     use relevo_core::camera::Camera;
-    use relevo_core::lp::refine::{RefineParams, Refiner};
+    use relevo_core::lp::refine::{GridArrays, RefineParams, Refiner};
     use relevo_core::lp::Layout;
     let extent = (side - 1) as f64 * cell;
     let top = heights.iter().cloned().fold(f32::MIN, f32::max) as f64;
@@ -576,18 +576,18 @@ fn refinement(
     // The same views with every per-vertex array in 64×64 tiles.
     let tiled_er = Layout::Tiled.arrange(side, &h.error_radius);
     let tiled_z = Layout::Tiled.arrange(side, heights);
+    let tiled = GridArrays {
+        layout: Layout::Tiled,
+        side,
+        cell_size_m: cell,
+        error_radius: &tiled_er,
+        heights: &tiled_z,
+    };
     let mut tiled_times = Vec::new();
     for k in 0..8 {
         let params = RefineParams::for_camera(&view(k), 1.0, None, true);
         tiled_times.push(median_ms(runs, || {
-            std::hint::black_box(refiner.refine_in(
-                Layout::Tiled,
-                side,
-                cell,
-                &tiled_er,
-                &tiled_z,
-                &params,
-            ));
+            std::hint::black_box(refiner.refine_source(&tiled, &params));
             Ok(())
         })?);
     }

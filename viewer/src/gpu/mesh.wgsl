@@ -13,7 +13,7 @@ struct Uniforms {
 };
 
 @group(0) @binding(0) var<uniform> u: Uniforms;
-@group(0) @binding(1) var drape: texture_2d<f32>;
+@group(0) @binding(1) var drape: texture_2d_array<f32>;
 @group(0) @binding(2) var drape_sampler: sampler;
 
 struct VertexIn {
@@ -22,6 +22,8 @@ struct VertexIn {
     @location(2) normal: vec3<f32>,
     @location(3) barycentric: vec3<f32>,
     @location(4) height: f32,
+    // The drape's layer: 0 for a single grid, the tile's for a pyramid.
+    @location(5) layer: u32,
 };
 
 struct VertexOut {
@@ -30,6 +32,7 @@ struct VertexOut {
     @location(1) normal: vec3<f32>,
     @location(2) barycentric: vec3<f32>,
     @location(3) height: f32,
+    @location(4) @interpolate(flat) layer: u32,
 };
 
 @vertex
@@ -40,12 +43,13 @@ fn vs_main(v: VertexIn) -> VertexOut {
     out.normal = v.normal;
     out.barycentric = v.barycentric;
     out.height = v.height;
+    out.layer = v.layer;
     return out;
 }
 
 @fragment
 fn fs_main(v: VertexOut) -> @location(0) vec4<f32> {
-    let texel = textureSample(drape, drape_sampler, v.uv).rgb;
+    let texel = textureSample(drape, drape_sampler, v.uv, v.layer).rgb;
     let t = clamp((v.height - u.options.z) * u.options.w, 0.0, 1.0);
     let ramp = mix(vec3<f32>(0.32, 0.42, 0.26), vec3<f32>(0.92, 0.90, 0.84), t);
     let light = u.sun.w + (1.0 - u.sun.w) * max(dot(normalize(v.normal), u.sun.xyz), 0.0);

@@ -60,6 +60,13 @@ impl Renderer {
         }
     }
 
+    /// Wait for every tile of a pyramid a frame needs, and upload all
+    /// their drapes, instead of drawing what has arrived (a headless
+    /// render: the picture does not depend on the loader's timing).
+    pub fn settle_tiles(&mut self) {
+        self.mesh.settle = true;
+    }
+
     /// Draw the next frame even if nothing changed (benchmarks timing the
     /// same view again).
     pub fn forget_last_frame(&mut self) {
@@ -81,8 +88,10 @@ impl Renderer {
         settings: &Settings,
     ) -> anyhow::Result<FrameStats> {
         let objects_key = scene.objects.as_ref().map(|o| o.positions.len());
+        // A pyramid still loading tiles draws again: finer tiles may have come.
+        let settled = scene.paged.as_ref().is_none_or(|p| p.stats().loading == 0);
         if let Some((c, s, o, stats)) = &self.drawn {
-            if c == camera && s == settings && *o == objects_key {
+            if c == camera && s == settings && *o == objects_key && settled {
                 return Ok(*stats);
             }
         }
@@ -148,8 +157,8 @@ impl Renderer {
         if let Some(vegetation) = scene.vegetation.as_mut().filter(|_| settings.objects) {
             let start = Instant::now();
             vegetation.select(camera, settings);
-            if settings.mode == TerrainMode::Mesh {
-                vegetation.stand_on_mesh(&scene.lp, &scene.terrain, camera, settings);
+            if let (TerrainMode::Mesh, Some(lp)) = (settings.mode, &scene.lp) {
+                vegetation.stand_on_mesh(lp, &scene.terrain, camera, settings);
             }
             stats.cut_ms = start.elapsed().as_secs_f64() * 1e3;
             let pass = match &mut self.vegetation {

@@ -12,7 +12,16 @@ use crate::settings::Settings;
 use eframe::egui_wgpu::wgpu;
 use relevo_core::camera::Camera;
 use relevo_core::horizon::TILE_COLUMNS;
+use relevo_core::pyramid::render::{render_with, LevelOptions};
 use std::time::Instant;
+
+/// A pyramid's raycast: a level's cell at most 2 pixels on screen before
+/// the next band reads the next coarser level (the raycast's bands are the
+/// pyramid's levels; see relevo-core's `pyramid::render`).
+const PYRAMID_LEVELS: LevelOptions = LevelOptions {
+    max_cell_px: 2.0,
+    hillshade: None,
+};
 
 pub struct RaycastPass {
     layout: wgpu::BindGroupLayout,
@@ -86,9 +95,22 @@ impl RaycastPass {
         stats: &mut FrameStats,
     ) -> anyhow::Result<()> {
         let start = Instant::now();
-        let frame = scene
-            .raycaster
-            .render(&scene.terrain, camera, &settings.raycast)?;
+        let frame = match &scene.paged {
+            // A pyramid: each distance band reads its own level.
+            Some(paged) => {
+                render_with(
+                    &mut scene.raycaster,
+                    &paged.pyramid,
+                    camera,
+                    &settings.raycast,
+                    PYRAMID_LEVELS,
+                )?;
+                scene.raycaster.frame()
+            }
+            None => scene
+                .raycaster
+                .render(&scene.terrain, camera, &settings.raycast)?,
+        };
         stats.raycast_ms = start.elapsed().as_secs_f64() * 1e3;
         let size = [camera.width, camera.height];
         if self.uploads.as_ref().is_none_or(|u| u.size != size) {

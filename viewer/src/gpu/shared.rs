@@ -271,4 +271,8 @@ pub struct FrameStats {
     pub depth_upload_ms: f64,
     /// Recording and submitting the GPU work.
     pub submit_ms: f64,
+    /// A pyramid's paging after this frame (mesh mode).
+    pub paging: Option<relevo_core::pyramid::paging::PagingStats>,
+    /// Tiles' drapes uploaded to the GPU this frame.
+    pub tile_uploads: u32,
 }

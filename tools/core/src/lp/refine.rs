@@ -49,8 +49,8 @@ impl RefineParams {
     }
 }
 
-/// A triangle strip over grid vertices (indices in the layout refined,
-/// row-major unless [`Refiner::refine_in`] was given another). Consecutive
+/// A triangle strip over grid vertices (indices as the [`VertexSource`]
+/// refined names them: row-major for a grid's arrays). Consecutive
 /// triples are triangles of alternating orientation; triples with a
 /// repeated vertex are degenerate and draw nothing.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -83,6 +83,69 @@ impl Strip {
 
 const ALL_INSIDE: u8 = 0b11_1111;
 
+/// Where a refinement reads its vertices: a grid's arrays
+/// ([`GridArrays`]), or the part of a pyramid's hierarchy whose tiles are
+/// resident (`pyramid::paging`).
+pub trait VertexSource {
+    /// Vertices a side of the grid, 2^n + 1.
+    fn side(&self) -> usize;
+    /// Distance between neighbouring vertices, metres.
+    fn cell_size_m(&self) -> f64;
+    /// Vertex (c, r)'s height (metres) and `[error, radius]`, or `None`
+    /// when the source does not hold it: such a vertex is never active.
+    /// The vertices held must be closed under parents (every parent of a
+    /// held vertex is held, the four corners always) for the mesh to stay
+    /// crack-free.
+    fn vertex(&self, c: usize, r: usize) -> Option<(f32, [f32; 2])>;
+    /// The strip index that names vertex (c, r).
+    fn index(&self, c: usize, r: usize) -> u32;
+}
+
+/// A whole grid's per-vertex arrays in one [`Layout`], errors and radii
+/// beside heights.
+#[derive(Debug, Clone, Copy)]
+pub struct GridArrays<'a> {
+    pub layout: Layout,
+    pub side: usize,
+    pub cell_size_m: f64,
+    pub error_radius: &'a [[f32; 2]],
+    pub heights: &'a [f32],
+}
+
+impl<'a> GridArrays<'a> {
+    /// A row-major hierarchy and its heights.
+    pub fn new(h: &'a Hierarchy, heights: &'a [f32]) -> Self {
+        GridArrays {
+            layout: Layout::RowMajor,
+            side: h.side,
+            cell_size_m: h.cell_size_m,
+            error_radius: &h.error_radius,
+            heights,
+        }
+    }
+}
+
+impl VertexSource for GridArrays<'_> {
+    fn side(&self) -> usize {
+        self.side
+    }
+
+    fn cell_size_m(&self) -> f64 {
+        self.cell_size_m
+    }
+
+    #[inline]
+    fn vertex(&self, c: usize, r: usize) -> Option<(f32, [f32; 2])> {
+        let i = self.layout.index(self.side, c, r);
+        Some((self.heights[i], self.error_radius[i]))
+    }
+
+    #[inline]
+    fn index(&self, c: usize, r: usize) -> u32 {
+        self.layout.index(self.side, c, r) as u32
+    }
+}
+
 /// Reusable refinement state: the strip buffers grow to the largest mesh
 /// seen and are reused, so a refinement allocates nothing once warm.
 #[derive(Debug, Default)]
@@ -94,10 +157,8 @@ pub struct Refiner {
 }
 
 /// Everything the recursion reads, bundled to keep its signature short.
-struct Ctx<'a> {
-    error_radius: &'a [[f32; 2]],
-    heights: &'a [f32],
-    layout: Layout,
+struct Ctx<'a, S> {
+    source: &'a S,
     side: usize,
     cell: f64,
     eye: [f64; 3],
@@ -108,21 +169,12 @@ struct Ctx<'a> {
     planes: Option<[[f64; 4]; 6]>,
 }
 
-impl<'a> Ctx<'a> {
-    fn new(
-        layout: Layout,
-        side: usize,
-        cell_size_m: f64,
-        error_radius: &'a [[f32; 2]],
-        heights: &'a [f32],
-        p: &RefineParams,
-    ) -> Self {
+impl<'a, S: VertexSource> Ctx<'a, S> {
+    fn new(source: &'a S, p: &RefineParams) -> Self {
         Ctx {
-            error_radius,
-            heights,
-            layout,
-            side,
-            cell: cell_size_m,
+            source,
+            side: source.side(),
+            cell: source.cell_size_m(),
             eye: p.eye,
             nu_max: p.lambda / p.tau_px,
             nu_min: p.morph_tau_max_px.map(|t| p.lambda / t),
@@ -130,22 +182,28 @@ impl<'a> Ctx<'a> {
         }
     }
 
-    /// Height of corner or boundary vertex (c, r) as stored.
+    /// Height of vertex (c, r) as stored: a corner, or an end of the
+    /// hypotenuse of a triangle reached (held, as a parent of one).
     fn z(&self, (c, r): (i64, i64)) -> f32 {
-        self.heights[self.layout.index(self.side, c as usize, r as usize)]
+        self.source
+            .vertex(c as usize, r as usize)
+            .map_or(0.0, |v| v.0)
     }
 
-    /// Is vertex `i` in the mesh? `None` when it is inactive (ρ ≤ τ, eye
-    /// outside its sphere) or culled (its sphere wholly outside a frustum
+    /// The strip index of vertex (c, r).
+    fn index(&self, (c, r): (i64, i64)) -> u32 {
+        self.source.index(c as usize, r as usize)
+    }
+
+    /// Is vertex `i` in the mesh? `None` when the source does not hold it,
+    /// when it is inactive (ρ ≤ τ, eye outside its sphere) or culled (its sphere wholly outside a frustum
     /// plane not yet known to contain the branch, per `inside`); else the
     /// planes known to contain its subtree and the height to draw it at,
     /// morphed towards `za` (the height it replaces) within the band.
     #[inline]
     fn vertex(&self, i: (i64, i64), mut inside: u8, za: f32) -> Option<(u8, f32)> {
-        let vi = self.layout.index(self.side, i.0 as usize, i.1 as usize);
-        let zi = self.heights[vi];
+        let (zi, [delta, radius]) = self.source.vertex(i.0 as usize, i.1 as usize)?;
         let p = terrain_position(i.0 as usize, i.1 as usize, self.side, self.cell, zi as f64);
-        let [delta, radius] = self.error_radius[vi];
         let (delta, radius) = (delta as f64, radius as f64);
         let d2 = (p[0] - self.eye[0]).powi(2)
             + (p[1] - self.eye[1]).powi(2)
@@ -222,28 +280,14 @@ impl Refiner {
     /// assert!(coarse.triangles().count() < fine_triangles);
     /// ```
     pub fn refine(&mut self, h: &Hierarchy, heights: &[f32], p: &RefineParams) -> &Strip {
-        self.refine_in(
-            Layout::RowMajor,
-            h.side,
-            h.cell_size_m,
-            &h.error_radius,
-            heights,
-            p,
-        )
+        self.refine_source(&GridArrays::new(h, heights), p)
     }
 
-    /// Refine from per-vertex arrays stored in `layout` (`error_radius` and
-    /// `heights` both); the strip's indices are in that layout too.
-    pub fn refine_in(
-        &mut self,
-        layout: Layout,
-        side: usize,
-        cell_size_m: f64,
-        error_radius: &[[f32; 2]],
-        heights: &[f32],
-        p: &RefineParams,
-    ) -> &Strip {
-        let ctx = Ctx::new(layout, side, cell_size_m, error_radius, heights, p);
+    /// Refine the vertices `source` holds for `p`; the strip's indices are
+    /// the source's.
+    pub fn refine_source(&mut self, source: &impl VertexSource, p: &RefineParams) -> &Strip {
+        let ctx = Ctx::new(source, p);
+        let side = ctx.side;
         let m = (side - 1) as i64;
         let hh = m / 2;
         let z = |c: i64, r: i64| ctx.z((c, r));
@@ -258,7 +302,7 @@ impl Refiner {
         self.strip.morphed_z.clear();
         self.parity = 0;
         self.morph = ctx.nu_min.is_some();
-        let idx = |v: (i64, i64)| layout.index(side, v.0 as usize, v.1 as usize) as u32;
+        let idx = |v: (i64, i64)| ctx.index(v);
         self.push(idx(sw), z(sw.0, sw.1));
         self.push(idx(sw), z(sw.0, sw.1));
         let quadrants = [
@@ -322,9 +366,9 @@ impl Refiner {
     /// from first; `[zl, za, zr]` are the drawn heights of those end points
     /// around `za`, the height `i` falls back to when morphing.
     #[allow(clippy::too_many_arguments)]
-    fn submesh(
+    fn submesh<S: VertexSource>(
         &mut self,
-        ctx: &Ctx,
+        ctx: &Ctx<S>,
         i: (i64, i64),
         j: (i64, i64),
         [left, right]: [(i64, i64); 2],
@@ -338,7 +382,7 @@ impl Refiner {
         let Some((inside, z)) = ctx.vertex(i, inside, za) else {
             return;
         };
-        let vi = ctx.layout.index(ctx.side, i.0 as usize, i.1 as usize);
+        let vi = ctx.index(i);
         let zm = (zl + zr) / 2.0;
         if l > 1 {
             // Splitting at j makes two triangles with right angle j: the
@@ -346,37 +390,29 @@ impl Refiner {
             let child_left = ((left.0 + i.0) / 2, (left.1 + i.1) / 2);
             let child_right = ((i.0 + right.0) / 2, (i.1 + right.1) / 2);
             self.submesh(ctx, j, child_left, [left, i], l - 1, inside, [zl, zm, z]);
-            self.append(vi as u32, (l % 2) as u8, z);
+            self.append(vi, (l % 2) as u8, z);
             self.submesh(ctx, j, child_right, [i, right], l - 1, inside, [z, zm, zr]);
         } else {
-            self.append(vi as u32, (l % 2) as u8, z);
+            self.append(vi, (l % 2) as u8, z);
         }
     }
 }
 
-/// Height of the refined mesh for `p` at terrain-frame point (`x_m`,
-/// `y_m`), metres: the same activation, culling and geomorphing as
-/// [`Refiner::refine`], followed down the one branch of the bintree that
+/// Height of the refined mesh of `source` for `p` at terrain-frame point
+/// (`x_m`, `y_m`), metres: the same activation, culling and geomorphing as
+/// [`Refiner::refine_source`], followed down the one branch of the bintree that
 /// holds the point (O(levels), no mesh built), then interpolated linearly
 /// in the leaf triangle. What the viewer stands objects on, so that they
 /// stand on the surface drawn rather than on the full-resolution grid.
 /// `None` outside the grid.
 pub fn mesh_height(
-    h: &Hierarchy,
-    heights: &[f32],
+    source: &impl VertexSource,
     p: &RefineParams,
     x_m: f64,
     y_m: f64,
 ) -> Option<f64> {
-    let side = h.side;
-    let ctx = Ctx::new(
-        Layout::RowMajor,
-        side,
-        h.cell_size_m,
-        &h.error_radius,
-        heights,
-        p,
-    );
+    let ctx = Ctx::new(source, p);
+    let side = ctx.side;
     let m = (side - 1) as i64;
     // The point in grid units (column, row; row 0 north).
     let q = [x_m / ctx.cell, m as f64 - y_m / ctx.cell];
@@ -389,7 +425,7 @@ pub fn mesh_height(
     let inside = if p.planes.is_some() { 0 } else { ALL_INSIDE };
     let za = (ctx.z(nw) + ctx.z(se)) / 2.0;
     // The quadrant (triangle with its right angle at the centre and a side
-    // of the square as hypotenuse) holding the point, as in `refine_in`.
+    // of the square as hypotenuse) holding the point, as in `refine_source`.
     let (dc, dr) = (q[0] - hh as f64, q[1] - hh as f64);
     let (split, left, corner) = if dr.abs() >= dc.abs() {
         if dr >= 0.0 {
@@ -424,8 +460,8 @@ pub fn mesh_height(
 /// is not in the mesh (the caller's triangle is the leaf); else the height
 /// at `q` in the leaf below triangle (left, right, i).
 #[allow(clippy::too_many_arguments)]
-fn locate(
-    ctx: &Ctx,
+fn locate<S: VertexSource>(
+    ctx: &Ctx<S>,
     q: [f64; 2],
     i: (i64, i64),
     j: (i64, i64),
@@ -472,7 +508,7 @@ fn interpolate(q: [f64; 2], v: [(i64, i64); 3], z: [f32; 3]) -> f32 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     //! Properties of the refined mesh on four real DEM crops: crack-free
     //! strips closed under parents for random cameras, τ = 0 keeping every
     //! vertex, culling keeping what is visible, geomorphing continuity.
@@ -485,14 +521,14 @@ mod tests {
     use glam::DVec3;
     use std::collections::HashMap;
 
-    struct Terrain {
-        name: &'static str,
-        heights: Vec<f32>,
-        h: Hierarchy<'static>,
+    pub(crate) struct Terrain {
+        pub(crate) name: &'static str,
+        pub(crate) heights: Vec<f32>,
+        pub(crate) h: Hierarchy<'static>,
     }
 
     /// The real DEM crops with their hierarchies.
-    fn terrains() -> Vec<Terrain> {
+    pub(crate) fn terrains() -> Vec<Terrain> {
         testdata::dems()
             .into_iter()
             .map(|d| Terrain {
@@ -504,7 +540,7 @@ mod tests {
     }
 
     /// Cameras inside, above and beside the terrain, looking anywhere.
-    fn cameras(t: &Terrain, count: usize, seed: u64) -> Vec<Camera> {
+    pub(crate) fn cameras(t: &Terrain, count: usize, seed: u64) -> Vec<Camera> {
         let mut rng = Lcg(seed);
         let extent = (t.h.side - 1) as f64 * t.h.cell_size_m;
         let top = t.heights.iter().cloned().fold(f32::MIN, f32::max) as f64;
@@ -565,13 +601,15 @@ mod tests {
                             Some(w[0] * z[0] as f64 + w[1] * z[1] as f64 + w[2] * z[2] as f64)
                         })
                         .expect("the strip covers the grid");
-                    let walked = mesh_height(&t.h, &t.heights, &p, x, y).expect("inside");
+                    let walked =
+                        mesh_height(&GridArrays::new(&t.h, &t.heights), &p, x, y).expect("inside");
                     let fine = RefineParams {
                         tau_px: 1e-3,
                         morph_tau_max_px: None,
                         ..p
                     };
-                    let full = mesh_height(&t.h, &t.heights, &fine, x, y).expect("inside");
+                    let full = mesh_height(&GridArrays::new(&t.h, &t.heights), &fine, x, y)
+                        .expect("inside");
                     off_the_grid += usize::from((walked - full).abs() > 0.5);
                     assert!(
                         (walked - drawn).abs() < 1e-3,
@@ -581,7 +619,10 @@ mod tests {
                 }
             }
             let p = RefineParams::for_camera(&cameras(&t, 1, 1)[0], 2.0, None, false);
-            assert_eq!(mesh_height(&t.h, &t.heights, &p, -1.0, 0.0), None);
+            assert_eq!(
+                mesh_height(&GridArrays::new(&t.h, &t.heights), &p, -1.0, 0.0),
+                None
+            );
         }
         assert!(off_the_grid > 100, "{off_the_grid}");
     }
@@ -610,7 +651,7 @@ mod tests {
 
     /// Every edge used once lies on the grid border, every other edge twice,
     /// and the triangles' areas add up to the whole grid.
-    fn assert_watertight(strip: &Strip, side: usize, what: &str) {
+    pub(crate) fn assert_watertight(strip: &Strip, side: usize, what: &str) {
         let mut edges: HashMap<(u32, u32), u32> = HashMap::new();
         let mut area2 = 0i64;
         let xy = |v: u32| ((v as usize % side) as i64, (v as usize / side) as i64);

@@ -16,11 +16,14 @@
 //! - [`mesh`]: the mesh of the region or of a window of it at a tolerance,
 //!   read through the tiles.
 //! - [`render`]: the raycast whose distance bands are the levels.
+//! - [`paging`]: tiles read in the background for a moving camera under a
+//!   memory budget, and the crack-free cut a frame refines through.
 
 pub mod build;
 pub mod jobs;
 pub mod layout;
 pub mod mesh;
+pub mod paging;
 pub mod reader;
 pub mod render;
 pub mod store;

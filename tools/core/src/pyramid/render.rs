@@ -70,6 +70,20 @@ pub fn render(
     opts: &RenderOptions,
     levels: LevelOptions,
 ) -> Result<(RaycastFrame, Vec<LevelRead>)> {
+    let mut raycaster = Raycaster::default();
+    let read = render_with(&mut raycaster, p, camera, opts, levels)?;
+    Ok((raycaster.into_frame(), read))
+}
+
+/// [`render`] into `raycaster`'s frame (its buffers reused from one frame
+/// to the next, as the viewer does); the levels read, nearest first.
+pub fn render_with(
+    raycaster: &mut Raycaster,
+    p: &Pyramid,
+    camera: &Camera,
+    opts: &RenderOptions,
+    levels: LevelOptions,
+) -> Result<Vec<LevelRead>> {
     if !(levels.max_cell_px.is_finite() && levels.max_cell_px > 0.0) {
         return Err(crate::Error::Input(format!(
             "the largest cell on screen must be a positive number of pixels, got {}",
@@ -96,7 +110,6 @@ pub fn render(
         }
         Ok(terrain)
     };
-    let mut raycaster = Raycaster::default();
     raycaster.render_levels(
         &Levels {
             extent,
@@ -105,8 +118,7 @@ pub fn render(
         camera,
         &opts,
     )?;
-    let read = read.into_inner().unwrap_or_default();
-    Ok((raycaster.into_frame(), read))
+    Ok(read.into_inner().unwrap_or_default())
 }
 
 /// Level `level` under the ground box `[x0, y0, x1, y1]` (level-0 terrain
