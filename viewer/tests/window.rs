@@ -5,7 +5,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
-use common::{grenoble_bundle, grenoble_bundle_with_drape};
+use common::{grenoble_bundle, grenoble_bundle_with_drape, grenoble_pyramid};
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -77,6 +77,44 @@ fn a_real_window_flies_a_tour_and_shows_terrain_and_the_hud() {
     );
 }
 
+/// A pyramid flown in a real window with a tile cache smaller than the
+/// region (tiles dropped and read again): the tour ends cleanly, the
+/// screenshot shows terrain below the horizon and the HUD.
+#[test]
+fn a_real_window_flies_over_a_pyramid_paging_its_tiles() {
+    let dir = tempfile::tempdir().unwrap();
+    let pyramid = grenoble_pyramid(dir.path());
+    let shot = dir.path().join("window.png");
+    let out = viewer(
+        &[
+            pyramid.as_os_str(),
+            "--tile-cache".as_ref(),
+            "300K".as_ref(),
+            "--tour".as_ref(),
+            "45".as_ref(),
+            "--screenshot".as_ref(),
+            shot.as_os_str(),
+        ],
+        true,
+        dir.path(),
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let (rgba, w, h) = decode_png(&shot);
+    let pixel = |x: usize, y: usize| &rgba[(y * w + x) * 4..(y * w + x) * 4 + 3];
+    let sky = [135u8, 170, 215];
+    let lower: Vec<&[u8]> = (h * 3 / 4..h - 10)
+        .flat_map(|y| (w / 8..w / 2).map(move |x| (x, y)))
+        .map(|(x, y)| pixel(x, y))
+        .collect();
+    let terrain = lower.iter().filter(|p| **p != sky).count();
+    assert!(
+        terrain * 10 > lower.len() * 9,
+        "{terrain} of {} lower pixels are terrain",
+        lower.len()
+    );
+}
+
 #[test]
 fn headless_renders_can_carry_the_hud() {
     let dir = tempfile::tempdir().unwrap();
@@ -125,10 +163,13 @@ fn bad_bundles_are_refused_with_their_name() {
     std::fs::write(broken.join("manifest.json"), "{ not json").unwrap();
     let truncated = grenoble_bundle(dir.path());
     std::fs::write(truncated.join("height.f32"), [0u8; 16]).unwrap();
+    let truncated_pyramid = grenoble_pyramid(dir.path());
+    std::fs::write(truncated_pyramid.join("tiles/lp.f32x2"), [0u8; 16]).unwrap();
     for (bundle, needle) in [
         (dir.path().join("missing.relevo"), "missing.relevo"),
         (broken.clone(), "invalid manifest"),
         (truncated.clone(), "height.f32"),
+        (truncated_pyramid.clone(), "lp.f32x2"),
     ] {
         let out = viewer(
             &[

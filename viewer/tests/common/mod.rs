@@ -67,3 +67,47 @@ pub fn grenoble_bundle_with_drape(dir: &Path) -> PathBuf {
     drop((heights, mask, bundle));
     writer.commit().unwrap()
 }
+
+/// The Grenoble crop as a pyramid of 32-cell tiles (8² tiles at level 0,
+/// four levels), written by relevo-core, its drape derived from the
+/// heights.
+#[allow(dead_code)] // used by the window tests, not the flight tests
+pub fn grenoble_pyramid(dir: &Path) -> PathBuf {
+    use relevo_core::bundle::GridInfo;
+    use relevo_core::pyramid::{write_pyramid, BuildOptions, PyramidDescription, WriteOptions};
+    let source = dir.join("pyramid_source");
+    std::fs::create_dir_all(&source).unwrap();
+    let single = relevo_core::bundle::Bundle::open(&grenoble_bundle(&source)).unwrap();
+    let g = &single.manifest.grid;
+    let grid = HeightGrid {
+        side: g.side,
+        heights: single.heights().unwrap().to_vec(),
+        mask: single.mask().unwrap().to_vec(),
+        geotransform: g.geotransform,
+    };
+    let description = PyramidDescription {
+        region: "grenoble".into(),
+        crs: single.manifest.crs.clone(),
+        grid: GridInfo::of(&grid, g.cell_size_m, 1.0).unwrap(),
+        inputs: Vec::new(),
+        parameters: Default::default(),
+    };
+    let options = WriteOptions {
+        tile_cells: 32,
+        build: BuildOptions {
+            metric: single.manifest.lp_error_metric,
+            cell_size_m: g.cell_size_m,
+            drape: true,
+        },
+        force: false,
+        resume: false,
+    };
+    write_pyramid(
+        &dir.join("grenoble_tiled.relevo"),
+        &grid,
+        description,
+        options,
+        &|_| {},
+    )
+    .unwrap()
+}
