@@ -35,7 +35,7 @@ use std::process::ExitCode;
   cargo run --release -p relevo-bench -- view-inputs --out gpu-inputs
   cargo run --release -p relevo-bench -- clusters --json --runs 5
   cargo run --release -p relevo-bench -- check --json --runs 5
-  cargo build --release -p relevo && cargo run --release -p relevo-bench -- pyramid --json --max-side 32769"
+  cargo build --release -p relevo -p relevo-view && cargo run --release -p relevo-bench -- pyramid --json --max-side 32769"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -66,10 +66,11 @@ enum BenchCommand {
     Ingest(BenchArgs),
     /// The pyramid at scale: `relevo prep --tiled` on a real 8193² DEM and
     /// the fractal at 16385² and 32769², wall time and peak memory, beside
-    /// gdaladdo and a COG of the same file. Needs the `relevo` binary built
-    /// beside this one.
+    /// gdaladdo and a COG of the same file; then the readers and the viewer
+    /// (`relevo-view bench`) over each pyramid. Needs the `relevo` and
+    /// `relevo-view` binaries built beside this one.
     #[command(after_help = "Examples:
-  cargo build --release -p relevo
+  cargo build --release -p relevo -p relevo-view
   relevo-bench pyramid --json
   relevo-bench pyramid --json --max-side 32769
   relevo-bench pyramid --pictures docs/images")]

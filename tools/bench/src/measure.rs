@@ -66,21 +66,27 @@ pub fn srtm_padded(data: &Path) -> Result<relevo_core::grid::HeightGrid> {
 /// report this process's own peak too: Linux carries the parent's
 /// high-water mark across fork and exec; GNU time's child starts small.)
 pub fn run_measured(command: &std::process::Command) -> Result<(f64, f64)> {
+    let (ms, mb, _) = run_measured_output(command)?;
+    Ok((ms, mb))
+}
+
+/// [`run_measured`], keeping what the child wrote to its standard output.
+pub fn run_measured_output(command: &std::process::Command) -> Result<(f64, f64, String)> {
     let (program, args): (&std::ffi::OsStr, Vec<&std::ffi::OsStr>) =
         (command.get_program(), command.get_args().collect());
     let report = std::env::temp_dir().join(format!("relevo-bench-time-{}", std::process::id()));
     let start = Instant::now();
-    let status = std::process::Command::new("/usr/bin/time")
+    let output = std::process::Command::new("/usr/bin/time")
         .args(["-f", "%M", "-o"])
         .arg(&report)
         .arg(program)
         .args(&args)
-        .stdout(std::process::Stdio::null())
-        .status()
+        .stderr(std::process::Stdio::inherit())
+        .output()
         .context("running /usr/bin/time (Debian package `time`)")?;
     let ms = start.elapsed().as_secs_f64() * 1e3;
-    if !status.success() {
-        anyhow::bail!("{program:?} {args:?} failed ({status})");
+    if !output.status.success() {
+        anyhow::bail!("{program:?} {args:?} failed ({})", output.status);
     }
     let text = std::fs::read_to_string(&report).with_context(|| report.display().to_string())?;
     let _ = std::fs::remove_file(&report);
@@ -89,5 +95,9 @@ pub fn run_measured(command: &std::process::Command) -> Result<(f64, f64)> {
         .last()
         .and_then(|l| l.trim().parse().ok())
         .with_context(|| format!("GNU time's report {text:?}"))?;
-    Ok((ms, kib / 1024.0))
+    Ok((
+        ms,
+        kib / 1024.0,
+        String::from_utf8_lossy(&output.stdout).into_owned(),
+    ))
 }

@@ -5,9 +5,10 @@
 //! same run: overviews alone (`gdaladdo`, on a copy) and a cloud-optimised
 //! GeoTIFF with its overviews (`gdal_translate -of COG`); then the readers
 //! over each pyramid (`relevo mesh`, whole and a window; `relevo render`
-//! with the levels as bands).
+//! with the levels as bands; `relevo-view bench`, the viewer paging its
+//! tiles on a scripted flight).
 
-use crate::measure::{emit, median, run_measured, tempfile_dir};
+use crate::measure::{emit, median, run_measured, run_measured_output, tempfile_dir};
 use anyhow::{bail, Context, Result};
 use gdal::raster::Buffer;
 use relevo_core::pyramid::{Pyramid, TileKey};
@@ -246,6 +247,47 @@ fn readers(
     }
     let _ = std::fs::remove_file(&glb);
     let _ = std::fs::remove_file(&png);
+    fly(relevo, out, name, json_lines)
+}
+
+/// `relevo-view bench` over the pyramid (1280×720, 30 frames a leg, on
+/// whatever GPU `VK_ICD_FILENAMES` picks — lavapipe in the documented
+/// runs): each mode's frame times and paging figures as the viewer
+/// reports them, with the whole process's peak memory.
+fn fly(relevo: &Path, out: &Path, name: &str, json_lines: bool) -> Result<()> {
+    let viewer = relevo.with_file_name("relevo-view");
+    if !viewer.is_file() {
+        bail!(
+            "{}: not built; run `cargo build --release -p relevo-view` first",
+            viewer.display()
+        );
+    }
+    let (ms, peak, records) = run_measured_output(
+        Command::new(&viewer)
+            .arg("bench")
+            .arg(out)
+            .args(["--size", "1280x720", "--frames", "30", "--json"]),
+    )?;
+    for line in records.lines() {
+        let mut record: serde_json::Value = serde_json::from_str(line)
+            .with_context(|| format!("relevo-view bench printed {line:?}"))?;
+        if record["bench"] != "view-flight" {
+            continue;
+        }
+        record["input"] = json!(name);
+        record["process_peak_rss_mb"] = json!(peak);
+        record["process_ms"] = json!(ms);
+        let text = format!(
+            "pyramid {name}: relevo-view bench {}: p50 {:.1} ms, p99 {:.1} ms, {} paging stalls, {} tiles read, {} dropped; process peak {peak:.0} MB",
+            record["config"].as_str().unwrap_or(""),
+            record["frame_ms_p50"].as_f64().unwrap_or(f64::NAN),
+            record["frame_ms_p99"].as_f64().unwrap_or(f64::NAN),
+            record["paging_stalls"],
+            record["tiles_loaded"],
+            record["tiles_evicted"],
+        );
+        emit(json_lines, record, text);
+    }
     Ok(())
 }
 

@@ -31,7 +31,7 @@ use std::time::Instant;
 const TILE_UPLOADS_PER_FRAME: u32 = 8;
 
 /// GPU memory the tiles' drape layers may take, bytes.
-const TILE_TEXTURE_BYTES: u64 = 512 << 20;
+const TILE_TEXTURE_BYTES: u64 = 256 << 20;
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -365,6 +365,8 @@ impl MeshPass {
         let eye = camera.position;
         let barycentric = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
         self.vertices.clear();
+        // Neighbouring triangles mostly share a tile: its layer, kept.
+        let mut last: Option<(TileKey, (TileKey, u32))> = None;
         for entries in strip.triangle_entries() {
             let at = entries.map(|e| {
                 let i = strip.indices[e] as usize;
@@ -377,7 +379,15 @@ impl MeshPass {
             else {
                 continue;
             };
-            let (key, layer) = tiles.layer_for(queue, &cut, cut.tile_holding(&at));
+            let holding = cut.tile_holding(&at);
+            let (key, layer) = match last {
+                Some((k, found)) if k == holding => found,
+                _ => {
+                    let found = tiles.layer_for(queue, &cut, holding);
+                    last = Some((holding, found));
+                    found
+                }
+            };
             let ([c0, r0, _, _], stride) = tiles.layout.vertices(key);
             for (k, (&e, &(c, r))) in entries.iter().zip(&at).enumerate() {
                 let z = strip

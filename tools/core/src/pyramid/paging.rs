@@ -173,6 +173,9 @@ pub struct Cut {
     tiles: HashMap<TileKey, Arc<LoadedTile>>,
     /// The level of the leaf over each level-0 tile, row by row.
     leaf_level: Vec<u32>,
+    /// The leaf over each level-0 tile, row by row (what a vertex is read
+    /// from without a search).
+    leaf_tile: Vec<Option<Arc<LoadedTile>>>,
 }
 
 /// A sample of the cut: what the mesh draws at a vertex.
@@ -218,14 +221,13 @@ impl Cut {
     /// index in it; `None` when no leaf over it holds it.
     fn held(&self, c: usize, r: usize) -> Option<(&LoadedTile, usize)> {
         let t = self.geometry.layout.tile_cells;
-        let last = self.across() - 1;
-        let (tx, ty) = ((c / t).min(last), (r / t).min(last));
-        let on_lattice = |key: TileKey| {
-            let s = key.level;
+        let n = self.across();
+        let (tx, ty) = ((c / t).min(n - 1), (r / t).min(n - 1));
+        let on_lattice = |x: usize, y: usize| {
+            let s = self.leaf_level[y * n + x];
             (c >> s) << s == c && (r >> s) << s == r
         };
-        let key = self.leaf_key(tx, ty);
-        if !on_lattice(key) {
+        if !on_lattice(tx, ty) {
             return None;
         }
         // On a level-0 tile's left or top border, the leaves across it
@@ -239,11 +241,12 @@ impl Cut {
         ];
         if across
             .iter()
-            .any(|&(border, x, y)| border && !on_lattice(self.leaf_key(x, y)))
+            .any(|&(border, x, y)| border && !on_lattice(x, y))
         {
             return None;
         }
-        let tile = self.tiles.get(&key)?;
+        let tile = self.leaf_tile.get(ty * n + tx)?.as_ref()?;
+        let key = tile.key;
         let ([c0, r0, _, _], _) = self.geometry.layout.vertices(key);
         let s = key.level;
         let samples = self.geometry.layout.samples();
@@ -438,6 +441,18 @@ fn choose(
             };
         }
     }
+    let leaf_tile = leaf_level
+        .iter()
+        .enumerate()
+        .map(|(i, &level)| {
+            let key = TileKey {
+                level,
+                x: (i % n) >> level,
+                y: (i / n) >> level,
+            };
+            tiles.get(&key).cloned()
+        })
+        .collect();
     wanted.sort_by_key(|k| (std::cmp::Reverse(k.level), k.y, k.x));
     wanted.dedup();
     (
@@ -445,6 +460,7 @@ fn choose(
             geometry,
             tiles,
             leaf_level,
+            leaf_tile,
         },
         wanted,
     )
