@@ -326,6 +326,7 @@ impl VertexSource for Cut {
 /// tile and every ancestor of a tile they hold): the tiles the camera
 /// needs where their children are resident, balanced. Also returns the
 /// tiles wanted and missing, coarsest first.
+#[allow(clippy::too_many_lines)] // one pass each: split, restrict, gather
 fn choose(
     geometry: Geometry,
     resident: &HashMap<TileKey, Arc<LoadedTile>>,
