@@ -678,20 +678,20 @@ impl PagedPyramid {
     }
 
     fn request(&mut self, wanted: &[TileKey]) {
-        let keys: Vec<TileKey> = wanted
-            .iter()
-            .copied()
-            .filter(|k| !self.resident.contains_key(k))
-            .collect();
         if let Ok(mut q) = self.queue.0.lock() {
-            // Those asked for earlier and no longer wanted are dropped.
-            let dropped: Vec<TileKey> = q.keys.drain(..).collect();
-            for key in dropped {
+            // Those asked for earlier and not yet taken are dropped; those
+            // being read are not asked for again.
+            for key in q.keys.drain(..) {
                 self.loading.remove(&key);
             }
-            q.keys = keys.clone();
+            let keys: Vec<TileKey> = wanted
+                .iter()
+                .copied()
+                .filter(|k| !self.resident.contains_key(k) && !self.loading.contains(k))
+                .collect();
+            self.loading.extend(keys.iter().copied());
+            q.keys = keys;
         }
-        self.loading.extend(keys);
         self.queue.1.notify_one();
         self.count();
     }
