@@ -294,19 +294,8 @@ fn raycast_depth_agrees_with_the_full_resolution_mesh() {
         let camera = flight.camera(&scene, SIZE);
         assert_eq!(camera.pitch_deg, pitch);
         let cell = scene.frame.cell_size_m;
-        let (mut errors, mut disagree) = (Vec::new(), 0usize);
-        for (&m, &r) in mesh_frame.depth.iter().zip(&ray_frame.depth) {
-            match (m < 1.0, r < 1.0) {
-                (true, true) => errors.push(
-                    (distance_of_depth(&camera, m as f64) - distance_of_depth(&camera, r as f64))
-                        .abs()
-                        / cell,
-                ),
-                (false, false) => {}
-                _ => disagree += 1,
-            }
-        }
-        errors.sort_by(f64::total_cmp);
+        let (errors, disagree) =
+            depth_differences(&camera, &mesh_frame.depth, &ray_frame.depth, |_| cell);
         let at = |q: f64| errors[((errors.len() - 1) as f64 * q) as usize];
         let pixels = (SIZE[0] * SIZE[1]) as usize;
         eprintln!(
@@ -329,6 +318,34 @@ fn raycast_depth_agrees_with_the_full_resolution_mesh() {
             "pitch {pitch}°: {disagree} pixels disagree"
         );
     }
+}
+
+/// Where both depth buffers (GPU depth in [0, 1], 1 = sky) hold terrain:
+/// the difference of their distances along `camera`'s view axis in units
+/// of `unit(nearer distance)` metres, sorted; and how many pixels are
+/// terrain in one and sky in the other.
+fn depth_differences(
+    camera: &relevo_core::camera::Camera,
+    a: &[f32],
+    b: &[f32],
+    unit: impl Fn(f64) -> f64,
+) -> (Vec<f64>, usize) {
+    let (mut differences, mut disagree) = (Vec::new(), 0usize);
+    for (&a, &b) in a.iter().zip(b) {
+        match (a < 1.0, b < 1.0) {
+            (true, true) => {
+                let (a, b) = (
+                    distance_of_depth(camera, a as f64),
+                    distance_of_depth(camera, b as f64),
+                );
+                differences.push((a - b).abs() / unit(a.min(b)));
+            }
+            (false, false) => {}
+            _ => disagree += 1,
+        }
+    }
+    differences.sort_by(f64::total_cmp);
+    (differences, disagree)
 }
 
 /// The sample region's vegetation, from relevo-core's quadtree cut, in
@@ -1017,25 +1034,10 @@ fn a_pyramids_raycast_over_its_levels_agrees_with_its_mesh() {
             &camera,
             2.0,
         );
-        let (mut errors, mut disagree) = (Vec::new(), 0usize);
-        for (&a, &b) in m.depth.iter().zip(&r.depth) {
-            match (a < 1.0, b < 1.0) {
-                (true, true) => {
-                    let (a, b) = (
-                        distance_of_depth(&camera, a as f64),
-                        distance_of_depth(&camera, b as f64),
-                    );
-                    let level = bands
-                        .iter()
-                        .position(|band| band.until_m > a.min(b))
-                        .unwrap_or(0);
-                    errors.push((a - b).abs() / (cell * (1u64 << level) as f64));
-                }
-                (false, false) => {}
-                _ => disagree += 1,
-            }
-        }
-        errors.sort_by(f64::total_cmp);
+        let (errors, disagree) = depth_differences(&camera, &m.depth, &r.depth, |d| {
+            let level = bands.iter().position(|band| band.until_m > d).unwrap_or(0);
+            cell * (1u64 << level) as f64
+        });
         let at = |q: f64| errors[((errors.len() - 1) as f64 * q) as usize];
         let pixels = (SIZE[0] * SIZE[1]) as usize;
         eprintln!(

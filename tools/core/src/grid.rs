@@ -197,6 +197,18 @@ pub fn neighbours4(i: usize, width: usize, height: usize) -> impl Iterator<Item 
     .flatten()
 }
 
+/// The offsets (columns, rows) of a vertex's eight neighbours, row by row.
+pub const EIGHT_NEIGHBOURS: [(i64, i64); 8] = [
+    (-1, -1),
+    (0, -1),
+    (1, -1),
+    (-1, 0),
+    (1, 0),
+    (-1, 1),
+    (0, 1),
+    (1, 1),
+];
+
 /// Unit normal (terrain frame, z up) of the full-resolution surface at
 /// vertex (c, r) of a `side`² grid of `heights` with `cell`-metre spacing:
 /// central differences, one-sided at the border.

@@ -3,7 +3,7 @@
 //! prefiltered level and with baked hillshade).
 
 use crate::geo::{GeoTransform, TerrainFrame};
-use crate::grid::vertex_normal;
+use crate::grid::{vertex_normal, EIGHT_NEIGHBOURS};
 use rayon::prelude::*;
 use std::borrow::Cow;
 
@@ -166,16 +166,7 @@ fn heights_beside_data(heights: &[f32], mask: &[u8], side: usize) -> Option<Vec<
     let beside = |i: usize| -> Option<f32> {
         let (c, r) = ((i % side) as i64, (i / side) as i64);
         let (mut sum, mut count) = (0.0f64, 0u32);
-        for (dc, dr) in [
-            (-1, -1),
-            (0, -1),
-            (1, -1),
-            (-1, 0),
-            (1, 0),
-            (-1, 1),
-            (0, 1),
-            (1, 1),
-        ] {
+        for (dc, dr) in EIGHT_NEIGHBOURS {
             let (nc, nr) = (c + dc, r + dr);
             if nc >= 0 && nr >= 0 && (nc as usize) < side && (nr as usize) < side {
                 let k = nr as usize * side + nc as usize;

@@ -27,6 +27,7 @@
 
 use super::layout::{TileKey, TileLayout};
 use super::reader::Pyramid;
+use crate::grid::{vertex_normal, EIGHT_NEIGHBOURS};
 use crate::lp::refine::{RefineParams, VertexSource};
 use crate::lp::terrain_position;
 use crate::{Error, Result};
@@ -259,20 +260,12 @@ impl Cut {
     pub fn sample(&self, c: usize, r: usize) -> Option<CutSample> {
         let (tile, k) = self.held(c, r)?;
         let samples = self.geometry.layout.samples();
-        let (i, j) = (k % samples, k / samples);
-        let z = |i: usize, j: usize| f64::from(tile.heights[j * samples + i]);
         let spacing = self.geometry.cell_size_m * (1u64 << tile.key.level) as f64;
-        let (i0, i1) = (i.saturating_sub(1), (i + 1).min(samples - 1));
-        let (j0, j1) = (j.saturating_sub(1), (j + 1).min(samples - 1));
-        // x grows with columns, y against rows.
-        let dzdx = (z(i1, j) - z(i0, j)) / ((i1 - i0) as f64 * spacing);
-        let dzdy = (z(i, j0) - z(i, j1)) / ((j1 - j0) as f64 * spacing);
-        let n = [-dzdx, -dzdy, 1.0];
-        let len = (n[0] * n[0] + n[1] * n[1] + 1.0).sqrt();
+        let normal = vertex_normal(&tile.heights, samples, spacing, k % samples, k / samples);
         Some(CutSample {
             height_m: tile.heights[k],
             mask: tile.mask[k],
-            normal: n.map(|v| v / len),
+            normal,
         })
     }
 
@@ -372,16 +365,7 @@ fn choose(
         for ty in 0..n {
             for tx in 0..n {
                 let fine = leaf_level[ty * n + tx];
-                for (dx, dy) in [
-                    (-1i64, -1i64),
-                    (0, -1),
-                    (1, -1),
-                    (-1, 0),
-                    (1, 0),
-                    (-1, 1),
-                    (0, 1),
-                    (1, 1),
-                ] {
+                for (dx, dy) in EIGHT_NEIGHBOURS {
                     let (ux, uy) = (tx as i64 + dx, ty as i64 + dy);
                     if ux < 0 || uy < 0 || ux >= n as i64 || uy >= n as i64 {
                         continue;
