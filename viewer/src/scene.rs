@@ -21,6 +21,7 @@ use relevo_core::lp::refine::{mesh_height, GridArrays, Refiner};
 use relevo_core::lp::window::Rect;
 use relevo_core::objects::{read_placement, ObjectMesh};
 use relevo_core::pyramid::paging::PagedPyramid;
+use relevo_core::pyramid::render::LevelWindows;
 use relevo_core::pyramid::Pyramid;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -71,6 +72,8 @@ pub struct Scene {
     /// once warm.
     pub refiner: Refiner,
     pub raycaster: horizon::Raycaster,
+    /// A pyramid's level windows the raycast read, kept for the next frame.
+    pub level_windows: LevelWindows,
     /// Objects placed on the terrain, when a placement file was loaded.
     pub objects: Option<ObjectMesh>,
     /// The bundle's vegetation clusters with the cut they were baked for,
@@ -210,6 +213,7 @@ impl Scene {
             paged: None,
             refiner: Refiner::new(),
             raycaster: horizon::Raycaster::default(),
+            level_windows: LevelWindows::default(),
             objects: None,
             vegetation,
         })
@@ -252,6 +256,7 @@ impl Scene {
             paged: Some(paged),
             refiner: Refiner::new(),
             raycaster: horizon::Raycaster::default(),
+            level_windows: LevelWindows::default(),
             objects: None,
             vegetation: None,
         })

@@ -100,6 +100,7 @@ impl RaycastPass {
             Some(paged) => {
                 render_with(
                     &mut scene.raycaster,
+                    &mut scene.level_windows,
                     &paged.pyramid,
                     camera,
                     &settings.raycast,

@@ -30,13 +30,14 @@ mod screen;
 use frame::tiled_len;
 pub use frame::{tiled_index, RaycastFrame, Rows, Steps, TILE_COLUMNS};
 use march::Slice;
-pub use sample::{ColorSource, Terrain};
+pub use sample::{hillshade, ColorSource, Terrain};
 pub use screen::{pitch_range, MAX_LINE_DENSITY};
 
 use crate::camera::Camera;
 use crate::{Error, Result};
 use rayon::prelude::*;
 use screen::Screen;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Projection used for the rays.
@@ -231,7 +232,7 @@ pub struct Levels<'a> {
     /// The terrain of `level` over the ground box `[x0, y0, x1, y1]`
     /// (level-0 terrain frame, metres), or what keeps it from being read.
     #[allow(clippy::type_complexity)]
-    pub load: &'a (dyn Fn(u32, [f64; 4]) -> Result<LevelTerrain> + Sync),
+    pub load: &'a (dyn Fn(u32, [f64; 4]) -> Result<Arc<LevelTerrain>> + Sync),
 }
 
 /// One level of a pyramid over a stretch of ground.
@@ -475,7 +476,7 @@ impl Raycaster {
         extent: &GridExtent,
         eye: [f64; 2],
         opts: &RenderOptions,
-    ) -> Result<Vec<(LevelTerrain, std::ops::Range<usize>)>> {
+    ) -> Result<Vec<(Arc<LevelTerrain>, std::ops::Range<usize>)>> {
         let mut out = Vec::new();
         let mut from = 0;
         for (level, band) in opts.bands.iter().enumerate() {

@@ -443,17 +443,22 @@ impl<'a> Terrain<'a> {
     /// Bake a hillshade into the colour: Lambert shading of the grid's
     /// normals for a sun at `azimuth_deg` (clockwise from north) and
     /// `elevation_deg`, with 35 % ambient light.
-    pub fn with_hillshade(mut self, azimuth_deg: f64, elevation_deg: f64) -> Self {
-        let (az, el) = (azimuth_deg.to_radians(), elevation_deg.to_radians());
-        let sun = [az.sin() * el.cos(), az.cos() * el.cos(), el.sin()];
+    pub fn with_hillshade(self, azimuth_deg: f64, elevation_deg: f64) -> Self {
         let (side, cell) = (self.side, self.cell_m);
         let shade = (0..side * side)
             .map(|i| {
                 let n = vertex_normal(self.surface_heights(), side, cell, i % side, i / side);
-                let lambert = (n[0] * sun[0] + n[1] * sun[1] + n[2] * sun[2]).max(0.0);
-                (0.35 + 0.65 * lambert) as f32
+                hillshade(n, azimuth_deg, elevation_deg)
             })
             .collect();
+        self.with_shade(shade)
+    }
+
+    /// Bake `shade`, a light factor per vertex (row-major, as
+    /// [`hillshade`] gives it), into the colour — for a caller whose normals
+    /// see past this grid's edges (a window of a larger grid).
+    pub fn with_shade(mut self, shade: Vec<f32>) -> Self {
+        assert_eq!(shade.len(), self.side * self.side);
         self.shade = Some(shade);
         self.update_vertex_colors();
         self
@@ -773,6 +778,16 @@ impl<'a> Terrain<'a> {
         let to_m = self.cell_m / 65536.0;
         self.color(x as f64 * to_m, y as f64 * to_m, subvoxel, level)
     }
+}
+
+/// The light factor of a surface of unit normal `normal` (terrain frame,
+/// z up) under a sun at `azimuth_deg` (clockwise from north) and
+/// `elevation_deg`: Lambert shading with 35 % ambient light.
+pub fn hillshade(normal: [f64; 3], azimuth_deg: f64, elevation_deg: f64) -> f32 {
+    let (az, el) = (azimuth_deg.to_radians(), elevation_deg.to_radians());
+    let sun = [az.sin() * el.cos(), az.cos() * el.cos(), el.sin()];
+    let lambert = (normal[0] * sun[0] + normal[1] * sun[1] + normal[2] * sun[2]).max(0.0);
+    (0.35 + 0.65 * lambert) as f32
 }
 
 #[cfg(test)]

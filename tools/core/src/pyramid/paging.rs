@@ -731,7 +731,7 @@ impl Drop for PagedPyramid {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::bundle::{Crs, GridInfo};
     use crate::grid::HeightGrid;
@@ -741,7 +741,7 @@ mod tests {
     use crate::testdata::Lcg;
 
     /// `t` as a pyramid of `tile_cells`-cell tiles, written and opened.
-    fn pyramid_of(t: &Terrain, tile_cells: usize) -> (tempfile::TempDir, Pyramid) {
+    pub(crate) fn pyramid_of(t: &Terrain, tile_cells: usize) -> (tempfile::TempDir, Pyramid) {
         let cell = t.h.cell_size_m;
         let grid = HeightGrid {
             side: t.h.side,
