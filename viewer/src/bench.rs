@@ -2,13 +2,16 @@
 //! mode by mode, on whatever GPU the machine has (Mesa's lavapipe without
 //! one). The flight — a takeoff, a low pass following the ground, a turn,
 //! a climb — advances by a fixed step a frame, so every machine draws the
-//! same frames; each frame is timed from the start of its CPU work until
-//! the GPU has finished it. Nothing here needs GDAL, so the binary runs on
-//! a machine that has a GPU and nothing else.
+//! same frames. With one frame in flight (the default) each frame is
+//! timed from the start of its CPU work until the GPU has finished it; with
+//! two, the next frame is cut, refined and uploaded while the GPU draws the
+//! current one (the LP chapter's refinement beside rendering), and a frame
+//! takes the time between two frames finished. Nothing here needs GDAL, so
+//! the binary runs on a machine that has a GPU and nothing else.
 
 use crate::flight::{Controls, Flight};
 use crate::gpu::{frame_bytes_per_pixel, Device, FrameStats, Queue, Renderer};
-use crate::headless::{device, wait_for_gpu};
+use crate::headless::{device, wait_for_gpu, wait_for_submission};
 use crate::scene::Scene;
 use crate::settings::{Settings, TerrainMode, VegetationSelection};
 use anyhow::{bail, Context, Result};
@@ -36,6 +39,11 @@ pub struct BenchArgs {
     /// instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Frames in flight: 1 waits for the GPU to finish each frame before
+    /// the next is prepared; 2 prepares the next frame (cut, refinement,
+    /// vertices, uploads) while the GPU draws the current one.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=2))]
+    pub in_flight: u8,
 }
 
 /// Seconds of flight a frame advances: the same path at any frame rate.
@@ -53,6 +61,9 @@ pub struct Record {
     pub config: String,
     pub size: [u32; 2],
     pub frames: usize,
+    /// Frames in flight: 1, each frame drawn before the next is prepared;
+    /// 2, the next prepared while the GPU draws the current one.
+    pub in_flight: u8,
     /// Frame time percentiles (nearest rank), milliseconds.
     pub frame_ms_p50: f64,
     pub frame_ms_p95: f64,
@@ -296,6 +307,8 @@ fn fly(
     wait_for_gpu(device)?;
     let mut times = Vec::new();
     let mut stats: Vec<FrameStats> = Vec::new();
+    // When the last frame was finished: a frame's time runs from there.
+    let mut finished = Instant::now();
     let paging_of = |scene: &Scene| scene.paged.as_ref().map(|p| p.stats()).unwrap_or_default();
     let paging_before = paging_of(scene);
     for (controls, follow) in LEGS {
@@ -309,12 +322,26 @@ fn fly(
         for _ in 0..a.frames {
             flight.fly(scene, &controls, STEP_S);
             let camera = flight.camera(scene, a.size);
-            let start = Instant::now();
+            let previous = renderer.last_submission();
             let frame = renderer.render(device, queue, scene, &camera, settings)?;
-            wait_for_gpu(device)?;
-            times.push(start.elapsed().as_secs_f64() * 1e3);
             stats.push(frame);
+            if a.in_flight == 1 {
+                wait_for_gpu(device)?;
+            } else if let Some(previous) = previous.filter(|_| stats.len() > 1) {
+                // The previous frame, drawn while this one was prepared.
+                wait_for_submission(device, previous)?;
+            } else {
+                // The flight's first frame: none of its frames finished yet.
+                continue;
+            }
+            times.push(finished.elapsed().as_secs_f64() * 1e3);
+            finished = Instant::now();
         }
+    }
+    if a.in_flight == 2 {
+        // The last frame, which nothing was prepared beside.
+        wait_for_gpu(device)?;
+        times.push(finished.elapsed().as_secs_f64() * 1e3);
     }
     let p50 = |values: Vec<f64>| percentile(values, 50.0);
     let field = |f: fn(&FrameStats) -> f64| p50(stats.iter().map(f).collect());
@@ -336,6 +363,7 @@ fn fly(
         config: labels.config.to_string(),
         size: a.size,
         frames: times.len(),
+        in_flight: a.in_flight,
         frame_ms_p50,
         frame_ms_p95: percentile(times.clone(), 95.0),
         frame_ms_p99: percentile(times.clone(), 99.0),

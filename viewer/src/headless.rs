@@ -219,6 +219,18 @@ pub fn wait_for_gpu(device: &wgpu::Device) -> Result<()> {
     Ok(())
 }
 
+/// Wait until the GPU has finished `submission` (and what came before it),
+/// leaving later submissions running.
+pub fn wait_for_submission(device: &wgpu::Device, submission: wgpu::SubmissionIndex) -> Result<()> {
+    device
+        .poll(wgpu::PollType::Wait {
+            submission_index: Some(submission),
+            timeout: None,
+        })
+        .context("waiting for the GPU")?;
+    Ok(())
+}
+
 /// What one headless frame is: its size, whether the window's HUD is
 /// painted over it, and whether its depth is read back.
 #[derive(Debug, Clone, Copy)]

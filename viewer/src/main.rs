@@ -69,6 +69,7 @@ enum Command {
     #[command(after_help = "Examples:
   relevo-view bench olinda.relevo                                  # text, 1280×720, 60 frames a leg
   relevo-view bench olinda.relevo --objects data/olinda/objects.geojson --size 1920x1080 --json > gpu.jsonl
+  relevo-view bench region.pyramid.relevo --in-flight 2           # the next frame refined while the GPU draws
   VK_ICD_FILENAMES=/usr/share/vulkan/icd.d/lvp_icd.x86_64.json relevo-view bench alps.relevo --frames 20   # on lavapipe")]
     Bench(relevo_view::bench::BenchArgs),
 }

@@ -19,8 +19,8 @@ fn bench(args: &[&str]) -> Output {
         .unwrap()
 }
 
-/// The records of a `--json` run.
-fn records(bundle: &Path) -> Vec<Value> {
+/// The records of a `--json` run with `in_flight` frames in flight.
+fn records(bundle: &Path, in_flight: &str) -> Vec<Value> {
     let out = bench(&[
         bundle.to_str().unwrap(),
         "--frames",
@@ -28,6 +28,8 @@ fn records(bundle: &Path) -> Vec<Value> {
         "--size",
         "320x180",
         "--json",
+        "--in-flight",
+        in_flight,
     ]);
     assert!(
         out.status.success(),
@@ -45,7 +47,7 @@ fn records(bundle: &Path) -> Vec<Value> {
 fn a_scripted_flight_gives_one_consistent_record_a_mode() {
     let dir = tempfile::tempdir().unwrap();
     let bundle = common::grenoble_bundle(dir.path());
-    let first = records(&bundle);
+    let first = records(&bundle, "1");
     assert_eq!(first[0]["bench"], "view-adapter");
     let adapter = first[0]["adapter"].as_str().unwrap();
     assert!(!adapter.is_empty());
@@ -58,6 +60,7 @@ fn a_scripted_flight_gives_one_consistent_record_a_mode() {
     for r in flights {
         let f = |k: &str| r[k].as_f64().unwrap();
         assert_eq!(r["frames"], 16, "{r}");
+        assert_eq!(r["in_flight"], 1, "{r}");
         assert_eq!(r["adapter"], adapter);
         assert!(
             0.0 < f("frame_ms_p50")
@@ -81,9 +84,19 @@ fn a_scripted_flight_gives_one_consistent_record_a_mode() {
     assert!(flights[2]["raycast_ms_p50"].as_f64().unwrap() > 0.0);
     assert!(flights[0]["refine_ms_p50"].as_f64().unwrap() > 0.0);
     // Another run flies the same path.
-    let again = records(&bundle);
+    let again = records(&bundle, "1");
     assert_eq!(again[1]["start_camera"], first[1]["start_camera"]);
     assert_eq!(again[1]["end_camera"], first[1]["end_camera"]);
+    // Two frames in flight (the next refined while the GPU draws): the
+    // same frames, one time each.
+    let pipelined = records(&bundle, "2");
+    for (p, r) in pipelined[1..].iter().zip(flights) {
+        assert_eq!(p["in_flight"], 2, "{p}");
+        for key in ["frames", "config", "start_camera", "end_camera"] {
+            assert_eq!(p[key], r[key], "{key}: {p} vs {r}");
+        }
+        assert_eq!(p["triangles_max"], r["triangles_max"], "{p} vs {r}");
+    }
 }
 
 #[test]
@@ -98,6 +111,10 @@ fn bad_requests_are_refused_by_name() {
             "--frames must be at least 1",
         ),
         (vec![bundle.to_str().unwrap(), "--size", "0x10"], "size"),
+        (
+            vec![bundle.to_str().unwrap(), "--in-flight", "3"],
+            "--in-flight",
+        ),
     ] {
         let out = bench(&args);
         let err = String::from_utf8_lossy(&out.stderr);

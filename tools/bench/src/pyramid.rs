@@ -252,8 +252,10 @@ fn readers(
 
 /// `relevo-view bench` over the pyramid (1280×720, 30 frames a leg, on
 /// whatever GPU `VK_ICD_FILENAMES` picks — lavapipe in the documented
-/// runs): each mode's frame times and paging figures as the viewer
-/// reports them, with the whole process's peak memory.
+/// runs), with one frame in flight and with two (the next frame refined
+/// while the GPU draws the current one): each mode's frame times and
+/// paging figures as the viewer reports them, with the whole process's
+/// peak memory.
 fn fly(relevo: &Path, out: &Path, name: &str, json_lines: bool) -> Result<()> {
     let viewer = relevo.with_file_name("relevo-view");
     if !viewer.is_file() {
@@ -262,12 +264,22 @@ fn fly(relevo: &Path, out: &Path, name: &str, json_lines: bool) -> Result<()> {
             viewer.display()
         );
     }
-    let (ms, peak, records) = run_measured_output(
-        Command::new(&viewer)
-            .arg("bench")
-            .arg(out)
-            .args(["--size", "1280x720", "--frames", "30", "--json"]),
-    )?;
+    for in_flight in ["1", "2"] {
+        let (ms, peak, records) = run_measured_output(
+            Command::new(&viewer)
+                .arg("bench")
+                .arg(out)
+                .args(["--size", "1280x720", "--frames", "30", "--json"])
+                .args(["--in-flight", in_flight]),
+        )?;
+        emit_flights(&records, name, ms, peak, json_lines)?;
+    }
+    Ok(())
+}
+
+/// The flight records of one `relevo-view bench` run, with the process's
+/// time `ms` and peak memory `peak` (MB).
+fn emit_flights(records: &str, name: &str, ms: f64, peak: f64, json_lines: bool) -> Result<()> {
     for line in records.lines() {
         let mut record: serde_json::Value = serde_json::from_str(line)
             .with_context(|| format!("relevo-view bench printed {line:?}"))?;
@@ -278,8 +290,9 @@ fn fly(relevo: &Path, out: &Path, name: &str, json_lines: bool) -> Result<()> {
         record["process_peak_rss_mb"] = json!(peak);
         record["process_ms"] = json!(ms);
         let text = format!(
-            "pyramid {name}: relevo-view bench {}: p50 {:.1} ms, p99 {:.1} ms, {} paging stalls, {} tiles read, {} dropped; process peak {peak:.0} MB",
+            "pyramid {name}: relevo-view bench {} ({} in flight): p50 {:.1} ms, p99 {:.1} ms, {} paging stalls, {} tiles read, {} dropped; process peak {peak:.0} MB",
             record["config"].as_str().unwrap_or(""),
+            record["in_flight"],
             record["frame_ms_p50"].as_f64().unwrap_or(f64::NAN),
             record["frame_ms_p99"].as_f64().unwrap_or(f64::NAN),
             record["paging_stalls"],

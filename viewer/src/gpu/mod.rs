@@ -38,6 +38,8 @@ pub struct Renderer {
     /// count) of the last frame and its figures. A frame asking for the
     /// same is already drawn.
     drawn: Option<(Camera, Settings, Option<usize>, FrameStats)>,
+    /// The last frame's submission to the GPU.
+    submitted: Option<wgpu::SubmissionIndex>,
 }
 
 /// The sky: the raycaster's colour for pixels without terrain.
@@ -57,7 +59,14 @@ impl Renderer {
             objects: None,
             vegetation: None,
             drawn: None,
+            submitted: None,
         }
+    }
+
+    /// The last frame drawn, as submitted to the GPU (to wait for it
+    /// alone while the next frame is prepared).
+    pub fn last_submission(&self) -> Option<wgpu::SubmissionIndex> {
+        self.submitted.clone()
     }
 
     /// Wait for every tile of a pyramid a frame needs, and upload all
@@ -176,7 +185,7 @@ impl Renderer {
             stats.impostor_views = pass.drawn();
         }
         let start = Instant::now();
-        queue.submit([encoder.finish()]);
+        self.submitted = Some(queue.submit([encoder.finish()]));
         stats.submit_ms = start.elapsed().as_secs_f64() * 1e3;
         self.drawn = Some((*camera, settings.clone(), objects_key, stats));
         Ok(stats)
