@@ -477,7 +477,9 @@ impl Raycaster {
         eye: [f64; 2],
         opts: &RenderOptions,
     ) -> Result<Vec<(Arc<LevelTerrain>, std::ops::Range<usize>)>> {
-        let mut out = Vec::new();
+        // Each band's level, slices and ground; then the levels read side
+        // by side (a camera that moved far may need several new windows).
+        let mut wanted = Vec::new();
         let mut from = 0;
         for (level, band) in opts.bands.iter().enumerate() {
             let to = if level + 1 == opts.bands.len() {
@@ -501,11 +503,14 @@ impl Raycaster {
                     }
                 }
                 let ground = [x0 - margin, y0 - margin, x1 + margin, y1 + margin];
-                out.push(((levels.load)(level as u32, ground)?, from..to));
+                wanted.push((level as u32, ground, from..to));
             }
             from = to;
         }
-        Ok(out)
+        wanted
+            .into_par_iter()
+            .map(|(level, ground, slices)| Ok(((levels.load)(level, ground)?, slices)))
+            .collect()
     }
 }
 

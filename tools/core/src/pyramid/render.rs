@@ -107,20 +107,26 @@ impl LevelWindows {
         hillshade: Option<[f64; 2]>,
     ) -> Result<(Arc<LevelTerrain>, Option<LevelRead>)> {
         let wanted = lattice_rect(p, level, ground, 0.0);
-        let mut held = self.held.lock().unwrap_or_else(PoisonError::into_inner);
         let l = level as usize;
-        if held.len() <= l {
-            held.resize(l + 1, None);
-        }
-        if let Some(window) = &held[l] {
-            if contains(&window.rect, &wanted) {
+        let room_for_level = |windows: &mut Vec<Option<HeldWindow>>| {
+            if windows.len() <= l {
+                windows.resize(l + 1, None);
+            }
+        };
+        {
+            let mut windows = self.held.lock().unwrap_or_else(PoisonError::into_inner);
+            room_for_level(&mut windows);
+            if let Some(window) = windows[l].as_ref().filter(|w| contains(&w.rect, &wanted)) {
                 return Ok((window.terrain.clone(), None));
             }
         }
+        // Read without the lock: other levels are read beside this one.
         let rect = lattice_rect(p, level, ground, WINDOW_MARGIN);
         let (terrain, read) = load_level(p, level, rect, hillshade)?;
         let terrain = Arc::new(terrain);
-        held[l] = Some(HeldWindow {
+        let mut windows = self.held.lock().unwrap_or_else(PoisonError::into_inner);
+        room_for_level(&mut windows);
+        windows[l] = Some(HeldWindow {
             rect,
             terrain: terrain.clone(),
         });
@@ -210,7 +216,9 @@ pub fn render_with(
         camera,
         &opts,
     )?;
-    Ok(read.into_inner().unwrap_or_else(PoisonError::into_inner))
+    let mut read = read.into_inner().unwrap_or_else(PoisonError::into_inner);
+    read.sort_by_key(|r| r.level);
+    Ok(read)
 }
 
 /// Level `level`'s lattice window under the ground box `[x0, y0, x1, y1]`
