@@ -22,7 +22,7 @@ use relevo_core::camera::Camera;
 use relevo_core::grid::vertex_normal;
 use relevo_core::lp::refine::VertexSource;
 use relevo_core::lp::terrain_position;
-use relevo_core::pyramid::paging::Cut;
+use relevo_core::pyramid::paging::{Cut, CutSample};
 use relevo_core::pyramid::{TileKey, TileLayout};
 use std::collections::HashMap;
 use std::time::Instant;
@@ -62,6 +62,9 @@ pub struct MeshPass {
     vertex_buffer: wgpu::Buffer,
     /// Vertices of the current frame, reused.
     vertices: Vec<Vertex>,
+    /// What the mesh draws at each entry of the frame's strip, read once
+    /// (neighbouring triangles of a strip share two entries); reused.
+    entries: Vec<Option<CutSample>>,
     /// When building this frame's vertices began.
     upload_started: Instant,
     vertex_count: u32,
@@ -221,6 +224,7 @@ impl MeshPass {
             uniforms,
             vertex_buffer: shared::empty_vertex_buffer(device, "mesh vertices"),
             vertices: Vec::new(),
+            entries: Vec::new(),
             upload_started: Instant::now(),
             vertex_count: 0,
             has_drape,
@@ -304,21 +308,31 @@ impl MeshPass {
             None => [0.0, 0.0],
         };
         let (heights, mask) = (scene.terrain.heights(), scene.terrain.mask());
+        self.entries.clear();
+        self.entries.extend(strip.indices.iter().map(|&i| {
+            let i = i as usize;
+            (mask[i] != 0).then(|| CutSample {
+                height_m: heights[i],
+                mask: mask[i],
+                normal: vertex_normal(heights, side, cell, i % side, i / side),
+            })
+        }));
         let barycentric = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
         self.vertices.clear();
         for entries in strip.triangle_entries() {
-            let index = entries.map(|e| strip.indices[e] as usize);
-            if index.iter().any(|&i| mask[i] == 0) {
+            let [Some(first), Some(second), Some(third)] = entries.map(|e| self.entries[e]) else {
                 continue;
-            }
-            for (k, (&e, &i)) in entries.iter().zip(&index).enumerate() {
+            };
+            let drawn = [first, second, third];
+            for (k, &e) in entries.iter().enumerate() {
+                let i = strip.indices[e] as usize;
                 let (c, r) = (i % side, i / side);
                 let z = strip
                     .morphed_z
                     .get(e)
-                    .map_or(heights[i] as f64, |&z| z as f64);
+                    .map_or(drawn[k].height_m as f64, |&z| z as f64);
                 let p = DVec3::from_array(terrain_position(c, r, side, cell, z));
-                let n = vertex_normal(heights, side, cell, c, r);
+                let n = drawn[k].normal;
                 self.vertices.push(Vertex {
                     position: (p - eye).as_vec3().to_array(),
                     uv: uv_of(p.x, p.y),
@@ -364,6 +378,11 @@ impl MeshPass {
         let samples = tiles.layout.samples() as f64;
         let eye = camera.position;
         let barycentric = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        self.entries.clear();
+        self.entries.extend(strip.indices.iter().map(|&i| {
+            let i = i as usize;
+            cut.sample(i % side, i / side).filter(|s| s.mask != 0)
+        }));
         self.vertices.clear();
         // Neighbouring triangles mostly share a tile: its layer, kept.
         let mut last: Option<(TileKey, (TileKey, u32))> = None;
@@ -372,13 +391,10 @@ impl MeshPass {
                 let i = strip.indices[e] as usize;
                 (i % side, i / side)
             });
-            let Some(drawn) = at
-                .iter()
-                .map(|&(c, r)| cut.sample(c, r).filter(|s| s.mask != 0))
-                .collect::<Option<Vec<_>>>()
-            else {
+            let [Some(first), Some(second), Some(third)] = entries.map(|e| self.entries[e]) else {
                 continue;
             };
+            let drawn = [first, second, third];
             let holding = cut.tile_holding(&at);
             let (key, layer) = match last {
                 Some((k, found)) if k == holding => found,
