@@ -86,6 +86,7 @@ fn read_everything(dir: &std::path::Path) {
     let Ok(p) = Pyramid::open(dir) else {
         return;
     };
+    let p = std::sync::Arc::new(p);
     for level in 0..p.layout.levels() {
         for key in p.layout.tiles(level) {
             let _ = p.tile(key);

@@ -96,6 +96,11 @@ pub struct Record {
     pub tiles_resident_max: usize,
     pub tile_cache_mb_max: f64,
     pub tile_uploads: u64,
+    /// A pyramid's raycast: frames that waited for a level window to be
+    /// read (the rest found theirs held or read ahead), and the windows
+    /// read ahead beside the frames.
+    pub raycast_window_waits: usize,
+    pub raycast_windows_ahead: u64,
     /// The flight's first and last camera (`relevo render --camera`).
     pub start_camera: String,
     pub end_camera: String,
@@ -311,6 +316,8 @@ fn fly(
     let mut finished = Instant::now();
     let paging_of = |scene: &Scene| scene.paged.as_ref().map(|p| p.stats()).unwrap_or_default();
     let paging_before = paging_of(scene);
+    let ahead_of = |scene: &Scene| scene.level_windows.as_ref().map_or(0, |w| w.reads().ahead);
+    let ahead_before = ahead_of(scene);
     for (controls, follow) in LEGS {
         if follow && !flight.follow_terrain {
             // Down to the low pass's height, then keep it.
@@ -391,6 +398,8 @@ fn fly(
             .filter_map(|s| s.paging.map(|p| p.resident_bytes as f64 / 1e6))
             .fold(0.0, f64::max),
         tile_uploads: stats.iter().map(|s| u64::from(s.tile_uploads)).sum(),
+        raycast_window_waits: stats.iter().filter(|s| s.level_windows_waited > 0).count(),
+        raycast_windows_ahead: ahead_of(scene) - ahead_before,
         start_camera,
         end_camera: flight.pose(scene, height).to_string(),
     })

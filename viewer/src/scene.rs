@@ -72,8 +72,9 @@ pub struct Scene {
     /// once warm.
     pub refiner: Refiner,
     pub raycaster: horizon::Raycaster,
-    /// A pyramid's level windows the raycast read, kept for the next frame.
-    pub level_windows: LevelWindows,
+    /// A pyramid's level windows the raycast reads, kept for the next
+    /// frame and read ahead.
+    pub level_windows: Option<LevelWindows>,
     /// Objects placed on the terrain, when a placement file was loaded.
     pub objects: Option<ObjectMesh>,
     /// The bundle's vegetation clusters with the cut they were baked for,
@@ -213,7 +214,7 @@ impl Scene {
             paged: None,
             refiner: Refiner::new(),
             raycaster: horizon::Raycaster::default(),
-            level_windows: LevelWindows::default(),
+            level_windows: None,
             objects: None,
             vegetation,
         })
@@ -246,6 +247,7 @@ impl Scene {
         let terrain = Terrain::new(side, frame.cell_size_m, heights, mask, color);
         let paged = PagedPyramid::new(pyramid, TILE_CACHE_BYTES.load(Ordering::Relaxed) as usize)
             .with_context(|| path.display().to_string())?;
+        let level_windows = Some(LevelWindows::new(paged.pyramid.clone()));
         Ok(Scene {
             path: path.to_path_buf(),
             grid,
@@ -256,7 +258,7 @@ impl Scene {
             paged: Some(paged),
             refiner: Refiner::new(),
             raycaster: horizon::Raycaster::default(),
-            level_windows: LevelWindows::default(),
+            level_windows,
             objects: None,
             vegetation: None,
         })

@@ -95,17 +95,17 @@ impl RaycastPass {
         stats: &mut FrameStats,
     ) -> anyhow::Result<()> {
         let start = Instant::now();
-        let frame = match &scene.paged {
+        let frame = match &mut scene.level_windows {
             // A pyramid: each distance band reads its own level.
-            Some(paged) => {
-                render_with(
+            Some(windows) => {
+                let waited = render_with(
                     &mut scene.raycaster,
-                    &mut scene.level_windows,
-                    &paged.pyramid,
+                    windows,
                     camera,
                     &settings.raycast,
                     PYRAMID_LEVELS,
                 )?;
+                stats.level_windows_waited = waited.len();
                 scene.raycaster.frame()
             }
             None => scene

@@ -275,4 +275,7 @@ pub struct FrameStats {
     pub paging: Option<relevo_core::pyramid::paging::PagingStats>,
     /// Tiles' drapes uploaded to the GPU this frame.
     pub tile_uploads: u32,
+    /// A pyramid's raycast: level windows this frame waited for (the rest
+    /// were held, or read ahead beside the frames).
+    pub level_windows_waited: usize,
 }

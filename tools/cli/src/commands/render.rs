@@ -138,7 +138,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
                 a.bundle.display()
             );
         }
-        let p = Pyramid::open(&a.bundle)?;
+        let p = std::sync::Arc::new(Pyramid::open(&a.bundle)?);
         let camera = scene::camera(&p.frame(), &view)?;
         let levels = LevelOptions {
             max_cell_px: a.max_cell_px,

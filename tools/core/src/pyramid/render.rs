@@ -18,6 +18,7 @@ use crate::horizon::{
 };
 use crate::lp::window::Rect;
 use crate::Result;
+use std::sync::mpsc::{sync_channel, Receiver, TryRecvError};
 use std::sync::{Arc, Mutex, PoisonError};
 
 /// How a pyramid is raycast beyond the raycaster's own options.
@@ -66,28 +67,53 @@ pub struct LevelRead {
 }
 
 /// The level windows a pyramid's raycasts read, kept from one frame to the
-/// next. A band whose ground lies inside the window its level read before
-/// reads nothing; one that leaves it reads its window grown by
-/// [`WINDOW_MARGIN`] of its size on each side (clamped to the level), so a
-/// camera that moves or turns a little reads nothing new. The raycast is
+/// next and read ahead. A band whose ground lies inside the window its
+/// level holds reads nothing; once its ground has moved a quarter of the
+/// margin toward the window's edge, the window around it grown by [`WINDOW_MARGIN`]
+/// of its size on each side (clamped to the level) is read on a thread of
+/// its own while frames go on with the one held, and replaces it once it
+/// has arrived. A frame waits only when its band has left the window held
+/// before the next one arrived (a jump, or the first frame). The raycast is
 /// the same whichever window a level comes from: a sample reads its
 /// lattice vertices' heights, mask and colour, and a baked hillshade's
 /// normals look past the window's edge (where a level's cell is under a
 /// pixel, beyond the last band's reach, the drape's averaged colour levels
 /// follow the window's origin).
-#[derive(Default)]
 pub struct LevelWindows {
-    /// Per level, the window held.
-    held: Mutex<Vec<Option<HeldWindow>>>,
-    /// The hillshade the windows were baked with.
+    pyramid: Arc<Pyramid>,
+    /// The hillshade the windows are baked with.
     hillshade: Option<[f64; 2]>,
+    /// Per level, the window held and the one being read ahead.
+    levels: Mutex<Vec<LevelSlot>>,
+    reads: Mutex<WindowReads>,
+}
+
+/// How a raycast's level windows were read, since the windows were made.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct WindowReads {
+    /// Windows a frame waited for.
+    pub waited: u64,
+    /// Windows read ahead, beside the frames.
+    pub ahead: u64,
+}
+
+/// A level's window held, and the one being read ahead.
+#[derive(Default)]
+struct LevelSlot {
+    held: Option<HeldWindow>,
+    ahead: Option<ReadAhead>,
 }
 
 /// A level's lattice window and its terrain.
-#[derive(Clone)]
 struct HeldWindow {
     rect: Rect,
     terrain: Arc<LevelTerrain>,
+}
+
+/// A window being read on a thread of its own.
+struct ReadAhead {
+    rect: Rect,
+    arrived: Receiver<Result<(LevelTerrain, LevelRead)>>,
 }
 
 /// How much larger than a band's ground a level window is read, as a
@@ -95,42 +121,139 @@ struct HeldWindow {
 pub const WINDOW_MARGIN: f64 = 0.25;
 
 impl LevelWindows {
+    /// No windows yet of `pyramid`'s levels.
+    pub fn new(pyramid: Arc<Pyramid>) -> LevelWindows {
+        LevelWindows {
+            pyramid,
+            hillshade: None,
+            levels: Mutex::default(),
+            reads: Mutex::default(),
+        }
+    }
+
+    /// The pyramid the windows are read from.
+    pub fn pyramid(&self) -> &Pyramid {
+        &self.pyramid
+    }
+
+    /// How the windows were read so far.
+    pub fn reads(&self) -> WindowReads {
+        *self.reads.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Bake `hillshade` into the windows from now on (those held are
+    /// dropped when it changes).
+    fn set_hillshade(&mut self, hillshade: Option<[f64; 2]>) {
+        if self.hillshade != hillshade {
+            self.hillshade = hillshade;
+            self.levels = Mutex::default();
+        }
+    }
+
     /// Level `level` over the ground box `[x0, y0, x1, y1]` (level-0
     /// terrain frame, metres): the window held when it covers the box, else
-    /// a grown one read from `p`; with the window read (`None` when none
-    /// was).
+    /// one read now; with the window the frame waited for (`None` when it
+    /// did not wait).
     fn level(
         &self,
-        p: &Pyramid,
         level: u32,
         ground: [f64; 4],
-        hillshade: Option<[f64; 2]>,
     ) -> Result<(Arc<LevelTerrain>, Option<LevelRead>)> {
+        let p = &*self.pyramid;
         let wanted = lattice_rect(p, level, ground, 0.0);
+        let grown = || lattice_rect(p, level, ground, WINDOW_MARGIN);
         let l = level as usize;
-        let room_for_level = |windows: &mut Vec<Option<HeldWindow>>| {
-            if windows.len() <= l {
-                windows.resize(l + 1, None);
+        let pending = {
+            let mut levels = self.levels.lock().unwrap_or_else(PoisonError::into_inner);
+            if levels.len() <= l {
+                levels.resize_with(l + 1, LevelSlot::default);
             }
+            let slot = &mut levels[l];
+            slot.take_arrived(&wanted);
+            if let Some(held) = slot.held.as_ref().filter(|w| contains(&w.rect, &wanted)) {
+                let terrain = held.terrain.clone();
+                if slot.ahead.is_none() && !contains(&inset(&held.rect), &wanted) {
+                    slot.ahead = Some(self.read_ahead(level, grown()));
+                }
+                return Ok((terrain, None));
+            }
+            // Nothing held covers the band: this frame waits, for the
+            // window under way if it will cover the band.
+            slot.ahead.take().filter(|a| contains(&a.rect, &wanted))
         };
-        {
-            let mut windows = self.held.lock().unwrap_or_else(PoisonError::into_inner);
-            room_for_level(&mut windows);
-            if let Some(window) = windows[l].as_ref().filter(|w| contains(&w.rect, &wanted)) {
-                return Ok((window.terrain.clone(), None));
-            }
-        }
-        // Read without the lock: other levels are read beside this one.
-        let rect = lattice_rect(p, level, ground, WINDOW_MARGIN);
-        let (terrain, read) = load_level(p, level, rect, hillshade)?;
+        let (rect, (terrain, read)) =
+            match pending.and_then(|a| Some((a.rect, a.arrived.recv().ok()?))) {
+                Some((rect, arrived)) => (rect, arrived?),
+                None => {
+                    let rect = grown();
+                    (rect, load_level(p, level, rect, self.hillshade)?)
+                }
+            };
         let terrain = Arc::new(terrain);
-        let mut windows = self.held.lock().unwrap_or_else(PoisonError::into_inner);
-        room_for_level(&mut windows);
-        windows[l] = Some(HeldWindow {
+        self.reads
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .waited += 1;
+        let mut levels = self.levels.lock().unwrap_or_else(PoisonError::into_inner);
+        levels[l].held = Some(HeldWindow {
             rect,
             terrain: terrain.clone(),
         });
         Ok((terrain, Some(read)))
+    }
+
+    /// Start reading level `level`'s window `rect` on a thread of its own.
+    /// Should no thread start, the window never arrives and a frame that
+    /// needs it reads it itself.
+    fn read_ahead(&self, level: u32, rect: Rect) -> ReadAhead {
+        let (send, arrived) = sync_channel(1);
+        let (pyramid, hillshade) = (self.pyramid.clone(), self.hillshade);
+        let _ = std::thread::Builder::new()
+            .name("relevo level window".into())
+            .spawn(move || {
+                let _ = send.send(load_level(&pyramid, level, rect, hillshade));
+            });
+        self.reads
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .ahead += 1;
+        ReadAhead { rect, arrived }
+    }
+}
+
+impl LevelSlot {
+    /// A window read ahead that has arrived replaces the one held, when it
+    /// covers `wanted` (one that failed is dropped: a frame that needs the
+    /// window reads it itself and reports why it cannot).
+    fn take_arrived(&mut self, wanted: &Rect) {
+        let Some(ahead) = &self.ahead else { return };
+        match ahead.arrived.try_recv() {
+            Err(TryRecvError::Empty) => {}
+            Ok(Ok((terrain, _))) if contains(&ahead.rect, wanted) => {
+                self.held = Some(HeldWindow {
+                    rect: ahead.rect,
+                    terrain: Arc::new(terrain),
+                });
+                self.ahead = None;
+            }
+            Ok(_) | Err(TryRecvError::Disconnected) => self.ahead = None,
+        }
+    }
+}
+
+/// `rect` less three quarters of the margin a grown window has on each
+/// side: a band whose ground leaves it starts the next window's read.
+fn inset(rect: &Rect) -> Rect {
+    let fraction = WINDOW_MARGIN / (1.0 + 2.0 * WINDOW_MARGIN) * 0.75;
+    let (dc, dr) = (
+        (rect.width as f64 * fraction) as usize,
+        (rect.height as f64 * fraction) as usize,
+    );
+    Rect {
+        c0: rect.c0 + dc,
+        r0: rect.r0 + dr,
+        width: rect.width.saturating_sub(2 * dc),
+        height: rect.height.saturating_sub(2 * dr),
     }
 }
 
@@ -146,30 +269,24 @@ fn contains(outer: &Rect, inner: &Rect) -> bool {
 /// whose bands are replaced by [`level_bands`]; the frame and the levels
 /// it read, nearest first.
 pub fn render(
-    p: &Pyramid,
+    p: &Arc<Pyramid>,
     camera: &Camera,
     opts: &RenderOptions,
     levels: LevelOptions,
 ) -> Result<(RaycastFrame, Vec<LevelRead>)> {
     let mut raycaster = Raycaster::default();
-    let read = render_with(
-        &mut raycaster,
-        &mut LevelWindows::default(),
-        p,
-        camera,
-        opts,
-        levels,
-    )?;
+    let mut windows = LevelWindows::new(p.clone());
+    let read = render_with(&mut raycaster, &mut windows, camera, opts, levels)?;
     Ok((raycaster.into_frame(), read))
 }
 
-/// [`render`] into `raycaster`'s frame, its buffers and the level windows
-/// in `windows` reused from one frame to the next (as the viewer does);
-/// the levels read this frame, nearest first.
+/// [`render`] of the pyramid of `windows` into `raycaster`'s frame, its
+/// buffers and the level windows reused from one frame to the next (as
+/// the viewer does); the level windows this frame waited for, nearest
+/// first.
 pub fn render_with(
     raycaster: &mut Raycaster,
     windows: &mut LevelWindows,
-    p: &Pyramid,
     camera: &Camera,
     opts: &RenderOptions,
     levels: LevelOptions,
@@ -180,6 +297,9 @@ pub fn render_with(
             levels.max_cell_px
         )));
     }
+    windows.set_hillshade(levels.hillshade);
+    let windows = &*windows;
+    let p = windows.pyramid();
     let opts = RenderOptions {
         bands: level_bands(p, camera, levels.max_cell_px),
         ..opts.clone()
@@ -192,15 +312,9 @@ pub fn render_with(
         lowest_m: lowest,
         highest_m: highest,
     };
-    if windows.hillshade != levels.hillshade {
-        *windows = LevelWindows {
-            hillshade: levels.hillshade,
-            ..LevelWindows::default()
-        };
-    }
     let read = Mutex::new(Vec::new());
     let load = |level: u32, ground: [f64; 4]| {
-        let (terrain, window) = windows.level(p, level, ground, levels.hillshade)?;
+        let (terrain, window) = windows.level(level, ground)?;
         if let Some(window) = window {
             read.lock()
                 .unwrap_or_else(PoisonError::into_inner)
@@ -338,9 +452,10 @@ mod tests {
 
     /// A flight low over two crops, forward and turning, four bands deep
     /// (`max_cell_px` 16), with a baked hillshade: the level windows kept
-    /// from frame to frame give the frames that windows read afresh give,
-    /// pixel for pixel and depth for depth, and read under half as many
-    /// windows.
+    /// from frame to frame (and read ahead beside them) give the frames
+    /// that windows read afresh give, pixel for pixel and depth for depth,
+    /// whenever the windows read ahead arrive; the frames wait for under
+    /// half as many windows.
     #[test]
     fn kept_level_windows_raycast_as_fresh_ones() {
         let levels = LevelOptions {
@@ -349,9 +464,11 @@ mod tests {
         };
         for t in terrains().into_iter().take(2) {
             let (_dir, p) = pyramid_of(&t, 32);
+            let p = Arc::new(p);
             let extent = (t.h.side - 1) as f64 * t.h.cell_size_m;
             let top = t.heights.iter().cloned().fold(f32::MIN, f32::max) as f64;
-            let (mut kept, mut raycaster) = (LevelWindows::default(), Raycaster::default());
+            let mut kept = LevelWindows::new(p.clone());
+            let mut raycaster = Raycaster::default();
             let (mut kept_reads, mut fresh_reads) = (0, 0);
             for frame in 0..24 {
                 let f = frame as f64;
@@ -371,8 +488,7 @@ mod tests {
                     far_m: extent * 3.0,
                 };
                 let opts = RenderOptions::default();
-                let read =
-                    render_with(&mut raycaster, &mut kept, &p, &camera, &opts, levels).unwrap();
+                let read = render_with(&mut raycaster, &mut kept, &camera, &opts, levels).unwrap();
                 kept_reads += read.len();
                 let (fresh, read) = render(&p, &camera, &opts, levels).unwrap();
                 fresh_reads += read.len();
@@ -389,9 +505,12 @@ mod tests {
                     t.name
                 );
             }
+            let reads = kept.reads();
+            assert_eq!(reads.waited, kept_reads as u64, "{}", t.name);
+            assert!(reads.ahead > 0, "{}: nothing read ahead", t.name);
             assert!(
                 2 * kept_reads < fresh_reads,
-                "{}: kept windows read {kept_reads} windows, fresh ones {fresh_reads}",
+                "{}: frames waited for {kept_reads} kept windows, for {fresh_reads} fresh ones",
                 t.name
             );
         }
