@@ -1026,7 +1026,8 @@ fn a_pyramid_flown_while_tiles_load_never_shows_a_crack() {
 /// the surface up to one slice past it, so the distance along the view
 /// axis, in cells of the level the raycast read there, is within 0.75 of a
 /// cell at the median and 1.5 at the 95th percentile; at most 2 % of the
-/// pixels disagree on terrain or sky.
+/// pixels disagree on terrain or sky. The HUD says how its level windows
+/// were read.
 #[test]
 fn a_pyramids_raycast_over_its_levels_agrees_with_its_mesh() {
     let dir = tempfile::tempdir().unwrap();
@@ -1048,7 +1049,26 @@ fn a_pyramids_raycast_over_its_levels_agrees_with_its_mesh() {
         flight.pitch_deg = flight.pitch_deg.max(-30.0);
         let shot = Shot::new(SIZE);
         let (m, _) = render_once(&device, &queue, &mut tiled, &flight, &mesh, &shot).unwrap();
-        let (r, _) = render_once(&device, &queue, &mut tiled, &flight, &raycast, &shot).unwrap();
+        let (r, stats) =
+            render_once(&device, &queue, &mut tiled, &flight, &raycast, &shot).unwrap();
+        // The HUD says how the level windows were read.
+        let reads = tiled.level_windows.as_ref().unwrap().reads();
+        assert!(reads.waited >= 1, "view {k}: {reads:?}");
+        let hud = relevo_view::hud::lines(&relevo_view::hud::Readings {
+            fps: 1.0,
+            frame_ms: 1.0,
+            settings: &raycast,
+            stats: &stats,
+            scene: Some(&tiled),
+            flight: Some(&flight),
+            pointer: None,
+        })
+        .join("\n");
+        let line = format!(
+            "level windows: {} read ahead, {} waited for ({} this frame)",
+            reads.ahead, reads.waited, stats.level_windows_waited
+        );
+        assert!(hud.contains(&line), "view {k}: {hud}");
         let camera = flight.camera(&tiled, SIZE);
         let bands = relevo_core::pyramid::render::level_bands(
             &tiled.paged.as_ref().unwrap().pyramid,

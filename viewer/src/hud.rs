@@ -67,6 +67,14 @@ pub fn lines(r: &Readings) -> Vec<String> {
             p.finest_level,
         ));
     }
+    let windows = r.scene.and_then(|scene| scene.level_windows.as_ref());
+    if let (TerrainMode::Raycast, Some(w)) = (s.mode, windows) {
+        let reads = w.reads();
+        lines.push(format!(
+            "level windows: {} read ahead, {} waited for ({} this frame)",
+            reads.ahead, reads.waited, r.stats.level_windows_waited
+        ));
+    }
     let objects = match r.scene.and_then(|scene| scene.objects.as_ref()) {
         None => "objects: none loaded".to_string(),
         Some(o) if s.objects => format!(
