@@ -18,6 +18,7 @@ use std::process::ExitCode;
   relevo-view olinda.relevo --objects data/olinda/objects.geojson --camera 290963,9112753,100,35
   relevo-view olinda.relevo --tour 90 --screenshot window.png   # scripted flight, screenshot, exit
   relevo-view region.relevo --tile-cache 256M   # a pyramid (prep --tiled): tiles paged as you fly
+  relevo-view region.relevo --mode raycast      # start in raycast mode
   relevo-view render olinda.relevo --mode raycast --size 1920x1080 --out shot.png
   relevo-view render olinda.relevo --mode mesh --tau 1 --wireframe --camera 289000,9111000,400,40,420 --out mesh.png
   relevo-view render alps.relevo --size 7680x4320 --depth depth.f32 --stats stats.json --out big.png
@@ -33,6 +34,11 @@ struct Cli {
     /// Start at this camera, X,Y,Z,HEADING[,PITCHdeg][,INCL] (default: the home view).
     #[arg(long, requires = "bundle", allow_hyphen_values = true)]
     camera: Option<String>,
+    /// Draw the terrain as mesh, raycast, or a Z-buffer baseline
+    /// zbuffer:a … zbuffer:g at first (the M key and the side panel
+    /// switch).
+    #[arg(long, default_value = "mesh", value_parser = relevo_view::settings::TerrainMode::parse)]
+    mode: relevo_view::settings::TerrainMode,
     /// Fly a scripted tour of this many frames (forward, turning), then
     /// save a screenshot of the window to --screenshot and close.
     #[arg(long, requires = "screenshot", value_name = "FRAMES")]
@@ -101,6 +107,7 @@ fn main() -> ExitCode {
                 bundle: cli.bundle,
                 objects: cli.objects,
                 camera: cli.camera,
+                mode: cli.mode,
                 tour,
             };
             relevo_view::app::run(start)

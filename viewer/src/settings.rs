@@ -10,9 +10,10 @@ use relevo_core::zbuffer::Representation;
 use serde::Serialize;
 
 /// How the terrain is drawn.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum TerrainMode {
     /// relevo-core's view-dependent refinement, drawn as triangles.
+    #[default]
     Mesh,
     /// relevo-core's floating-horizon raycast, composited with its depth.
     Raycast,

@@ -83,29 +83,34 @@ fn assert_terrain_and_hud(shot: &Path) {
 }
 
 /// A pyramid flown in a real window with a tile cache smaller than the
-/// region (tiles dropped and read again): the tour ends cleanly, the
+/// region (tiles dropped and read again), then in raycast mode (its level
+/// windows read ahead beside the frames): each tour ends cleanly, the
 /// screenshot shows terrain below the horizon and the HUD.
 #[test]
 fn a_real_window_flies_over_a_pyramid_paging_its_tiles() {
     let dir = tempfile::tempdir().unwrap();
     let pyramid = grenoble_pyramid(dir.path());
-    let shot = dir.path().join("window.png");
-    let out = viewer(
-        &[
-            pyramid.as_os_str(),
-            "--tile-cache".as_ref(),
-            "300K".as_ref(),
-            "--tour".as_ref(),
-            "45".as_ref(),
-            "--screenshot".as_ref(),
-            shot.as_os_str(),
-        ],
-        true,
-        dir.path(),
-    );
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{stderr}");
-    assert_terrain_and_hud(&shot);
+    for mode in ["mesh", "raycast"] {
+        let shot = dir.path().join(format!("window_{mode}.png"));
+        let out = viewer(
+            &[
+                pyramid.as_os_str(),
+                "--mode".as_ref(),
+                mode.as_ref(),
+                "--tile-cache".as_ref(),
+                "300K".as_ref(),
+                "--tour".as_ref(),
+                "45".as_ref(),
+                "--screenshot".as_ref(),
+                shot.as_os_str(),
+            ],
+            true,
+            dir.path(),
+        );
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{mode}: {stderr}");
+        assert_terrain_and_hud(&shot);
+    }
 }
 
 #[test]

@@ -20,7 +20,7 @@ use crate::gpu::{self, FrameStats};
 use crate::hud;
 use crate::samples::SamplesTab;
 use crate::scene::Scene;
-use crate::settings::Settings;
+use crate::settings::{Settings, TerrainMode};
 use eframe::egui;
 use relevo_core::scene::CameraPose;
 use std::collections::VecDeque;
@@ -242,6 +242,9 @@ pub struct Start {
     pub objects: Option<PathBuf>,
     /// A camera string to start at instead of the home view.
     pub camera: Option<String>,
+    /// How the terrain is drawn at first (the keys and the side panel
+    /// change it).
+    pub mode: TerrainMode,
     /// A scripted flight ending with a screenshot.
     pub tour: Option<Tour>,
 }
@@ -254,6 +257,7 @@ pub fn run(start: Start) -> anyhow::Result<()> {
         bundle,
         objects,
         camera,
+        mode,
         tour,
     } = start;
     let outcome = tour
@@ -272,6 +276,7 @@ pub fn run(start: Start) -> anyhow::Result<()> {
         options,
         Box::new(move |_| {
             let mut app = ViewerApp::new(bundle.as_deref());
+            app.settings.mode = mode;
             if let Some(path) = &objects {
                 app.load_objects(path);
             }
