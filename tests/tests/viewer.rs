@@ -7,6 +7,7 @@ use relevo_core::horizon::{distance_of_depth, DistanceBand};
 use relevo_tests::forge::forged;
 use relevo_tests::{compare_with_reference, prep_region, repo};
 use relevo_view::flight::Flight;
+use relevo_view::gpu::FrameStats;
 use relevo_view::headless::{device, render_once, Shot};
 use relevo_view::scene::Scene;
 use relevo_view::settings::{Settings, TerrainMode};
@@ -520,16 +521,7 @@ fn the_hud_counts_the_objects_in_view_and_impostors_stand_on_the_mesh_drawn() {
                 let what = format!("camera {text}, {selection}, {mode}");
                 assert!(in_view > 50, "{what}: {in_view} objects in view");
                 assert_eq!(stats.vegetation_represented, in_view, "{what}");
-                let readings = relevo_view::hud::Readings {
-                    fps: 1.0,
-                    frame_ms: 1.0,
-                    settings: &settings,
-                    stats: &stats,
-                    scene: Some(&scene),
-                    flight: Some(&flight),
-                    pointer: None,
-                };
-                let hud = relevo_view::hud::lines(&readings).join("\n");
+                let hud = hud_text(&settings, &stats, &scene, &flight);
                 assert!(
                     hud.contains(&format!("{in_view} objects represented")),
                     "{what}: {hud}"
@@ -884,6 +876,21 @@ fn the_viewer_refuses_hostile_bundles_by_name_when_it_opens_them() {
     }
 }
 
+/// The HUD's lines for a frame drawn with `settings` from `flight` over
+/// `scene` (no pointer), one text.
+fn hud_text(settings: &Settings, stats: &FrameStats, scene: &Scene, flight: &Flight) -> String {
+    relevo_view::hud::lines(&relevo_view::hud::Readings {
+        fps: 1.0,
+        frame_ms: 1.0,
+        settings,
+        stats,
+        scene: Some(scene),
+        flight: Some(flight),
+        pointer: None,
+    })
+    .join("\n")
+}
+
 /// The Grenoble sample region (Copernicus GLO-30-derived DEM, 1025² grid,
 /// its drape derived from the heights) as a single-grid bundle and as a
 /// pyramid in tiles of 64 cells (16² tiles at level 0, five levels), both
@@ -1054,16 +1061,7 @@ fn a_pyramids_raycast_over_its_levels_agrees_with_its_mesh() {
         // The HUD says how the level windows were read.
         let reads = tiled.level_windows.as_ref().unwrap().reads();
         assert!(reads.waited >= 1, "view {k}: {reads:?}");
-        let hud = relevo_view::hud::lines(&relevo_view::hud::Readings {
-            fps: 1.0,
-            frame_ms: 1.0,
-            settings: &raycast,
-            stats: &stats,
-            scene: Some(&tiled),
-            flight: Some(&flight),
-            pointer: None,
-        })
-        .join("\n");
+        let hud = hud_text(&raycast, &stats, &tiled, &flight);
         let line = format!(
             "level windows: {} read ahead, {} waited for ({} this frame)",
             reads.ahead, reads.waited, stats.level_windows_waited

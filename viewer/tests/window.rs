@@ -35,21 +35,25 @@ fn decode_png(path: &Path) -> (Vec<u8>, usize, usize) {
 fn a_real_window_flies_a_tour_and_shows_terrain_and_the_hud() {
     let dir = tempfile::tempdir().unwrap();
     let bundle = grenoble_bundle(dir.path());
-    let shot = dir.path().join("window.png");
-    let out = viewer(
-        &[
-            bundle.as_os_str(),
-            "--tour".as_ref(),
-            "45".as_ref(),
-            "--screenshot".as_ref(),
-            shot.as_os_str(),
-        ],
-        true,
-        dir.path(),
+    fly_a_tour(&bundle, &[], &dir.path().join("window.png"));
+}
+
+/// Open `bundle` in a real window with `options`, fly a 45-frame tour and
+/// check its screenshot at `shot` (terrain and the HUD) and a clean exit.
+fn fly_a_tour(bundle: &Path, options: &[&str], shot: &Path) {
+    use std::ffi::OsStr;
+    let mut args: Vec<&OsStr> = vec![bundle.as_os_str()];
+    args.extend(
+        options
+            .iter()
+            .chain(&["--tour", "45", "--screenshot"])
+            .map(OsStr::new),
     );
+    args.push(shot.as_os_str());
+    let out = viewer(&args, true, shot.parent().unwrap());
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{stderr}");
-    assert_terrain_and_hud(&shot);
+    assert!(out.status.success(), "{options:?}: {stderr}");
+    assert_terrain_and_hud(shot);
 }
 
 /// The window's screenshot at `shot`: in the view (left of the side
@@ -91,25 +95,11 @@ fn a_real_window_flies_over_a_pyramid_paging_its_tiles() {
     let dir = tempfile::tempdir().unwrap();
     let pyramid = grenoble_pyramid(dir.path());
     for mode in ["mesh", "raycast"] {
-        let shot = dir.path().join(format!("window_{mode}.png"));
-        let out = viewer(
-            &[
-                pyramid.as_os_str(),
-                "--mode".as_ref(),
-                mode.as_ref(),
-                "--tile-cache".as_ref(),
-                "300K".as_ref(),
-                "--tour".as_ref(),
-                "45".as_ref(),
-                "--screenshot".as_ref(),
-                shot.as_os_str(),
-            ],
-            true,
-            dir.path(),
+        fly_a_tour(
+            &pyramid,
+            &["--mode", mode, "--tile-cache", "300K"],
+            &dir.path().join(format!("window_{mode}.png")),
         );
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert!(out.status.success(), "{mode}: {stderr}");
-        assert_terrain_and_hud(&shot);
     }
 }
 
