@@ -177,6 +177,10 @@ pub struct Cut {
     /// The leaf over each level-0 tile, row by row (what a vertex is read
     /// from without a search).
     leaf_tile: Vec<Option<Arc<LoadedTile>>>,
+    /// Level-0 tiles a side, and log2 of a tile's cells: what every vertex
+    /// lookup needs, kept (shifts, no divisions).
+    across: usize,
+    tile_shift: u32,
 }
 
 /// A sample of the cut: what the mesh draws at a vertex.
@@ -189,14 +193,9 @@ pub struct CutSample {
 }
 
 impl Cut {
-    /// Level-0 tiles a side.
-    fn across(&self) -> usize {
-        self.geometry.layout.across(0)
-    }
-
     /// The leaf over level-0 tile (tx, ty).
     fn leaf_key(&self, tx: usize, ty: usize) -> TileKey {
-        let level = self.leaf_level[ty * self.across() + tx];
+        let level = self.leaf_level[ty * self.across + tx];
         TileKey {
             level,
             x: tx >> level,
@@ -206,7 +205,7 @@ impl Cut {
 
     /// The leaves, coarsest first.
     pub fn leaves(&self) -> Vec<TileKey> {
-        let n = self.across();
+        let n = self.across;
         let mut keys: Vec<TileKey> = (0..n * n).map(|i| self.leaf_key(i % n, i / n)).collect();
         keys.sort_by_key(|k| (std::cmp::Reverse(k.level), k.y, k.x));
         keys.dedup();
@@ -221,9 +220,8 @@ impl Cut {
     /// The leaf that holds vertex (c, r) on its lattice, and the sample's
     /// index in it; `None` when no leaf over it holds it.
     fn held(&self, c: usize, r: usize) -> Option<(&LoadedTile, usize)> {
-        let t = self.geometry.layout.tile_cells;
-        let n = self.across();
-        let (tx, ty) = ((c / t).min(n - 1), (r / t).min(n - 1));
+        let (n, shift) = (self.across, self.tile_shift);
+        let (tx, ty) = ((c >> shift).min(n - 1), (r >> shift).min(n - 1));
         let on_lattice = |x: usize, y: usize| {
             let s = self.leaf_level[y * n + x];
             (c >> s) << s == c && (r >> s) << s == r
@@ -233,8 +231,8 @@ impl Cut {
         }
         // On a level-0 tile's left or top border, the leaves across it
         // must hold the vertex too.
-        let left = c.is_multiple_of(t) && c > 0 && tx == c / t;
-        let up = r.is_multiple_of(t) && r > 0 && ty == r / t;
+        let left = c > 0 && tx << shift == c;
+        let up = r > 0 && ty << shift == r;
         let across = [
             (left, tx.wrapping_sub(1), ty),
             (up, tx, ty.wrapping_sub(1)),
@@ -247,10 +245,10 @@ impl Cut {
             return None;
         }
         let tile = self.leaf_tile.get(ty * n + tx)?.as_ref()?;
-        let key = tile.key;
-        let ([c0, r0, _, _], _) = self.geometry.layout.vertices(key);
-        let s = key.level;
-        let samples = self.geometry.layout.samples();
+        // The leaf's first vertex: its key times its span, 2^(level + shift).
+        let s = tile.key.level;
+        let (c0, r0) = (tile.key.x << (s + shift), tile.key.y << (s + shift));
+        let samples = (1 << shift) + 1;
         Some((tile, ((r - r0) >> s) * samples + ((c - c0) >> s)))
     }
 
@@ -274,7 +272,7 @@ impl Cut {
     /// over them is textured from.
     pub fn tile_holding(&self, vertices: &[(usize, usize)]) -> TileKey {
         let layout = &self.geometry.layout;
-        let last = self.across() - 1;
+        let last = self.across - 1;
         let t = layout.tile_cells;
         let (c, r) = vertices[0];
         let mut key = self.leaf_key((c / t).min(last), (r / t).min(last));
@@ -446,6 +444,8 @@ fn choose(
             tiles,
             leaf_level,
             leaf_tile,
+            across: n,
+            tile_shift: layout.tile_cells.trailing_zeros(),
         },
         wanted,
     )
