@@ -15,15 +15,28 @@ use crate::headless::{device, wait_for_gpu, wait_for_submission};
 use crate::scene::Scene;
 use crate::settings::{Settings, TerrainMode, VegetationSelection};
 use anyhow::{bail, Context, Result};
-use relevo_core::scene;
+use relevo_core::bundle::{Crs, GridInfo};
+use relevo_core::geo::GeoTransform;
+use relevo_core::grid::HeightGrid;
+use relevo_core::lp::ErrorMetric;
+use relevo_core::{pyramid, scene};
 use serde::Serialize;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 #[derive(clap::Args, Debug)]
 pub struct BenchArgs {
     /// The bundle to fly over.
-    pub bundle: PathBuf,
+    #[arg(required_unless_present = "fractal")]
+    pub bundle: Option<PathBuf>,
+    /// Instead of a bundle: write relevo-core's fractal heightfield of this
+    /// side (2^n + 1 from 17, e.g. 16385: the heights of the pyramid
+    /// benchmark's input, 10 m cells) as a pyramid of 512-cell tiles (a
+    /// quarter of a smaller fractal's side) into a scratch folder beside
+    /// the system's temporary files, fly over it, and remove it — the
+    /// benchmark's pyramid on a machine that has a GPU and no GDAL.
+    #[arg(long, conflicts_with = "bundle", value_name = "SIDE")]
+    pub fractal: Option<usize>,
     /// Frame size, WIDTHxHEIGHT.
     #[arg(long, default_value = "1280x720", value_parser = scene::parse_size)]
     pub size: [u32; 2],
@@ -118,14 +131,118 @@ pub fn run(a: BenchArgs) -> Result<()> {
         raycast_bytes,
         "choose a smaller --size",
     )?;
-    let mut scene = Scene::open(&a.bundle)?;
+    let (bundle, name, scratch) = match (&a.bundle, a.fractal) {
+        (Some(bundle), _) => (bundle.clone(), bundle.display().to_string(), None),
+        (None, Some(side)) => {
+            let scratch = Scratch::new()?;
+            let bundle = write_fractal(side, &scratch.0)?;
+            (bundle, format!("fractal {side}²"), Some(scratch))
+        }
+        (None, None) => bail!("give a bundle to fly over, or --fractal SIDE"),
+    };
+    let result = fly_all(&a, &bundle, &name);
+    drop(scratch);
+    result
+}
+
+/// A scratch folder, removed when dropped.
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new() -> Result<Scratch> {
+        let dir = std::env::temp_dir().join(format!("relevo-view-bench-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).with_context(|| dir.display().to_string())?;
+        Ok(Scratch(dir))
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// relevo-core's fractal of `side`² (seed 1, 10 m cells, north-up in UTM
+/// 31N's numbers as the pyramid benchmark writes it) as a pyramid of
+/// [`pyramid::DEFAULT_TILE_CELLS`]-cell tiles (a quarter of the side when
+/// that is less, at least 16 cells) in `dir`, each pass's progress on
+/// stderr.
+fn write_fractal(side: usize, dir: &Path) -> Result<PathBuf> {
+    if !(side >= 17 && (side - 1).is_power_of_two()) {
+        bail!("--fractal {side}: the side must be 2^n + 1, at least 17 (e.g. 4097, 16385)");
+    }
+    let cell = 10.0;
+    relevo_core::memory::check(
+        &format!("the {side}² fractal"),
+        (side * side) as u64,
+        5,
+        "choose a smaller --fractal side",
+    )?;
+    let grid = HeightGrid {
+        side,
+        heights: relevo_core::grid::fractal_heights(side, 1),
+        mask: vec![1; side * side],
+        geotransform: GeoTransform::north_up(600_000.0, 5_100_000.0, cell, cell),
+    };
+    let description = pyramid::PyramidDescription {
+        region: format!("fractal {side}²"),
+        crs: Crs {
+            wkt: String::new(),
+            epsg: None,
+        },
+        grid: GridInfo::of(&grid, cell, 1.0).context("the fractal holds no data")?,
+        inputs: Vec::new(),
+        parameters: Default::default(),
+    };
+    let options = pyramid::WriteOptions {
+        tile_cells: pyramid::DEFAULT_TILE_CELLS.min((side - 1) / 4).max(16),
+        build: pyramid::BuildOptions {
+            metric: ErrorMetric::default(),
+            cell_size_m: cell,
+            drape: true,
+        },
+        force: false,
+        resume: false,
+    };
+    let start = Instant::now();
+    let last = std::sync::Mutex::new("");
+    let bundle = pyramid::write_pyramid(
+        &dir.join("fractal.relevo"),
+        &grid,
+        description,
+        options,
+        &|p| {
+            // One line a pass, when it starts.
+            if let Ok(mut last) = last.lock() {
+                if *last != p.pass {
+                    *last = p.pass;
+                    eprintln!(
+                        "fractal {side}²: {} ({} tiles), {:.0} s in",
+                        p.pass,
+                        p.total,
+                        start.elapsed().as_secs_f64()
+                    );
+                }
+            }
+        },
+    )?;
+    eprintln!(
+        "fractal {side}²: pyramid written in {:.0} s",
+        start.elapsed().as_secs_f64()
+    );
+    Ok(bundle)
+}
+
+/// Fly every configuration over `bundle` (labelled `name`) and print the
+/// records.
+fn fly_all(a: &BenchArgs, bundle: &Path, name: &str) -> Result<()> {
+    let mut scene = Scene::open(bundle)?;
     if let Some(path) = &a.objects {
         scene
             .load_objects(path)
             .with_context(|| path.display().to_string())?;
     }
     let (device, queue, adapter) = device()?;
-    let name = a.bundle.display().to_string();
     if a.json {
         println!(
             "{}",
@@ -141,7 +258,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
     {
         if k > 0 && scene.paged.is_some() {
             // A pyramid flies each mode from an empty cache, paging as it goes.
-            scene = Scene::open(&a.bundle)?;
+            scene = Scene::open(bundle)?;
             if let Some(path) = &a.objects {
                 scene.load_objects(path)?;
             }
@@ -153,9 +270,9 @@ pub fn run(a: BenchArgs) -> Result<()> {
             &mut renderer,
             &mut scene,
             &settings,
-            &a,
+            a,
             Labels {
-                bundle: &name,
+                bundle: name,
                 adapter: &adapter,
                 config: &config,
             },

@@ -76,6 +76,7 @@ enum Command {
   relevo-view bench olinda.relevo                                  # text, 1280×720, 60 frames a leg
   relevo-view bench olinda.relevo --objects data/olinda/objects.geojson --size 1920x1080 --json > gpu.jsonl
   relevo-view bench region.pyramid.relevo --in-flight 2           # the next frame refined while the GPU draws
+  relevo-view bench --fractal 16385 --size 1920x1080 --json       # the pyramid benchmark's input, made here without GDAL
   VK_ICD_FILENAMES=/usr/share/vulkan/icd.d/lvp_icd.x86_64.json relevo-view bench alps.relevo --frames 20   # on lavapipe")]
     Bench(relevo_view::bench::BenchArgs),
 }

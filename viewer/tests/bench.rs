@@ -99,6 +99,51 @@ fn a_scripted_flight_gives_one_consistent_record_a_mode() {
     }
 }
 
+/// `--fractal`: the fractal written as a pyramid in a scratch folder (no
+/// bundle, no GDAL), flown in every mode with its tiles paged, and the
+/// folder removed afterwards.
+#[test]
+fn a_fractal_pyramid_is_made_flown_and_removed() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_relevo-view"))
+        .args([
+            "bench",
+            "--fractal",
+            "257",
+            "--frames",
+            "3",
+            "--size",
+            "160x90",
+        ])
+        .arg("--json")
+        .env("VK_ICD_FILENAMES", relevo_view::LAVAPIPE_ICD)
+        .env("TMPDIR", tmp.path())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("fractal 257²: pyramid written"), "{stderr}");
+    let flights: Vec<Value> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str::<Value>(l).unwrap())
+        .filter(|r| r["bench"] == "view-flight")
+        .collect();
+    assert_eq!(flights.len(), 3);
+    for r in &flights {
+        assert_eq!(r["bundle"], "fractal 257²", "{r}");
+        assert_eq!(r["frames"], 12, "{r}");
+    }
+    assert!(
+        flights[0]["tiles_loaded"].as_u64().unwrap() > 0,
+        "{}",
+        flights[0]
+    );
+    assert!(flights[0]["triangles_p50"].as_u64().unwrap() > 0);
+    let left: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+}
+
 #[test]
 fn bad_requests_are_refused_by_name() {
     let dir = tempfile::tempdir().unwrap();
@@ -115,6 +160,8 @@ fn bad_requests_are_refused_by_name() {
             vec![bundle.to_str().unwrap(), "--in-flight", "3"],
             "--in-flight",
         ),
+        (vec!["--fractal", "100"], "2^n + 1"),
+        (vec![], "BUNDLE"),
     ] {
         let out = bench(&args);
         let err = String::from_utf8_lossy(&out.stderr);
