@@ -172,10 +172,11 @@ fn write_fractal(side: usize, dir: &Path) -> Result<PathBuf> {
         bail!("--fractal {side}: the side must be 2^n + 1, at least 17 (e.g. 4097, 16385)");
     }
     let cell = 10.0;
+    // The generator's f64 working heights, the f32 heights and the mask.
     relevo_core::memory::check(
         &format!("the {side}² fractal"),
         (side * side) as u64,
-        5,
+        13,
         "choose a smaller --fractal side",
     )?;
     let grid = HeightGrid {
