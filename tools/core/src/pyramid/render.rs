@@ -5,8 +5,8 @@
 //! lattice under the ground its slices reach. Nothing the size of the
 //! region is held: a frame holds a few windows of about the same number
 //! of vertices, one a level. [`LevelWindows`] keeps them for the next
-//! frame, so a moving camera reads a level again only when its band leaves
-//! the window read before.
+//! frame and reads the next ones ahead, beside the frames, as the camera
+//! moves toward their edges.
 
 use super::reader::Pyramid;
 use crate::camera::Camera;
@@ -69,10 +69,10 @@ pub struct LevelRead {
 /// The level windows a pyramid's raycasts read, kept from one frame to the
 /// next and read ahead. A band whose ground lies inside the window its
 /// level holds reads nothing; once its ground has moved a quarter of the
-/// margin toward the window's edge, the window around it grown by [`WINDOW_MARGIN`]
-/// of its size on each side (clamped to the level) is read on a thread of
-/// its own while frames go on with the one held, and replaces it once it
-/// has arrived. A frame waits only when its band has left the window held
+/// margin toward the window's edge, the window around it grown by
+/// [`WINDOW_MARGIN`] of its size on each side (clamped to the level) is
+/// read on a thread of its own while frames go on with the one held, and
+/// replaces it once it has arrived. A frame waits only when its band has left the window held
 /// before the next one arrived (a jump, or the first frame). The raycast is
 /// the same whichever window a level comes from: a sample reads its
 /// lattice vertices' heights, mask and colour, and a baked hillshade's
