@@ -134,8 +134,11 @@ pub fn run(a: BenchArgs) -> Result<()> {
     let (bundle, name, scratch) = match (&a.bundle, a.fractal) {
         (Some(bundle), _) => (bundle.clone(), bundle.display().to_string(), None),
         (None, Some(side)) => {
-            let scratch = Scratch::new()?;
-            let bundle = write_fractal(side, &scratch.0)?;
+            let scratch = tempfile::Builder::new()
+                .prefix("relevo-view-bench-")
+                .tempdir()
+                .context("making a scratch folder for the fractal")?;
+            let bundle = write_fractal(side, scratch.path())?;
             (bundle, format!("fractal {side}²"), Some(scratch))
         }
         (None, None) => bail!("give a bundle to fly over, or --fractal SIDE"),
@@ -143,23 +146,6 @@ pub fn run(a: BenchArgs) -> Result<()> {
     let result = fly_all(&a, &bundle, &name);
     drop(scratch);
     result
-}
-
-/// A scratch folder, removed when dropped.
-struct Scratch(PathBuf);
-
-impl Scratch {
-    fn new() -> Result<Scratch> {
-        let dir = std::env::temp_dir().join(format!("relevo-view-bench-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).with_context(|| dir.display().to_string())?;
-        Ok(Scratch(dir))
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
 }
 
 /// relevo-core's fractal of `side`² (seed 1, 10 m cells, north-up in UTM
