@@ -15,6 +15,7 @@ use relevo_core::cluster::stage::bake_database;
 use relevo_core::cluster::Clusters;
 use relevo_core::geo::{GeoTransform, TerrainFrame};
 use relevo_core::grid::fractal_heights;
+use relevo_core::horizon::Terrain;
 use relevo_core::veg::db::VegObject;
 use serde_json::json;
 use std::collections::BTreeMap;
@@ -72,6 +73,7 @@ fn seed_table(bundle: &Bundle, database: &[VegObject], json_lines: bool) -> Resu
     let side_m = (frame.side - 1) as f64 * frame.cell_size_m;
     let diagonal = side_m * std::f64::consts::SQRT_2;
     let (heights, mask) = (bundle.heights()?, bundle.mask()?);
+    let ground = Terrain::new(frame.side, frame.cell_size_m, &heights[..], &mask[..], None);
     // South of the region, 4 km up, looking north and down over all of it.
     let camera = Camera {
         position: DVec3::new(side_m / 2.0, -3_000.0, 4_000.0),
@@ -104,8 +106,7 @@ fn seed_table(bundle: &Bundle, database: &[VegObject], json_lines: bool) -> Resu
             let (clusters, _) = bake_database(
                 &subset,
                 &frame,
-                &heights,
-                &mask,
+                &ground,
                 &BTreeMap::new(),
                 &options,
                 &|_, _| {},
@@ -172,11 +173,11 @@ fn large(
             ..BakeOptions::default()
         };
         let start = Instant::now();
+        let ground = Terrain::new(side, cell, &heights[..], &mask[..], None);
         let (clusters, _) = bake_database(
             &objects,
             &frame,
-            &heights,
-            &mask,
+            &ground,
             &BTreeMap::new(),
             &options,
             &|_, _| {},

@@ -5,7 +5,7 @@ use crate::progress;
 use anyhow::Result;
 use relevo_core::cluster::bake::BakeOptions;
 use relevo_core::cluster::model::ModelSource;
-use relevo_core::cluster::stage::bake_database;
+use relevo_core::cluster::stage::{bake_database, Ground};
 use relevo_core::cluster::{BakeReport, Clusters};
 use relevo_core::geo::TerrainFrame;
 use relevo_core::veg::db::VegObject;
@@ -52,21 +52,12 @@ pub fn count_on(bar: &indicatif::ProgressBar) -> impl Fn(u64, u64) + Sync + '_ {
 pub fn bake_with_progress(
     database: &[VegObject],
     frame: &TerrainFrame,
-    heights: &[f32],
-    mask: &[u8],
+    ground: &dyn Ground,
     models: &BTreeMap<String, ModelSource>,
     options: &BakeOptions,
 ) -> Result<(Clusters, usize)> {
     let bar = progress::bar(0, "clusters");
-    let result = bake_database(
-        database,
-        frame,
-        heights,
-        mask,
-        models,
-        options,
-        &count_on(&bar),
-    );
+    let result = bake_database(database, frame, ground, models, options, &count_on(&bar));
     bar.finish_and_clear();
     Ok(result?)
 }

@@ -27,6 +27,7 @@ use relevo_core::cluster::bake::BakeOptions;
 use relevo_core::cluster::{store, Clusters};
 use relevo_core::geo::{GeoTransform, TerrainFrame};
 use relevo_core::grid::{pow2_plus_1_at_least, pow2_plus_1_nearest, HeightGrid, Squaring};
+use relevo_core::horizon::Terrain;
 use relevo_core::lp::Hierarchy;
 use relevo_core::raster::fill::{fill_holes, FillReport};
 use relevo_core::raster::stretch::{stretch_or_default, to_rgba8};
@@ -425,11 +426,17 @@ fn stage_clusters(b: &mut Build) -> Result<()> {
     // From the database as stored (millimetres), so that `relevo bake`
     // on the bundle reproduces these clusters byte for byte.
     let database = db::as_stored(&extraction.objects);
+    let ground = Terrain::new(
+        grid.side,
+        b.cell_size_m,
+        &grid.heights[..],
+        &grid.mask[..],
+        None,
+    );
     let (clusters, off_terrain) = bake_with_progress(
         &database,
         &frame,
-        &grid.heights,
-        &grid.mask,
+        &ground,
         &section.models,
         &section.options,
     )?;

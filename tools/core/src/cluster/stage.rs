@@ -19,40 +19,60 @@ pub fn class_names(database: &[VegObject]) -> Vec<String> {
     set.into_iter().map(str::to_string).collect()
 }
 
-/// The database's objects in the terrain frame, standing on the ground:
-/// `ground(x, y)` is the terrain height at a terrain-frame point (`None` off
-/// the terrain), `aspect[class]` the height-to-diameter ratio of each class
-/// of `classes`. Returns the objects and how many were off the terrain
-/// (left out).
+/// What the objects stand on: the terrain's height under points of the
+/// terrain frame. A single grid's [`Terrain`] and a pyramid's tiles
+/// (`pyramid::ground`) give the same heights.
+pub trait Ground: Sync {
+    /// The height under each of `points` (terrain frame, metres), `None`
+    /// off the terrain or where it has no data; errors name what could not
+    /// be read.
+    fn heights_under(&self, points: &[[f64; 2]]) -> Result<Vec<Option<f64>>>;
+}
+
+impl Ground for Terrain<'_> {
+    fn heights_under(&self, points: &[[f64; 2]]) -> Result<Vec<Option<f64>>> {
+        Ok(points.iter().map(|&[x, y]| self.surface(x, y)).collect())
+    }
+}
+
+/// The database's objects in the terrain frame, standing on `ground`;
+/// `aspect[class]` is the height-to-diameter ratio of each class of
+/// `classes`. Returns the objects and how many were off the terrain (left
+/// out).
 pub fn objects_on_terrain(
     database: &[VegObject],
     classes: &[String],
     aspect: &[f32],
     frame: &TerrainFrame,
-    ground: &dyn Fn(f64, f64) -> Option<f64>,
-) -> (Vec<ClusterObject>, usize) {
+    ground: &dyn Ground,
+) -> Result<(Vec<ClusterObject>, usize)> {
+    let at: Vec<Option<[f64; 2]>> = database
+        .iter()
+        .map(|o| frame.terrain_from_world(o.x, o.y).map(|(x, y)| [x, y]))
+        .collect();
+    let points: Vec<[f64; 2]> = at.iter().flatten().copied().collect();
+    let mut heights = ground.heights_under(&points)?.into_iter();
     let mut off = 0;
     let mut objects = Vec::with_capacity(database.len());
-    for (row, o) in database.iter().enumerate() {
+    for (row, (o, at)) in database.iter().zip(at).enumerate() {
+        let z = at.and_then(|_| heights.next().flatten());
         let class = classes.iter().position(|c| *c == o.class);
         let placed = class
-            .zip(frame.terrain_from_world(o.x, o.y))
-            .and_then(|(class, (x, y))| {
-                let z = ground(x, y)?;
-                Some(ClusterObject {
-                    foot: [x as f32, y as f32, z as f32],
-                    diameter: o.size as f32,
-                    height: o.size as f32 * aspect[class],
-                    class: class as u32,
-                    row: row as u32,
-                })
+            .zip(at)
+            .zip(z)
+            .map(|((class, [x, y]), z)| ClusterObject {
+                foot: [x as f32, y as f32, z as f32],
+                diameter: o.size as f32,
+                height: o.size as f32 * aspect[class],
+                class: class as u32,
+                row: row as u32,
             });
         match placed {
             Some(p) if p.diameter > 0.0 => objects.push(p),
             _ => off += 1,
         }
     }
-    (objects, off)
+    Ok((objects, off))
 }
 
 /// The model of each class: `models` maps a class name to a built-in kind
@@ -80,13 +100,13 @@ pub fn class_sources(
 
 /// The whole clusters stage on a vegetation database over a terrain (the
 /// one path `prep`, `bake`, the tests and the benchmarks take): models per
-/// class, objects on the ground, the bake. Returns the clusters and the
-/// number of objects left out off the terrain.
+/// class, objects on `ground` (a single grid's [`Terrain`] or a pyramid's
+/// tiles), the bake. Returns the clusters and the number of objects left
+/// out off the terrain.
 pub fn bake_database(
     database: &[VegObject],
     frame: &TerrainFrame,
-    heights: &[f32],
-    mask: &[u8],
+    ground: &dyn Ground,
     models: &BTreeMap<String, ModelSource>,
     options: &BakeOptions,
     progress: &(dyn Fn(u64, u64) + Sync),
@@ -113,9 +133,7 @@ pub fn bake_database(
     let classes = class_names(database);
     let sources = class_sources(&classes, models)?;
     let aspect: Vec<f32> = sources.iter().map(|c| c.model.aspect()).collect();
-    let terrain = Terrain::new(frame.side, frame.cell_size_m, heights, mask, None);
-    let ground = |x: f64, y: f64| terrain.surface(x, y);
-    let (objects, off_terrain) = objects_on_terrain(database, &classes, &aspect, frame, &ground);
+    let (objects, off_terrain) = objects_on_terrain(database, &classes, &aspect, frame, ground)?;
     if objects.is_empty() {
         return Err(Error::Input(format!(
             "none of the {} vegetation objects stands on the terrain",

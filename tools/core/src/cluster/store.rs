@@ -16,6 +16,7 @@ use super::{AtlasFrame, BakeReport};
 use super::{ClassImpostor, Clusters};
 use crate::bundle::names;
 use crate::bundle::{Bundle, BundleLock, BundleWriter};
+use crate::horizon::Terrain;
 use crate::raster::png;
 use crate::{files, memory};
 use crate::{Error, Result};
@@ -151,15 +152,10 @@ pub fn rewrite_bundle(
         }
     };
     let (heights, mask) = (bundle.heights()?, bundle.mask()?);
-    let (clusters, off_terrain) = super::stage::bake_database(
-        database,
-        &bundle.frame(),
-        &heights,
-        &mask,
-        models,
-        options,
-        progress,
-    )?;
+    let frame = bundle.frame();
+    let ground = Terrain::new(frame.side, frame.cell_size_m, &heights[..], &mask[..], None);
+    let (clusters, off_terrain) =
+        super::stage::bake_database(database, &frame, &ground, models, options, progress)?;
     let replaced = |key: &str| {
         is_cluster_artifact(key)
             || (new.database.is_some()
@@ -179,6 +175,7 @@ pub fn rewrite_bundle(
         writer.write_vegetation_samples(samples)?;
     }
     write(&mut writer, &clusters, options, off_terrain)?;
+    drop(ground);
     drop((heights, mask));
     let path = writer.commit_checked(&validate)?;
     Ok((path, clusters, off_terrain))

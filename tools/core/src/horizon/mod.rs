@@ -30,7 +30,7 @@ mod screen;
 use frame::tiled_len;
 pub use frame::{tiled_index, RaycastFrame, Rows, Steps, TILE_COLUMNS};
 use march::Slice;
-pub use sample::{hillshade, ColorSource, Terrain};
+pub use sample::{grid_position, hillshade, ColorSource, Terrain};
 pub use screen::{pitch_range, MAX_LINE_DENSITY};
 
 use crate::camera::Camera;

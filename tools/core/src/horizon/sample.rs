@@ -159,6 +159,14 @@ impl ColorSource {
     }
 }
 
+/// The grid position (column, row, fractional) of terrain-frame point
+/// (`x`, `y`) metres, on a grid whose cells are `1 / inv_cell` metres and
+/// whose last vertex is `last` (side − 1): columns grow east, rows south.
+#[inline(always)]
+pub fn grid_position(x: f64, y: f64, inv_cell: f64, last: f64) -> (f64, f64) {
+    (x * inv_cell, last - y * inv_cell)
+}
+
 /// `heights` with every masked vertex that has data among its eight
 /// neighbours set to the mean of those neighbours' heights; `None` when
 /// there is no such vertex.
@@ -522,7 +530,7 @@ impl<'a> Terrain<'a> {
     /// Grid position (column, row), fractional, of terrain-frame (x, y).
     #[inline]
     fn grid(&self, x: f64, y: f64) -> (f64, f64) {
-        (x * self.inv_cell, self.last - y * self.inv_cell)
+        grid_position(x, y, self.inv_cell, self.last)
     }
 
     /// Where the vertex nearest (x, y) is kept in `tiled` and
@@ -634,6 +642,15 @@ impl<'a> Terrain<'a> {
     /// `None` off the grid or over masked cells.
     pub fn surface(&self, x: f64, y: f64) -> Option<f64> {
         let (c, r) = self.grid(x, y);
+        self.surface_at(c, r)
+    }
+
+    /// The exact bilinear surface at grid position (`c`, `r`) (columns and
+    /// rows from the first vertex, fractional), metres; `None` off the grid
+    /// or when the nearest vertex has no data. A window of a larger grid
+    /// holding the cell and one vertex around it gives the larger grid's
+    /// value bit for bit at the shifted position.
+    pub fn surface_at(&self, c: f64, r: f64) -> Option<f64> {
         self.vertex(c, r)?;
         let last = (self.side - 2) as f64;
         let (c0, r0) = (c.floor().clamp(0.0, last), r.floor().clamp(0.0, last));

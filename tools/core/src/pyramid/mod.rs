@@ -9,6 +9,7 @@
 //!   progress.
 //! - [`build`]: the tiles computed pass by pass in bounded memory, equal
 //!   bit for bit to the single grid.
+//! - [`ground`]: the heights vegetation stands on, read tile by tile.
 //! - [`jobs`]: a build split into jobs that processes on several machines
 //!   run side by side.
 //! - [`reader`]: a pyramid opened, its tiles mapped without copying, the
@@ -20,6 +21,7 @@
 //!   memory budget, and the crack-free cut a frame refines through.
 
 pub mod build;
+pub mod ground;
 pub mod jobs;
 pub mod layout;
 pub mod mesh;

@@ -25,6 +25,7 @@ use rayon::prelude::*;
 /// use relevo_core::cluster::stage::bake_database;
 /// use relevo_core::cluster::cut::{DrawList, ObjectList, QuadtreeCut, Selection};
 /// use relevo_core::geo::{GeoTransform, TerrainFrame};
+/// use relevo_core::horizon::Terrain;
 /// use relevo_core::veg::db::VegObject;
 /// // 400 conifers 8 m across, 60 m apart, on a flat 1.28 km square.
 /// let side = 65;
@@ -44,10 +45,10 @@ use rayon::prelude::*;
 ///     })
 ///     .collect();
 /// let options = BakeOptions { budget_bytes: 16 << 20, ..BakeOptions::default() };
-/// let (heights, mask) = (vec![0.0; side * side], vec![1; side * side]);
+/// let ground = Terrain::new(side, 20.0, vec![0.0; side * side], vec![1; side * side], None);
 /// let models = Default::default(); // each class's model from its name
 /// let (clusters, off_terrain) =
-///     bake_database(&database, &frame, &heights, &mask, &models, &options, &|_, _| {}).unwrap();
+///     bake_database(&database, &frame, &ground, &models, &options, &|_, _| {}).unwrap();
 /// assert_eq!(off_terrain, 0);
 /// // 3 km south of the square, 1 km up, looking north and down at it.
 /// let camera = Camera {
