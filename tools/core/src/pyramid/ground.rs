@@ -22,6 +22,10 @@ use crate::Result;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 
+/// A point by its index among those asked and its grid position (column,
+/// row).
+type GridPoint = (usize, f64, f64);
+
 /// The ground of a pyramid's level 0 read tile by tile from `source`.
 ///
 /// ```
@@ -83,7 +87,7 @@ impl Ground for TiledGround<'_> {
         let across = self.layout.across(0);
         // Grid positions by tile; a point whose nearest vertex is off the
         // grid (or not a number) is off the terrain.
-        let mut by_tile: BTreeMap<(usize, usize), Vec<(usize, f64, f64)>> = BTreeMap::new();
+        let mut by_tile: BTreeMap<(usize, usize), Vec<GridPoint>> = BTreeMap::new();
         for (i, &[x, y]) in points.iter().enumerate() {
             let (c, r) = grid_position(x, y, inv_cell, last);
             let on_grid = |v: f64| v > -0.5 && v < last + 0.5;
