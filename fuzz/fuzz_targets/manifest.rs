@@ -4,7 +4,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use relevo_core::bundle::{write_terrain_bundle, Bundle, Crs};
+use relevo_core::bundle::{write_terrain_bundle, Bundle, BundleFiles, Crs};
 use relevo_core::cluster::store;
 use relevo_core::geo::GeoTransform;
 use relevo_core::grid::HeightGrid;

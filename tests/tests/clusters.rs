@@ -6,6 +6,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use relevo_core::bundle::Bundle;
+use relevo_core::bundle::BundleFiles;
 use relevo_core::camera::Camera;
 use relevo_core::cluster::checks;
 use relevo_core::cluster::cut::{
@@ -165,7 +166,7 @@ fn validate_finds_clusters_that_disagree_with_the_database() {
         |key| key != "vegetation",
     )
     .unwrap();
-    writer.write_vegetation(&database).unwrap();
+    writer.staged().write_vegetation(&database).unwrap();
     drop(bundle);
     let out = writer.commit().unwrap();
     let problems = relevo_core::validation::validate(&Bundle::open(&out).unwrap());

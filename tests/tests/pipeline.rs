@@ -2,6 +2,7 @@
 //! hashes against `data/golden/`, the grid and the drape as recorded.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+use relevo_core::bundle::BundleFiles;
 use relevo_core::bundle::{sha256_file, Bundle};
 use relevo_core::validation::validate;
 use relevo_tests::{blessing, prep_region, repo};

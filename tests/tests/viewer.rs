@@ -3,6 +3,7 @@
 //! seed's central claim — the raycast's depth is the GPU mesh's depth.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+use relevo_core::bundle::BundleFiles;
 use relevo_core::horizon::{distance_of_depth, DistanceBand};
 use relevo_tests::forge::forged;
 use relevo_tests::{compare_with_reference, prep_region, repo};

@@ -10,6 +10,7 @@
 
 use anyhow::Context;
 use eframe::egui;
+use relevo_core::bundle::BundleFiles;
 use relevo_core::bundle::{Bundle, BundleLock};
 use relevo_core::cluster::model::ModelSource;
 use relevo_core::cluster::store::{self, NewVegetation};

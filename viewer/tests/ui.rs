@@ -9,6 +9,7 @@ mod common;
 use eframe::egui::Key;
 use egui_kittest::kittest::Queryable;
 use egui_kittest::Harness;
+use relevo_core::bundle::BundleFiles;
 use relevo_view::app::ViewerApp;
 use relevo_view::settings::TerrainMode;
 

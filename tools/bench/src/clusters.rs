@@ -8,6 +8,7 @@ use anyhow::{Context, Result};
 use glam::DVec3;
 use relevo::prep::region::RegionSpec;
 use relevo_core::bundle::Bundle;
+use relevo_core::bundle::BundleFiles;
 use relevo_core::camera::Camera;
 use relevo_core::cluster::bake::BakeOptions;
 use relevo_core::cluster::cut::{Blobs, CutOptions, DrawList, ObjectList, QuadtreeCut, Selection};

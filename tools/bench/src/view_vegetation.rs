@@ -10,6 +10,7 @@ use anyhow::{bail, Context, Result};
 use glam::DVec3;
 use relevo::prep::prep;
 use relevo::prep::region::RegionSpec;
+use relevo_core::bundle::BundleFiles;
 use relevo_core::bundle::{Bundle, BundleLock};
 use relevo_core::camera::Camera;
 use relevo_core::cluster::bake::BakeOptions;

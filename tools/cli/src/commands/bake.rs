@@ -6,6 +6,7 @@ use crate::clusters::{count_on, print_report};
 use crate::progress;
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use relevo_core::bundle::BundleFiles;
 use relevo_core::bundle::{Bundle, BundleLock};
 use relevo_core::cluster::bake::BakeOptions;
 use relevo_core::cluster::cut::{CutBand, CutOptions};

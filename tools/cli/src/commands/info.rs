@@ -3,6 +3,7 @@
 use crate::clusters::print_report;
 use anyhow::Result;
 use clap::Args;
+use relevo_core::bundle::BundleFiles;
 use relevo_core::bundle::{Bundle, Crs};
 use relevo_core::cluster::store;
 use std::path::{Path, PathBuf};

@@ -20,7 +20,8 @@ use gdal::spatial_ref::SpatialRef;
 use region::RegionSpec;
 use relevo_core::bundle::names;
 use relevo_core::bundle::{
-    sha256_file, BundleWriter, ColorInfo, Crs, Description, GridInfo, InputFile, StageTiming,
+    sha256_file, Bundle, BundleWriter, ColorInfo, Crs, Description, GridInfo, InputFile,
+    StageTiming,
 };
 use relevo_core::bundle::{MAX_IMAGE_SIDE, MAX_SIDE};
 use relevo_core::cluster::bake::BakeOptions;
@@ -503,9 +504,9 @@ fn stage_write(b: &mut Build) -> Result<()> {
         writer.record_export(export)?;
     }
     if let Some((image, extraction)) = &b.vegetation {
-        writer.write_vegetation(&extraction.objects)?;
+        writer.staged().write_vegetation(&extraction.objects)?;
         if let Some(csv) = &b.samples_csv {
-            writer.write_vegetation_samples(csv)?;
+            writer.staged().write_vegetation_samples(csv)?;
         }
         let export = names::VEGETATION_GEOPACKAGE;
         veg_io::write_gpkg(
@@ -519,7 +520,7 @@ fn stage_write(b: &mut Build) -> Result<()> {
         writer.record_export(export)?;
     }
     if let Some((clusters, off_terrain, options)) = &b.clusters {
-        store::write(writer, clusters, options, *off_terrain)?;
+        store::write(writer.staged(), clusters, options, *off_terrain)?;
     }
     Ok(())
 }
@@ -585,7 +586,7 @@ fn finish(b: Build, timings: Vec<StageTiming>) -> Result<Summary> {
         parameters,
         timings: timings.clone(),
     });
-    let bundle = writer.commit_checked(&store::validate)?;
+    let bundle = writer.commit_checked(&|b: &Bundle| store::validate(b))?;
     Ok(Summary {
         bundle,
         region: b.name,

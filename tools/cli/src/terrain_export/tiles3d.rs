@@ -16,6 +16,7 @@ use super::{
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use relevo_core::bundle::Bundle;
+use relevo_core::bundle::BundleFiles;
 use relevo_core::cluster::store;
 use relevo_core::lp::export::MeshSource;
 use relevo_core::lp::extract::mask_boundaries;

@@ -7,6 +7,7 @@
 //! [`BundleLock`] meanwhile, so that two writers never interleave. Reading maps arrays into memory
 //! without copying.
 
+mod files;
 mod hash;
 mod lock;
 mod manifest;
@@ -16,6 +17,7 @@ mod staging;
 mod validate;
 mod writer;
 
+pub use files::{BundleFiles, StagedFiles};
 pub use hash::{sha256_bytes, sha256_file};
 pub use lock::{lock_path, BundleLock};
 pub use manifest::{

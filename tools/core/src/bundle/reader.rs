@@ -1,9 +1,9 @@
+use super::files::BundleFiles;
 use super::manifest::{Artifact, ColorInfo, Manifest, FORMAT, FORMAT_VERSION};
 use super::names::{self, ArtifactName, MANIFEST_FILE};
 use crate::geo::TerrainFrame;
 use crate::horizon::ColorSource;
 use crate::lp::Hierarchy;
-use crate::veg::db::{self, VegObject};
 use crate::{files, Error, Result};
 use memmap2::Mmap;
 use std::marker::PhantomData;
@@ -16,6 +16,18 @@ use std::path::{Path, PathBuf};
 pub struct Bundle {
     pub dir: PathBuf,
     pub manifest: Manifest,
+}
+
+impl BundleFiles for Bundle {
+    fn dir(&self) -> &Path {
+        &self.dir
+    }
+    fn files(&self) -> &std::collections::BTreeMap<String, Artifact> {
+        &self.manifest.artifacts
+    }
+    fn terrain_frame(&self) -> TerrainFrame {
+        self.frame()
+    }
 }
 
 /// An array artifact mapped into memory, read as `&[T]` without copying.
@@ -282,28 +294,6 @@ impl Bundle {
             rgba,
             info: info.clone(),
         }))
-    }
-
-    /// The vegetation database, when the bundle has one.
-    pub fn vegetation(&self) -> Result<Option<Vec<VegObject>>> {
-        let Some(artifact) = self.manifest.artifacts.get(names::VEGETATION.key) else {
-            return Ok(None);
-        };
-        let path = self.dir.join(&artifact.file);
-        let text = files::read_to_string(&path)?;
-        db::from_csv(&text)
-            .map(Some)
-            .map_err(|e| Error::invalid(&path, e.to_string()))
-    }
-
-    /// The manifest entry of artifact `name`.
-    pub fn artifact(&self, name: &str) -> Result<&Artifact> {
-        self.manifest.artifacts.get(name).ok_or_else(|| {
-            Error::invalid(
-                self.dir.join(MANIFEST_FILE),
-                format!("no artifact {name:?}"),
-            )
-        })
     }
 
     /// Map `name` checking that its recorded shape is `shape`.

@@ -1,3 +1,4 @@
+use super::files::BundleFiles;
 use super::hash::sha256_file;
 use super::names;
 use super::reader::Bundle;

@@ -1,4 +1,5 @@
-use super::hash::{sha256_bytes, sha256_file};
+use super::files::StagedFiles;
+use super::hash::sha256_bytes;
 use super::lock::BundleLock;
 use super::manifest::{
     Artifact, ColorInfo, Crs, Dtype, GridInfo, InputFile, Manifest, StageTiming, FORMAT,
@@ -10,7 +11,6 @@ use super::staging::{Leftover, Staging};
 use super::validate::validate_artifacts;
 use crate::grid::HeightGrid;
 use crate::lp::{ErrorMetric, Hierarchy};
-use crate::veg::db::{self, VegObject};
 use crate::{Error, Result};
 use names::ArtifactName;
 use std::collections::BTreeMap;
@@ -34,9 +34,10 @@ pub struct Description {
 
 /// Builds a bundle in `TARGET.tmp/` and moves it to `TARGET` on [`commit`].
 /// Every artifact goes through one typed call — [`write_grid`],
-/// [`write_hierarchy`], [`write_drape`], [`write_vegetation`],
-/// [`write_vegetation_samples`], the exports ([`export_path`] then
-/// [`record_export`]) and the clusters (`cluster::store::write`) — which
+/// [`write_hierarchy`], [`write_drape`], the whole files of
+/// [`staged`] (the vegetation database, its samples, the clusters through
+/// `cluster::store::write`), the exports ([`export_path`] then
+/// [`record_export`]) — which
 /// writes the file `names` gives it and records it in the manifest; nothing
 /// else adds to a manifest. Dropped without committing, it removes the
 /// staging directory; a process killed mid-way leaves only the staging
@@ -79,8 +80,7 @@ pub struct Description {
 /// [`write_grid`]: BundleWriter::write_grid
 /// [`write_hierarchy`]: BundleWriter::write_hierarchy
 /// [`write_drape`]: BundleWriter::write_drape
-/// [`write_vegetation`]: BundleWriter::write_vegetation
-/// [`write_vegetation_samples`]: BundleWriter::write_vegetation_samples
+/// [`staged`]: BundleWriter::staged
 /// [`export_path`]: BundleWriter::export_path
 /// [`record_export`]: BundleWriter::record_export
 pub struct BundleWriter {
@@ -92,7 +92,8 @@ pub struct BundleWriter {
     tool_version: String,
     description: Option<Description>,
     color: Option<ColorInfo>,
-    artifacts: BTreeMap<String, Artifact>,
+    /// The artifacts written so far.
+    staged: StagedFiles,
     exports: BTreeMap<String, Artifact>,
 }
 
@@ -113,11 +114,11 @@ impl BundleWriter {
         let place = Staging::start(lock, target, force, Leftover::Clear)?;
         Ok(BundleWriter {
             staging: place.dir().to_path_buf(),
+            staged: StagedFiles::new(place.dir()),
             place,
             tool_version: env!("CARGO_PKG_VERSION").into(),
             description: None,
             color: None,
-            artifacts: BTreeMap::new(),
             exports: BTreeMap::new(),
         })
     }
@@ -156,14 +157,19 @@ impl BundleWriter {
             parameters: m.parameters.clone(),
             timings: m.timings.clone(),
         });
-        writer.artifacts = m.artifacts.clone();
+        writer.staged.artifacts = m.artifacts.clone();
         writer.exports = m.exports.clone();
-        writer.artifacts.retain(|key, _| keep(key));
+        writer.staged.artifacts.retain(|key, _| keep(key));
         writer.exports.retain(|key, _| keep(key));
-        if writer.artifacts.contains_key(names::COLOR.key) {
+        if writer.staged.artifacts.contains_key(names::COLOR.key) {
             writer.color.clone_from(&m.color);
         }
-        for a in writer.artifacts.values().chain(writer.exports.values()) {
+        for a in writer
+            .staged
+            .artifacts
+            .values()
+            .chain(writer.exports.values())
+        {
             let (from, to) = (bundle.dir.join(&a.file), writer.staging.join(&a.file));
             if let Some(parent) = to.parent() {
                 fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
@@ -208,15 +214,10 @@ impl BundleWriter {
         Ok(())
     }
 
-    /// The vegetation database (`vegetation.csv`).
-    pub fn write_vegetation(&mut self, objects: &[VegObject]) -> Result<()> {
-        self.put_file(names::VEGETATION, db::to_csv(objects).as_bytes())
-    }
-
-    /// The samples the vegetation came from, as `veg::samples::to_csv` writes
-    /// them (drape pixels).
-    pub fn write_vegetation_samples(&mut self, csv: &str) -> Result<()> {
-        self.put_file(names::VEGETATION_SAMPLES, csv.as_bytes())
+    /// The artifacts written so far, to add whole files to (the vegetation
+    /// database, its samples, the clusters).
+    pub fn staged(&mut self) -> &mut StagedFiles {
+        &mut self.staged
     }
 
     /// Where an export (a GeoTIFF, a GeoPackage, written by another
@@ -232,7 +233,7 @@ impl BundleWriter {
 
     /// Record the export written at [`export_path`](BundleWriter::export_path).
     pub fn record_export(&mut self, name: ArtifactName) -> Result<()> {
-        let artifact = self.record(name.file)?;
+        let artifact = self.staged.record(name.file)?;
         self.exports.insert(name.key.into(), artifact);
         Ok(())
     }
@@ -271,7 +272,7 @@ impl BundleWriter {
             color: self.color.take(),
             inputs: d.inputs,
             parameters: d.parameters,
-            artifacts: std::mem::take(&mut self.artifacts),
+            artifacts: std::mem::take(&mut self.staged.artifacts),
             exports: std::mem::take(&mut self.exports),
             timings: d.timings,
         };
@@ -318,8 +319,8 @@ impl BundleWriter {
         // Every target Relevo builds for is little-endian; refuse others.
         const { assert!(cfg!(target_endian = "little")) };
         let bytes: &[u8] = bytemuck::cast_slice(data);
-        self.write_bytes(name.file, bytes)?;
-        self.artifacts.insert(
+        self.staged.write_bytes(name.file, bytes)?;
+        self.staged.artifacts.insert(
             name.key.into(),
             Artifact {
                 file: name.file.to_string(),
@@ -330,40 +331,6 @@ impl BundleWriter {
             },
         );
         Ok(())
-    }
-
-    /// Write a whole-file artifact under `key` (the clusters' pages have
-    /// keys made at run time, so this takes the key and file apart).
-    pub(crate) fn put_keyed_file(&mut self, key: &str, file: &str, bytes: &[u8]) -> Result<()> {
-        self.write_bytes(file, bytes)?;
-        let artifact = self.record(file)?;
-        self.artifacts.insert(key.into(), artifact);
-        Ok(())
-    }
-
-    /// Write a whole-file artifact under `name`.
-    pub(crate) fn put_file(&mut self, name: ArtifactName, bytes: &[u8]) -> Result<()> {
-        self.put_keyed_file(name.key, name.file, bytes)
-    }
-
-    fn write_bytes(&self, file: &str, bytes: &[u8]) -> Result<()> {
-        let path = self.staging.join(file);
-        if let Some(parent) = path.parent() {
-            fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
-        }
-        fs::write(&path, bytes).map_err(|e| Error::io(&path, e))
-    }
-
-    /// The artifact record (size, SHA-256) of a file in the staging directory.
-    fn record(&self, file: &str) -> Result<Artifact> {
-        let (bytes, sha256) = sha256_file(&self.staging.join(file))?;
-        Ok(Artifact {
-            file: file.to_string(),
-            dtype: Dtype::File,
-            shape: Vec::new(),
-            bytes,
-            sha256,
-        })
     }
 }
 

@@ -15,7 +15,7 @@ use super::quadtree::{ClusterObject, Node, Quadtree, NONE};
 use super::{AtlasFrame, BakeReport};
 use super::{ClassImpostor, Clusters};
 use crate::bundle::names;
-use crate::bundle::{Bundle, BundleLock, BundleWriter};
+use crate::bundle::{Bundle, BundleFiles, BundleLock, BundleWriter, StagedFiles};
 use crate::horizon::Terrain;
 use crate::raster::png;
 use crate::{files, memory};
@@ -60,10 +60,11 @@ fn page_name(i: usize) -> (String, String) {
     )
 }
 
-/// Write `clusters` into the bundle being built (the index, the quadtree's
-/// records and the atlas pages), each recorded in its manifest.
+/// Write `clusters` into the bundle being built, of either format (the
+/// index, the quadtree's records and the atlas pages), each recorded in
+/// its manifest.
 pub fn write(
-    writer: &mut BundleWriter,
+    writer: &mut StagedFiles,
     clusters: &Clusters,
     options: &BakeOptions,
     off_terrain: usize,
@@ -169,15 +170,15 @@ pub fn rewrite_bundle(
     };
     let mut writer = BundleWriter::rewrite(lock, bundle, |key| !replaced(key))?;
     if let Some(database) = new.database {
-        writer.write_vegetation(database)?;
+        writer.staged().write_vegetation(database)?;
     }
     if let Some(samples) = new.samples_csv {
-        writer.write_vegetation_samples(samples)?;
+        writer.staged().write_vegetation_samples(samples)?;
     }
-    write(&mut writer, &clusters, options, off_terrain)?;
+    write(writer.staged(), &clusters, options, off_terrain)?;
     drop(ground);
     drop((heights, mask));
-    let path = writer.commit_checked(&validate)?;
+    let path = writer.commit_checked(&|b: &Bundle| validate(b))?;
     Ok((path, clusters, off_terrain))
 }
 
@@ -187,11 +188,11 @@ pub fn is_cluster_artifact(key: &str) -> bool {
 }
 
 /// The bundle's cluster index, when it has clusters.
-pub fn read_index(bundle: &Bundle) -> Result<Option<ClusterIndex>> {
-    let Some(artifact) = bundle.manifest.artifacts.get(names::CLUSTER_INDEX.key) else {
+pub fn read_index(bundle: &dyn BundleFiles) -> Result<Option<ClusterIndex>> {
+    let Some(artifact) = bundle.files().get(names::CLUSTER_INDEX.key) else {
         return Ok(None);
     };
-    let path = bundle.dir.join(&artifact.file);
+    let path = bundle.dir().join(&artifact.file);
     let text = files::read_to_string(&path)?;
     parse_index(&text)
         .map(Some)
@@ -212,9 +213,9 @@ pub fn parse_index(text: &str) -> Result<ClusterIndex, String> {
 }
 
 /// Records of type `T` from a cluster artifact, `count` of them.
-fn records<T: bytemuck::Pod>(bundle: &Bundle, key: &str, count: usize) -> Result<Vec<T>> {
+fn records<T: bytemuck::Pod>(bundle: &dyn BundleFiles, key: &str, count: usize) -> Result<Vec<T>> {
     let artifact = bundle.artifact(key)?;
-    let path = bundle.dir.join(&artifact.file);
+    let path = bundle.dir().join(&artifact.file);
     parse_records(&files::read(&path)?, count).map_err(|e| Error::invalid(&path, e))
 }
 
@@ -233,7 +234,9 @@ pub fn parse_records<T: bytemuck::Pod>(bytes: &[u8], count: usize) -> Result<Vec
 
 /// The bundle's cluster index, quadtree and frames, checked, without the
 /// atlas pages, when it has them.
-pub fn read_tree(bundle: &Bundle) -> Result<Option<(ClusterIndex, Quadtree, Vec<AtlasFrame>)>> {
+pub fn read_tree(
+    bundle: &dyn BundleFiles,
+) -> Result<Option<(ClusterIndex, Quadtree, Vec<AtlasFrame>)>> {
     let Some(index) = read_index(bundle)? else {
         return Ok(None);
     };
@@ -242,7 +245,7 @@ pub fn read_tree(bundle: &Bundle) -> Result<Option<(ClusterIndex, Quadtree, Vec<
     let frames = records::<AtlasFrame>(bundle, names::CLUSTER_FRAMES.key, index.frames)?;
     let tree = Quadtree { nodes, objects };
     if let Some(problem) = structure_problem(&index, &tree, &frames) {
-        let path = bundle.dir.join(names::CLUSTERS_DIR);
+        let path = bundle.dir().join(names::CLUSTERS_DIR);
         return Err(Error::invalid(
             &path,
             format!("{problem}; the clusters cannot be read"),
@@ -252,7 +255,7 @@ pub fn read_tree(bundle: &Bundle) -> Result<Option<(ClusterIndex, Quadtree, Vec<
 }
 
 /// The bundle's clusters with their pages decoded, when it has them.
-pub fn read(bundle: &Bundle) -> Result<Option<(ClusterIndex, Clusters)>> {
+pub fn read(bundle: &dyn BundleFiles) -> Result<Option<(ClusterIndex, Clusters)>> {
     let Some((index, tree, frames)) = read_tree(bundle)? else {
         return Ok(None);
     };
@@ -271,7 +274,7 @@ pub fn read(bundle: &Bundle) -> Result<Option<(ClusterIndex, Clusters)>> {
     for (i, page) in index.pages.iter().enumerate() {
         let (key, _) = page_name(i);
         let artifact = bundle.artifact(&key)?;
-        let path = bundle.dir.join(&artifact.file);
+        let path = bundle.dir().join(&artifact.file);
         let bytes = files::read(&path)?;
         let invalid = |e: Error| Error::invalid(&path, e.to_string());
         let (width, height) = png::size(&bytes).map_err(invalid)?;
@@ -355,7 +358,7 @@ pub fn structure_problem(
 /// every database object on the terrain appears once, at its place, with
 /// its class and size; nodes nest and count their members; frames lie in
 /// their pages. One line per problem (at most a few of each kind).
-pub fn validate(bundle: &Bundle) -> Vec<String> {
+pub fn validate(bundle: &dyn BundleFiles) -> Vec<String> {
     let fail = |e: Error| vec![format!("clusters: {e}")];
     let (index, clusters) = match read(bundle) {
         Ok(Some(c)) => c,
@@ -383,7 +386,7 @@ pub fn validate(bundle: &Bundle) -> Vec<String> {
             database.len()
         ));
     }
-    let frame = bundle.frame();
+    let frame = bundle.terrain_frame();
     let mut seen = vec![false; database.len()];
     for (i, o) in clusters.tree.objects.iter().enumerate() {
         let Some(row) = database.get(o.row as usize) else {

@@ -7,6 +7,7 @@
 use super::check::render_reference;
 use super::record::RenderRecord;
 use super::vegetation::{match_objects, ClassChanges};
+use crate::bundle::BundleFiles;
 use crate::bundle::{names, Bundle};
 use crate::raster::compare::{difference, difference_image, ImageDifference};
 use crate::raster::png::encode_rgba;

@@ -10,6 +10,7 @@
 use super::blocks::{self, BlockDigest, BlockLayout, BlockStatistics, CellValues, Cells};
 use super::reference::{self, Reference};
 use super::vegetation::{self, VegetationDigest};
+use crate::bundle::BundleFiles;
 use crate::bundle::{names, Bundle};
 use crate::geo::GeoTransform;
 use crate::{Error, Result};
