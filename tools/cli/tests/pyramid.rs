@@ -6,7 +6,9 @@
 //! on level 0, a projected DEM is read window by window to the same
 //! pyramid in a budget its grid exceeds, a killed build resumes to the
 //! same bytes, the files match their golden hashes, and tampered pyramids
-//! are refused by name.
+//! are refused by name. On the real Olinda region (SRTM, Landsat 7 and a
+//! person's samples), a pyramid holds the single grid's vegetation and
+//! clusters byte for byte.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
@@ -582,4 +584,69 @@ fn a_grid_beyond_the_memory_budget_and_bad_tile_sizes_are_refused() {
         assert_eq!(o.status.code(), Some(1), "{stderr}");
         assert!(stderr.contains(needle) && !out.exists(), "{stderr}");
     }
+}
+
+/// Olinda prepared as a pyramid of 32-cell tiles holds the vegetation
+/// database, its samples and every cluster file of the single-grid bundle
+/// byte for byte (the objects stand on the tiles' ground as on the whole
+/// grid's), passes validation, and `info` shows them. Replacing it with
+/// --force drops the old pyramid's files and keeps the user's. Clusters
+/// that disagree with the database are refused by name.
+#[test]
+fn a_pyramid_holds_the_single_grids_vegetation_and_clusters() {
+    let d = tempfile::tempdir().unwrap();
+    let region = repo("data/olinda/REGION.toml");
+    let (single, pyramid) = (d.path().join("s.relevo"), d.path().join("p.relevo"));
+    let prep = |out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "prep",
+            region.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend(extra);
+        relevo_ok(&args)
+    };
+    prep(&single, &["-q"]);
+    let printed = prep(&pyramid, &["--tiled", "--tile-size", "32"]);
+    assert!(printed.contains("vegetation: 11764 objects"), "{printed}");
+    let s = Bundle::open(&single).unwrap();
+    let p = Pyramid::open(&pyramid).unwrap();
+    let vegetation: Vec<_> = s
+        .manifest
+        .artifacts
+        .iter()
+        .filter(|(key, _)| key.starts_with("vegetation") || key.starts_with("clusters"))
+        .collect();
+    assert!(vegetation.len() >= 7, "{vegetation:?}");
+    for (key, a) in vegetation {
+        let b = p.manifest.files.get(key).unwrap_or_else(|| panic!("{key}"));
+        assert_eq!((&a.file, &a.sha256), (&b.file, &b.sha256), "{key}");
+        assert_eq!(sha256(&pyramid.join(&b.file)), a.sha256, "{key}");
+    }
+    assert!(relevo_ok(["validate", pyramid.to_str().unwrap()]).contains("valid"));
+    let info = relevo_ok(["info", pyramid.to_str().unwrap()]);
+    assert!(info.contains("vegetation   11764 objects"), "{info}");
+    assert!(
+        info.contains("clusters     11764 objects (0 off the terrain)"),
+        "{info}"
+    );
+
+    std::fs::write(pyramid.join("notes.txt"), "mine").unwrap();
+    prep(&pyramid, &["--tiled", "--tile-size", "64", "--force", "-q"]);
+    assert_eq!(
+        std::fs::read_to_string(pyramid.join("notes.txt")).unwrap(),
+        "mine"
+    );
+    assert!(!d.path().join("p.relevo.old").exists());
+
+    // A cluster object moved off its database row: refused by name.
+    let objects = pyramid.join("clusters/objects.bin");
+    let mut bytes = std::fs::read(&objects).unwrap();
+    bytes[0] ^= 0x40;
+    std::fs::write(&objects, bytes).unwrap();
+    let o = relevo(["validate", pyramid.to_str().unwrap()]);
+    let out = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{out}");
+    assert!(out.contains("clusters/objects.bin"), "{out}");
 }

@@ -49,6 +49,22 @@ fn describe(path: &Path, json: bool) -> Result<()> {
             c.width, c.height, c.bands
         );
     }
+    print_vegetation(&bundle)?;
+    for (name, a) in m.artifacts.iter().chain(&m.exports) {
+        println!(
+            "  {name:<12} {} {:?} {:?} {} bytes",
+            a.file, a.dtype, a.shape, a.bytes
+        );
+    }
+    for t in &m.timings {
+        println!("  stage {:<6} {:.1} ms", t.stage, t.ms);
+    }
+    Ok(())
+}
+
+/// The vegetation database by class and its clusters, of either kind of
+/// bundle, when it has them.
+fn print_vegetation(bundle: &dyn BundleFiles) -> Result<()> {
     if let Some(objects) = bundle.vegetation()? {
         let mut per_class = std::collections::BTreeMap::new();
         for o in &objects {
@@ -56,7 +72,7 @@ fn describe(path: &Path, json: bool) -> Result<()> {
         }
         println!("  vegetation   {} objects {per_class:?}", objects.len());
     }
-    if let Some(index) = store::read_index(&bundle)? {
+    if let Some(index) = store::read_index(bundle)? {
         let o = &index.options;
         let bands: Vec<String> = o
             .cut
@@ -79,15 +95,6 @@ fn describe(path: &Path, json: bool) -> Result<()> {
             );
         }
         print_report(&index.report);
-    }
-    for (name, a) in m.artifacts.iter().chain(&m.exports) {
-        println!(
-            "  {name:<12} {} {:?} {:?} {} bytes",
-            a.file, a.dtype, a.shape, a.bytes
-        );
-    }
-    for t in &m.timings {
-        println!("  stage {:<6} {:.1} ms", t.stage, t.ms);
     }
     Ok(())
 }
@@ -138,6 +145,7 @@ fn describe_pyramid(path: &Path, json: bool) -> Result<()> {
             g.cell_size_m * p.layout.stride(level) as f64
         );
     }
+    print_vegetation(&p)?;
     for (key, a) in &m.files {
         println!("  {key:<12} {} ({:.1} MB)", a.file, a.bytes as f64 / 1e6);
     }

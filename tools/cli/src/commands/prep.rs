@@ -66,8 +66,9 @@ pub struct PrepArgs {
     /// regions"). A single DEM on a projected grid of square cells, whose
     /// voids are holes the fill stage fills, is read window by window and
     /// never held whole; other inputs are stitched and filled in memory
-    /// first. The drape is derived from
-    /// the heights.
+    /// first. The drape is derived from the heights; with [vegetation]
+    /// the imagery is used to detect the vegetation, whose clusters stand
+    /// on the tiles.
     #[arg(long)]
     pub tiled: bool,
     /// With --tiled: cells a tile side, a power of two 16–4096 (tiles have
@@ -231,6 +232,18 @@ fn print_tiled(s: &TiledSummary, json: bool) -> Result<()> {
             s.height_range_m[1],
             s.grid_ms + s.pyramid_ms
         );
+        if let (Some(objects), Some(c)) = (s.vegetation, &s.clusters) {
+            println!(
+                "  vegetation: {objects} objects, {} standing on the terrain in {} cluster nodes \
+                 ({} baked, {} atlas pages, {:.1} MiB), {:.0} ms",
+                c.objects,
+                c.nodes,
+                c.baked_nodes,
+                c.pages,
+                c.atlas_bytes as f64 / (1u64 << 20) as f64,
+                s.vegetation_ms
+            );
+        }
     }
     Ok(())
 }

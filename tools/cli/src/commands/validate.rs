@@ -18,7 +18,7 @@ pub fn run(a: ValidateArgs) -> Result<()> {
         == Some(relevo_core::bundle::PYRAMID_FORMAT)
     {
         let pyramid = relevo_core::pyramid::Pyramid::open(path)?;
-        relevo_core::pyramid::reader::validate(&pyramid, true)
+        relevo_core::validation::validate_pyramid(&pyramid, true)
     } else {
         validate(&Bundle::open(path)?)
     };

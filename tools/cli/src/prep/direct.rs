@@ -14,7 +14,7 @@
 //! an encoding) goes through the in-memory stages.
 
 use super::region::RegionSpec;
-use crate::ingest::gdalio;
+use crate::ingest::gdalio::{self, GridSpec};
 use anyhow::{bail, Result};
 use relevo_core::bundle::{Crs, GridInfo};
 use relevo_core::grid::{pow2_plus_1_at_least, Squaring};
@@ -49,6 +49,16 @@ pub struct DirectSource {
 }
 
 impl DirectSource {
+    /// The DEM's own grid (the level-0 grid before it was padded).
+    pub fn dem_grid(&self) -> GridSpec {
+        GridSpec {
+            crs_wkt: self.crs.wkt.clone(),
+            geotransform: self.grid.geotransform,
+            width: self.width,
+            height: self.height,
+        }
+    }
+
     /// The region's DEM as a direct source, when it qualifies by its
     /// header (see the module); `None` when the in-memory stages must run.
     /// [`DirectSource::scan`] then reads it once for voids.

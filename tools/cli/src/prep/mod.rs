@@ -17,7 +17,7 @@ use crate::veg_io;
 use anyhow::{bail, Context, Result};
 use gdal::raster::GdalDataType;
 use gdal::spatial_ref::SpatialRef;
-use region::RegionSpec;
+use region::{ImageSection, RegionSpec, VegetationSection};
 use relevo_core::bundle::names;
 use relevo_core::bundle::{
     sha256_file, Bundle, BundleWriter, ColorInfo, Crs, Description, GridInfo, InputFile,
@@ -304,6 +304,19 @@ fn stage_drape(b: &mut Build) -> Result<()> {
         return Ok(());
     };
     let dem = b.dem.as_ref().context("dem stage did not run")?;
+    let (rgba, grid, bands) = imagery_drape(image, &dem.grid)?;
+    b.rgba = rgba;
+    b.color = Some((grid, bands));
+    Ok(())
+}
+
+/// The imagery of `image` on the CRS of the DEM whose grid is `dem`, at the
+/// imagery's own resolution, cropped to the DEM, stretched to RGBA8; with
+/// its grid and the source bands shown as R, G, B.
+pub fn imagery_drape(
+    image: &ImageSection,
+    dem: &GridSpec,
+) -> Result<(Vec<u8>, GridSpec, [usize; 3])> {
     // Default: the first three bands, or grey from a single-band image.
     let bands = match image.bands {
         Some(b) => b,
@@ -311,12 +324,8 @@ fn stage_drape(b: &mut Build) -> Result<()> {
         None => [1, 2, 3],
     };
     let opts = StitchOptions {
-        target_crs: (!dem.grid.crs_wkt.is_empty()).then(|| dem.grid.crs_wkt.clone()),
-        extent: Some(
-            dem.grid
-                .geotransform
-                .bounds(dem.grid.width, dem.grid.height),
-        ),
+        target_crs: (!dem.crs_wkt.is_empty()).then(|| dem.crs_wkt.clone()),
+        extent: Some(dem.geotransform.bounds(dem.width, dem.height)),
         resampling: image.resampling,
         src_nodata: image.src_nodata.map(|n| n.value()),
         overlap: image.overlap,
@@ -332,12 +341,11 @@ fn stage_drape(b: &mut Build) -> Result<()> {
              resample the imagery coarser first"
         );
     }
-    b.rgba = to_rgba8(
+    let rgba = to_rgba8(
         &mosaic.raster,
         stretch_or_default(image.stretch, mosaic.band_type == GdalDataType::UInt8),
     );
-    b.color = Some((mosaic.grid, bands));
-    Ok(())
+    Ok((rgba, mosaic.grid, bands))
 }
 
 /// The drape derived from the terrain: one pixel per grid vertex, on the
@@ -365,8 +373,24 @@ fn stage_vegetation(b: &mut Build) -> Result<()> {
         return Ok(());
     };
     let (grid, _) = b.color.as_ref().context("drape stage did not run")?;
+    let (image, extraction, samples_csv) = detect_on_drape(section, image_section, &b.rgba, grid)?;
+    b.samples_csv = Some(samples_csv);
+    b.vegetation = Some((image, extraction));
+    Ok(())
+}
+
+/// Vegetation detected on `rgba`, the drape of `image_section` on `grid`,
+/// from the samples of `section` (marked on the first image file, carried
+/// through its georeferencing onto the drape). Returns the image analysed,
+/// the extraction and the samples on the drape as CSV.
+pub fn detect_on_drape(
+    section: &VegetationSection,
+    image_section: &ImageSection,
+    rgba: &[u8],
+    grid: &GridSpec,
+) -> Result<(VegImage, Extraction, String)> {
     let image = VegImage::from_drape(
-        &b.rgba,
+        rgba,
         grid.width,
         grid.height,
         grid.geotransform,
@@ -406,9 +430,8 @@ fn stage_vegetation(b: &mut Build) -> Result<()> {
     let extraction = pipeline::extract(&image, &samples, &section.options)
         .with_context(|| section.samples.display().to_string())?;
     tracing::info!(objects = extraction.objects.len(), "vegetation");
-    b.samples_csv = Some(samples::to_csv(&samples, grid.width, grid.height));
-    b.vegetation = Some((image, extraction));
-    Ok(())
+    let samples_csv = samples::to_csv(&samples, grid.width, grid.height);
+    Ok((image, extraction, samples_csv))
 }
 
 /// Bake the vegetation clusters: class impostors from their models, the

@@ -26,7 +26,7 @@ use super::tiled::{
 };
 use crate::plan::absolute;
 use anyhow::{bail, Context, Result};
-use relevo_core::bundle::{staging_path, StageTiming, PLAN_MARK};
+use relevo_core::bundle::{staging_path, StageTiming, StagedFiles, PLAN_MARK};
 use relevo_core::pyramid::jobs::{self, Job};
 use relevo_core::pyramid::{
     self, build, BuildReport, PyramidDescription, Step, TileLayout, WriteOptions,
@@ -210,7 +210,7 @@ pub fn create(region: &RegionSpec, out: &Path, dir: &Path, options: PlanOptions)
     let name = region_name(region, &out);
     // The manifest names the inputs as given, as `prep` does; the jobs,
     // which may run in another folder, read them by absolute paths.
-    let (source, description) = height_source(region, &name, &out, options.tile_cells, false)?;
+    let (source, description, _) = height_source(region, &name, &out, options.tile_cells, false)?;
     let mut region = region.clone();
     for f in &mut region.dem.files {
         *f = absolute(f)?;
@@ -394,7 +394,16 @@ pub fn finish(dir: &Path) -> Result<TiledSummary> {
         valid_vertices,
         timings,
     };
-    let bundle = pyramid::seal_build(staging, store, report, plan.description.clone(), &options)?;
+    let extras = StagedFiles::new(staging.dir());
+    let bundle = pyramid::seal_build(
+        staging,
+        store,
+        report,
+        plan.description.clone(),
+        &options,
+        extras,
+        &|_| Vec::new(),
+    )?;
     let pyramid_ms = start.elapsed().as_secs_f64() * 1e3;
     let windows = matches!(plan.heights, PlannedHeights::Windows { .. });
     TiledSummary::of(bundle, windows, 0.0, pyramid_ms)

@@ -4,17 +4,29 @@
 //! written tile by tile through relevo-core —
 //! errors and radii, the derived drape and the coarser levels computed in
 //! memory bounded by a few tiles and their halos, resumable after a kill,
-//! with progress and an ETA per pass. The drape is always derived from the
-//! heights; imagery, vegetation and clusters are not yet written into
-//! pyramids and are refused.
+//! with progress and an ETA per pass. The tiles' drape is derived from the
+//! heights. With `[vegetation]`, the vegetation is detected on the imagery
+//! as a single-grid `prep` detects it (the imagery cropped to the DEM and
+//! stretched, in memory: at most `MAX_IMAGE_SIDE` pixels a side) and its
+//! clusters are baked standing on the tiles' ground
+//! (`pyramid::ground::TiledGround`): the pyramid then holds the same
+//! `vegetation.csv` and `clusters/` as the single-grid bundle of the region.
 
 use super::direct::DirectSource;
 use super::region::RegionSpec;
-use super::{provenance, provenance_of, stage_dem, stage_fill, stage_grid, Build};
+use super::{
+    detect_on_drape, imagery_drape, provenance, provenance_of, stage_dem, stage_fill, stage_grid,
+    Build,
+};
+use crate::clusters::{bake_with_progress, ClustersSummary};
+use crate::ingest::gdalio::GridSpec;
 use anyhow::{bail, Context, Result};
-use relevo_core::bundle::GridInfo;
+use relevo_core::bundle::{BundleFiles, GridInfo, StagedFiles};
+use relevo_core::cluster::store;
 use relevo_core::grid::HeightGrid;
+use relevo_core::pyramid::ground::TiledGround;
 use relevo_core::pyramid::{self, BuildOptions, HeightSource, PyramidDescription, WriteOptions};
+use relevo_core::veg::db;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -46,15 +58,21 @@ pub struct TiledSummary {
     pub read_by_windows: bool,
     pub grid_ms: f64,
     pub pyramid_ms: f64,
+    /// Objects in the vegetation database, when the region has vegetation.
+    pub vegetation: Option<usize>,
+    /// Its clusters.
+    pub clusters: Option<ClustersSummary>,
+    /// Detecting the vegetation and baking its clusters, ms.
+    pub vegetation_ms: f64,
 }
 
 /// Prepare `region` as a pyramid at `out`.
 pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Result<TiledSummary> {
-    if region.image.is_some() || region.vegetation.is_some() || region.clusters.is_some() {
+    if region.image.is_some() && region.vegetation.is_none() {
         bail!(
-            "a tiled bundle (--tiled) derives its drape from the heights; imagery, vegetation \
-             and clusters are not written into pyramids yet — drop [image], [vegetation] and \
-             [clusters], or prepare a single-grid bundle"
+            "a tiled bundle (--tiled) derives its drape from the heights and uses [image] only \
+             to detect vegetation; drop [image], add [vegetation], or prepare a single-grid \
+             bundle to drape the imagery"
         );
     }
     if out.symlink_metadata().is_ok() && !options.force && !options.resume {
@@ -65,19 +83,70 @@ pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Res
     }
     let name = region_name(region, out);
     let start = Instant::now();
-    let (heights, description) =
+    let (heights, description, dem) =
         height_source(region, &name, out, options.tile_cells, options.resume)?;
     let read_by_windows = matches!(heights, Heights::Windows(_));
     let grid_ms = start.elapsed().as_secs_f64() * 1e3;
     let write = write_options(region, &description, options);
     let start = Instant::now();
+    let (staging, tiles) = pyramid::start_build(out, &description, &write)?;
     let bar = crate::progress::pass_bar();
-    let bundle = pyramid::write_pyramid(out, heights.source(), description, write, &|p| {
+    let report = pyramid::build::build(heights.source(), &tiles, &write.build, &|p| {
         crate::progress::show_pass(&bar, p);
     })?;
     bar.finish_and_clear();
     let pyramid_ms = start.elapsed().as_secs_f64() * 1e3;
-    TiledSummary::of(bundle, read_by_windows, grid_ms, pyramid_ms)
+    let start = Instant::now();
+    let mut extras = StagedFiles::new(staging.dir());
+    let ground = TiledGround::new(heights.source(), tiles.layout, description.grid.cell_size_m);
+    let clusters = vegetation(region, &dem, &description, &ground, &mut extras)?;
+    let vegetation_ms = start.elapsed().as_secs_f64() * 1e3;
+    let bundle = pyramid::seal_build(staging, tiles, report, description, &write, extras, &|p| {
+        store::validate(p)
+    })?;
+    let mut summary = TiledSummary::of(bundle, read_by_windows, grid_ms, pyramid_ms)?;
+    summary.clusters = clusters;
+    summary.vegetation_ms = vegetation_ms;
+    Ok(summary)
+}
+
+/// The region's vegetation, when it has a `[vegetation]` section: detected
+/// on its imagery cropped to the DEM whose grid is `dem` (as a single-grid
+/// `prep` detects it), its clusters baked standing on `ground`; the
+/// database, its samples and the clusters written into `extras`.
+fn vegetation(
+    region: &RegionSpec,
+    dem: &GridSpec,
+    description: &PyramidDescription,
+    ground: &TiledGround,
+    extras: &mut StagedFiles,
+) -> Result<Option<ClustersSummary>> {
+    let (Some(section), Some(image)) = (&region.vegetation, &region.image) else {
+        return Ok(None);
+    };
+    let (rgba, grid, _) = imagery_drape(image, dem)?;
+    let (_, extraction, samples_csv) = detect_on_drape(section, image, &rgba, &grid)?;
+    drop(rgba);
+    extras.write_vegetation(&extraction.objects)?;
+    extras.write_vegetation_samples(&samples_csv)?;
+    let clusters = region.clusters.clone().unwrap_or_default();
+    let g = &description.grid;
+    let frame = relevo_core::geo::TerrainFrame {
+        side: g.side,
+        cell_size_m: g.cell_size_m,
+        geotransform: g.geotransform,
+    };
+    // From the database as stored (millimetres), as a single-grid bundle's.
+    let database = db::as_stored(&extraction.objects);
+    let (baked, off_terrain) = bake_with_progress(
+        &database,
+        &frame,
+        ground,
+        &clusters.models,
+        &clusters.options,
+    )?;
+    store::write(extras, &baked, &clusters.options, off_terrain)?;
+    Ok(Some(ClustersSummary::of(&baked)))
 }
 
 impl TiledSummary {
@@ -90,8 +159,12 @@ impl TiledSummary {
         pyramid_ms: f64,
     ) -> Result<TiledSummary> {
         let opened = pyramid::Pyramid::open(&bundle)?;
+        let vegetation = opened.vegetation()?.map(|objects| objects.len());
         let m = &opened.manifest;
         Ok(TiledSummary {
+            vegetation,
+            clusters: None,
+            vegetation_ms: 0.0,
             region: m.region.clone(),
             side: m.grid.side,
             cell_size_m: m.grid.cell_size_m,
@@ -152,17 +225,18 @@ impl Heights {
     }
 }
 
-/// Where the pyramid's heights come from, and its description: a single
-/// DEM on the target grid whose voids are holes the fill stage fills is
-/// read window by window (the tiling, memory and disk checked before the
-/// file is scanned); anything else goes through the in-memory grid stages.
+/// Where the pyramid's heights come from, its description and the DEM's
+/// grid before it was squared (what imagery is cropped to): a single DEM on
+/// the target grid whose voids are holes the fill stage fills is read
+/// window by window (the tiling, memory and disk checked before the file
+/// is scanned); anything else goes through the in-memory grid stages.
 pub fn height_source(
     region: &RegionSpec,
     name: &str,
     out: &Path,
     tile_cells: usize,
     resume: bool,
-) -> Result<(Heights, PyramidDescription)> {
+) -> Result<(Heights, PyramidDescription, GridSpec)> {
     if let Some(mut d) = DirectSource::open(region)? {
         pyramid::preflight(out, d.grid.side, tile_cells, resume)?;
         if d.scan()? {
@@ -174,7 +248,8 @@ pub fn height_source(
                 inputs,
                 parameters,
             };
-            return Ok((Heights::Windows(d), description));
+            let dem = d.dem_grid();
+            return Ok((Heights::Windows(d), description, dem));
         }
     }
     let mut b = Build::new(region, name.to_string(), None);
@@ -197,5 +272,5 @@ pub fn height_source(
         inputs,
         parameters,
     };
-    Ok((Heights::Grid(grid), description))
+    Ok((Heights::Grid(grid), description, dem.grid))
 }

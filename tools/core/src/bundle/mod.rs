@@ -25,6 +25,7 @@ pub use manifest::{
     FORMAT_VERSION,
 };
 pub use names::MANIFEST_FILE;
+pub(crate) use reader::check_files_stay_inside;
 pub use reader::{Array, Bundle, Drape, LpArray, MAX_IMAGE_SIDE, MAX_SIDE};
 pub use staging::{
     format_of, is_bundle, staging_path, Leftover, Staging, PLAN_MARK, PYRAMID_FORMAT,

@@ -171,9 +171,12 @@ fn check_manifest(m: &Manifest) -> std::result::Result<(), String> {
 
 /// No artifact or export may be a link leading out of the bundle (its
 /// canonical path must lie under the bundle's).
-fn check_files_stay_inside(dir: &Path, m: &Manifest) -> Result<()> {
+pub(crate) fn check_files_stay_inside<'a>(
+    dir: &Path,
+    files: impl IntoIterator<Item = &'a Artifact>,
+) -> Result<()> {
     let root = dir.canonicalize().map_err(|e| Error::io(dir, e))?;
-    for a in m.artifacts.values().chain(m.exports.values()) {
+    for a in files {
         let path = dir.join(&a.file);
         // A missing file is reported by whoever reads it.
         if let Ok(real) = path.canonicalize() {
@@ -227,7 +230,10 @@ impl Bundle {
         if let Err(problem) = check_manifest(&manifest) {
             return Err(Error::invalid(&path, problem));
         }
-        check_files_stay_inside(dir, &manifest)?;
+        check_files_stay_inside(
+            dir,
+            manifest.artifacts.values().chain(manifest.exports.values()),
+        )?;
         Ok(Bundle {
             dir: dir.to_path_buf(),
             manifest,

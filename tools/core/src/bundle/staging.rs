@@ -208,14 +208,15 @@ impl Drop for Staging {
     }
 }
 
-/// The files a bundle's manifest lists (artifacts, exports) and the
-/// manifest itself: what Relevo wrote there.
+/// The files a bundle's manifest lists (a single grid's artifacts and
+/// exports, a pyramid's files) and the manifest itself: what Relevo wrote
+/// there.
 fn listed_files(dir: &Path) -> BTreeSet<PathBuf> {
     let mut listed = BTreeSet::from([PathBuf::from(MANIFEST_FILE)]);
     let manifest = crate::files::read_to_string(&dir.join(MANIFEST_FILE))
         .ok()
         .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok());
-    for table in ["artifacts", "exports"] {
+    for table in ["artifacts", "exports", "files"] {
         let entries = manifest
             .as_ref()
             .and_then(|m| m.get(table))

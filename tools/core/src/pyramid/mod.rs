@@ -36,7 +36,7 @@ pub use reader::Pyramid;
 
 use crate::bundle::{
     sha256_file, Artifact, BundleLock, Crs, Dtype, GridInfo, InputFile, Leftover, StageTiming,
-    Staging, MANIFEST_FILE, PYRAMID_FORMAT,
+    StagedFiles, Staging, MANIFEST_FILE, PYRAMID_FORMAT,
 };
 use crate::lp::ErrorMetric;
 use crate::{Error, Result};
@@ -61,7 +61,9 @@ pub struct PyramidManifest {
     pub lp_error_metric: ErrorMetric,
     pub tiling: Tiling,
     /// The tile files: `height`, `mask`, `lp`, `drape`, each
-    /// `[tiles, T+1, T+1(, channels)]`.
+    /// `[tiles, T+1, T+1(, channels)]`; then, when the region has
+    /// vegetation, its database and clusters as a single-grid bundle
+    /// lists them (`vegetation`, `clusters_*`).
     pub files: BTreeMap<String, Artifact>,
     pub inputs: Vec<InputFile>,
     #[serde(default)]
@@ -129,7 +131,16 @@ pub fn write_pyramid(
 ) -> Result<PathBuf> {
     let (staging, store) = start_build(target, &description, &options)?;
     let report = build::build(source, &store, &options.build, progress)?;
-    seal_build(staging, store, report, description, &options)
+    let extras = StagedFiles::new(staging.dir());
+    seal_build(
+        staging,
+        store,
+        report,
+        description,
+        &options,
+        extras,
+        &|_| Vec::new(),
+    )
 }
 
 /// Start (or, with `options.resume`, go on with) the build of a pyramid
@@ -201,14 +212,19 @@ pub fn open_build(target: &Path, layout: TileLayout) -> Result<TileStore> {
 }
 
 /// Finish a build whose every step is done: the manifest written with
-/// the report's figures and the files' hashes, the pyramid validated,
-/// moved into place, its scratch removed.
+/// the report's figures and the hashes of the tile files and of `extras`
+/// (the vegetation and its clusters, written into the staging folder),
+/// the pyramid validated — its tiles, and whatever `check` finds (the
+/// clusters' own checks, which live above the format) — moved into place,
+/// its scratch removed.
 pub fn seal_build(
     staging: Staging,
     store: TileStore,
     report: BuildReport,
     description: PyramidDescription,
     options: &WriteOptions,
+    extras: StagedFiles,
+    check: &dyn Fn(&Pyramid) -> Vec<String>,
 ) -> Result<PathBuf> {
     let layout = store.layout;
     let dir = staging.dir().to_path_buf();
@@ -254,6 +270,12 @@ pub fn seal_build(
             },
         );
     }
+    for (key, artifact) in extras.into_artifacts() {
+        if files.contains_key(&key) {
+            return Err(Error::invalid(&dir, format!("{key}: a tile file's key")));
+        }
+        files.insert(key, artifact);
+    }
     let mut timings = report.timings.clone();
     timings.push(StageTiming {
         stage: "hashes".into(),
@@ -289,7 +311,10 @@ pub fn seal_build(
     std::fs::write(&path, json).map_err(|e| Error::io(&path, e))?;
     let plan_path = dir.join(PLAN_FILE);
     std::fs::remove_file(&plan_path).map_err(|e| Error::io(&plan_path, e))?;
-    let problems = reader::validate(&Pyramid::open(&dir)?, false);
+    let staged = Pyramid::open(&dir)?;
+    let mut problems = reader::validate(&staged, false);
+    problems.extend(check(&staged));
+    drop(staged);
     if !problems.is_empty() {
         return Err(Error::invalid(
             staging.target(),

@@ -2,10 +2,11 @@
 //! mapped into memory, any tile's arrays handed out as slices without a
 //! copy, the tiles a camera sees, and the checks `relevo validate` runs.
 
+use super::build::HeightSource;
 use super::layout::{TileKey, TileLayout};
 use super::store::TileArray;
 use super::{PyramidManifest, FORMAT_VERSION};
-use crate::bundle::{sha256_file, MANIFEST_FILE, PYRAMID_FORMAT};
+use crate::bundle::{sha256_file, BundleFiles, MANIFEST_FILE, PYRAMID_FORMAT};
 use crate::camera::Camera;
 use crate::geo::GeoTransform;
 use crate::lp::terrain_position;
@@ -32,6 +33,25 @@ pub struct Pyramid {
     pub manifest: PyramidManifest,
     pub layout: TileLayout,
     maps: [Mmap; 4],
+}
+
+impl BundleFiles for Pyramid {
+    fn dir(&self) -> &Path {
+        &self.dir
+    }
+    fn files(&self) -> &std::collections::BTreeMap<String, crate::bundle::Artifact> {
+        &self.manifest.files
+    }
+    fn terrain_frame(&self) -> crate::geo::TerrainFrame {
+        self.frame()
+    }
+}
+
+impl HeightSource for Pyramid {
+    fn window(&self, rect: Rect) -> Result<(Vec<f32>, Vec<u8>)> {
+        let w = self.level0_window(rect)?;
+        Ok((w.heights, w.mask))
+    }
 }
 
 /// One tile's arrays, `(T+1)²` samples row-major, mapped.
@@ -136,6 +156,7 @@ impl Pyramid {
             // place (writers build a new folder and rename it).
             unsafe { Mmap::map(&handle) }.map_err(|e| Error::io(&file_path, e))
         };
+        crate::bundle::check_files_stay_inside(dir, manifest.files.values())?;
         Ok(Pyramid {
             maps: [
                 map(TileArray::Height)?,
