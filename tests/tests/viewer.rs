@@ -599,6 +599,72 @@ fn objects_composite_over_a_pyramid_as_over_a_single_grid() {
     assert_objects_hidden_where_the_terrain_covers_them(&mut tiled, d.path());
 }
 
+/// Olinda prepared as a pyramid of 32-cell tiles (its clusters baked on
+/// the tiles' ground) draws the vegetation as the single-grid bundle does:
+/// from the home view and a low pass, the vegetation alone renders the
+/// same pixels, and over the terrain (mesh through the tiles, all loaded)
+/// it shows at the same pixels.
+#[test]
+fn vegetation_over_a_pyramid_draws_as_over_a_single_grid() {
+    let d = tempfile::tempdir().unwrap();
+    let toml = repo("data/olinda/REGION.toml");
+    let region = relevo::prep::region::RegionSpec::load(&toml).unwrap();
+    let options = relevo::prep::tiled::TiledOptions {
+        tile_cells: 32,
+        force: false,
+        resume: false,
+    };
+    let tiled = relevo::prep::tiled::prep_tiled(&region, &d.path().join("t.relevo"), options)
+        .unwrap()
+        .bundle;
+    let mut single = olinda(d.path());
+    let mut pyramid = Scene::open(&tiled).unwrap();
+    assert!(pyramid.paged.is_some() && pyramid.vegetation.is_some());
+    let (device, queue) = lavapipe();
+    let mut low = Flight::home(&single);
+    low.position.z -= 150.0;
+    for flight in [Flight::home(&single), low] {
+        let settings = Settings {
+            tau_px: 1.0,
+            ..Default::default()
+        };
+        let alone = Settings {
+            terrain: false,
+            ..settings.clone()
+        };
+        let terrain_only = Settings {
+            objects: false,
+            ..settings.clone()
+        };
+        let mut render = |scene: &mut Scene, s: &Settings| {
+            render_once(&device, &queue, scene, &flight, s, &Shot::new(SIZE))
+                .unwrap()
+                .0
+        };
+        // Alone, the pyramid's impostors stand where the bake put them
+        // (no mesh drawn to stand on), the single grid's on its mesh: the
+        // same objects, a few pixels apart.
+        let (a, b) = (render(&mut single, &alone), render(&mut pyramid, &alone));
+        let drawn = |r: &relevo_view::gpu::Readback| r.depth.iter().filter(|&&z| z < 1.0).count();
+        let (na, nb) = (drawn(&a), drawn(&b));
+        assert!(
+            na > 2000 && na.abs_diff(nb) * 20 < na,
+            "{na} and {nb} pixels"
+        );
+        // Over the terrain, both on the mesh drawn: shown at the same pixels.
+        let mut shown = |scene: &mut Scene| {
+            let (both, terrain) = (render(scene, &settings), render(scene, &terrain_only));
+            (0..both.depth.len())
+                .map(|i| both.depth[i] < terrain.depth[i])
+                .collect::<Vec<bool>>()
+        };
+        let (sa, sb) = (shown(&mut single), shown(&mut pyramid));
+        let n = sa.iter().filter(|&&v| v).count();
+        let off = sa.iter().zip(&sb).filter(|(x, y)| x != y).count();
+        assert!(n > 2000 && off * 200 <= n, "{off} of {n} pixels differ");
+    }
+}
+
 /// A 1 km² building 1 500 m tall, 3 km beyond the ground below the screen's
 /// centre seen low over the valley floor, composited in mesh and raycast
 /// modes: shown exactly where it alone is nearer than the terrain alone

@@ -9,7 +9,7 @@
 
 use crate::settings::{Settings, VegetationSelection};
 use anyhow::{Context, Result};
-use relevo_core::bundle::{Array, Bundle, GridInfo, LpArray, PYRAMID_FORMAT};
+use relevo_core::bundle::{Array, Bundle, BundleFiles, GridInfo, LpArray, PYRAMID_FORMAT};
 use relevo_core::camera::Camera;
 use relevo_core::cluster::cut::{
     group_blobs, Blob, Blobs, CutOptions, DrawList, ObjectList, QuadtreeCut, Selection,
@@ -17,10 +17,10 @@ use relevo_core::cluster::cut::{
 use relevo_core::cluster::{store, Clusters};
 use relevo_core::geo::TerrainFrame;
 use relevo_core::horizon::{self, Terrain};
-use relevo_core::lp::refine::{mesh_height, GridArrays, Refiner};
+use relevo_core::lp::refine::{mesh_height, Refiner, VertexSource};
 use relevo_core::lp::window::Rect;
 use relevo_core::objects::{read_placement, ObjectMesh};
-use relevo_core::pyramid::paging::PagedPyramid;
+use relevo_core::pyramid::paging::{Cut, PagedPyramid};
 use relevo_core::pyramid::render::LevelWindows;
 use relevo_core::pyramid::Pyramid;
 use std::path::{Path, PathBuf};
@@ -68,6 +68,9 @@ pub struct Scene {
     pub terrain: Terrain<'static>,
     /// A pyramid's tiles, paged for the mesh.
     pub paged: Option<PagedPyramid>,
+    /// The cut of a pyramid's tiles the last mesh frame was refined
+    /// through: what its vegetation stands on.
+    pub mesh_cut: Option<Cut>,
     /// Reusable refinement and raycast buffers: nothing allocated per frame
     /// once warm.
     pub refiner: Refiner,
@@ -92,6 +95,16 @@ pub struct Vegetation {
 }
 
 impl Vegetation {
+    /// The clusters of a bundle of either kind, when it has them.
+    fn of(bundle: &dyn BundleFiles) -> Result<Option<Vegetation>> {
+        Ok(store::read(bundle)?.map(|(index, clusters)| Vegetation {
+            clusters,
+            cut: index.options.cut,
+            list: DrawList::default(),
+            blobs: None,
+        }))
+    }
+
     /// Choose what to draw from `camera` with the selection and view angle
     /// of `settings` (relevo-core's selections; blobs are grouped once per
     /// side).
@@ -118,26 +131,25 @@ impl Vegetation {
     }
 
     /// Move the selected impostors from the grid's surface, on which the
-    /// bake placed them, onto the mesh refined for `camera`: in mesh mode
-    /// they stand on the surface drawn (relevo-core's `mesh_height`).
+    /// bake placed them, onto the mesh refined for `camera` through
+    /// `mesh` (a grid's arrays or a pyramid's cut): in mesh mode they stand
+    /// on the surface drawn (relevo-core's `mesh_height`). `ground` is the
+    /// surface the bake stood them on — exactly for a single grid and a
+    /// pyramid whose overview is its level 0 (at most 2049² vertices); a
+    /// larger pyramid's overview is coarser, and its objects stand on the
+    /// mesh within the overview's error.
     pub fn stand_on_mesh(
         &mut self,
-        lp: &LpArray,
-        terrain: &Terrain,
+        mesh: &(impl VertexSource + Sync),
+        ground: &Terrain,
         camera: &Camera,
         settings: &Settings,
     ) {
         let params = settings.refine_params(camera);
-        let hierarchy = lp.hierarchy();
         self.list.lift(&|x, y| {
-            mesh_height(
-                &GridArrays::new(&hierarchy, terrain.heights()),
-                &params,
-                x,
-                y,
-            )
-            .zip(terrain.surface(x, y))
-            .map_or(0.0, |(mesh, grid)| mesh - grid)
+            mesh_height(mesh, &params, x, y)
+                .zip(ground.surface(x, y))
+                .map_or(0.0, |(mesh, grid)| mesh - grid)
         });
     }
 }
@@ -162,12 +174,7 @@ impl Scene {
             .with_context(|| path.display().to_string())?;
         let lp = bundle.lp()?;
         let drape = bundle.drape()?;
-        let vegetation = store::read(&bundle)?.map(|(index, clusters)| Vegetation {
-            clusters,
-            cut: index.options.cut,
-            list: DrawList::default(),
-            blobs: None,
-        });
+        let vegetation = Vegetation::of(&bundle)?;
         let color = drape.as_ref().and_then(|d| d.color_source(&frame));
         let terrain = Terrain::new(
             frame.side,
@@ -212,6 +219,7 @@ impl Scene {
             drape,
             terrain,
             paged: None,
+            mesh_cut: None,
             refiner: Refiner::new(),
             raycaster: horizon::Raycaster::default(),
             level_windows: None,
@@ -247,6 +255,7 @@ impl Scene {
         let terrain = Terrain::new(side, frame.cell_size_m, heights, mask, color);
         let paged = PagedPyramid::new(pyramid, TILE_CACHE_BYTES.load(Ordering::Relaxed) as usize)
             .with_context(|| path.display().to_string())?;
+        let vegetation = Vegetation::of(paged.pyramid.as_ref())?;
         let level_windows = Some(LevelWindows::new(paged.pyramid.clone()));
         Ok(Scene {
             path: path.to_path_buf(),
@@ -256,11 +265,12 @@ impl Scene {
             drape: None,
             terrain,
             paged: Some(paged),
+            mesh_cut: None,
             refiner: Refiner::new(),
             raycaster: horizon::Raycaster::default(),
             level_windows,
             objects: None,
-            vegetation: None,
+            vegetation,
         })
     }
 

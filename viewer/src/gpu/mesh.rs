@@ -427,6 +427,7 @@ impl MeshPass {
         }
         stats.tile_uploads = tiles.uploads;
         self.upload_started = start;
+        scene.mesh_cut = Some(cut);
         Ok(())
     }
 

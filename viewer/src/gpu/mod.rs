@@ -20,6 +20,7 @@ use eframe::egui_wgpu::wgpu;
 
 use relevo_core::camera::Camera;
 use relevo_core::horizon::RenderOptions;
+use relevo_core::lp::refine::GridArrays;
 use std::time::Instant;
 /// The GPU device and queue types the viewer draws with.
 pub use wgpu::{Device, Queue};
@@ -125,6 +126,9 @@ impl Renderer {
             label: Some("relevo-view frame"),
         });
         let objects_drawn = settings.objects && scene.has_objects();
+        // Set again by a pyramid's mesh drawn this frame: vegetation stands
+        // only on a mesh that is drawn.
+        scene.mesh_cut = None;
         match settings.mode {
             _ if !settings.terrain => {
                 self.targets
@@ -166,8 +170,14 @@ impl Renderer {
         if let Some(vegetation) = scene.vegetation.as_mut().filter(|_| settings.objects) {
             let start = Instant::now();
             vegetation.select(camera, settings);
-            if let (TerrainMode::Mesh, Some(lp)) = (settings.mode, &scene.lp) {
-                vegetation.stand_on_mesh(lp, &scene.terrain, camera, settings);
+            if settings.mode == TerrainMode::Mesh {
+                if let Some(lp) = &scene.lp {
+                    let hierarchy = lp.hierarchy();
+                    let mesh = GridArrays::new(&hierarchy, scene.terrain.heights());
+                    vegetation.stand_on_mesh(&mesh, &scene.terrain, camera, settings);
+                } else if let Some(cut) = &scene.mesh_cut {
+                    vegetation.stand_on_mesh(cut, &scene.terrain, camera, settings);
+                }
             }
             stats.cut_ms = start.elapsed().as_secs_f64() * 1e3;
             let pass = match &mut self.vegetation {
