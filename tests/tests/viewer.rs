@@ -636,7 +636,7 @@ fn vegetation_over_a_pyramid_draws_as_over_a_single_grid() {
             objects: false,
             ..settings.clone()
         };
-        let mut render = |scene: &mut Scene, s: &Settings| {
+        let render = |scene: &mut Scene, s: &Settings| {
             render_once(&device, &queue, scene, &flight, s, &Shot::new(SIZE))
                 .unwrap()
                 .0
@@ -652,7 +652,7 @@ fn vegetation_over_a_pyramid_draws_as_over_a_single_grid() {
             "{na} and {nb} pixels"
         );
         // Over the terrain, both on the mesh drawn: shown at the same pixels.
-        let mut shown = |scene: &mut Scene| {
+        let shown = |scene: &mut Scene| {
             let (both, terrain) = (render(scene, &settings), render(scene, &terrain_only));
             (0..both.depth.len())
                 .map(|i| both.depth[i] < terrain.depth[i])
