@@ -4,7 +4,8 @@
 //! vegetation clusters. A pyramid (`relevo prep --tiled`) is paged instead:
 //! the mesh reads the tiles core's `PagedPyramid` loads in the background
 //! for the camera, and the other renderers one coarser level of it that
-//! fits in memory. Everything the viewer computes about terrain goes
+//! fits in memory; its vegetation clusters are read as a single grid's and
+//! stand on the mesh drawn through the tiles. Everything the viewer computes about terrain goes
 //! through these core types.
 
 use crate::settings::{Settings, VegetationSelection};
