@@ -1,17 +1,20 @@
-//! `relevo bake`: (re)bake the vegetation clusters of an existing bundle —
-//! class impostors from their models, the quadtree's views, the atlases —
-//! replacing its `clusters/` atomically.
+//! `relevo bake`: (re)bake the vegetation clusters of an existing bundle or
+//! pyramid — class impostors from their models, the quadtree's views, the
+//! atlases — replacing its `clusters/` atomically (a pyramid's objects
+//! stand on its level-0 tiles, read one at a time).
 
 use crate::clusters::{count_on, print_report};
 use crate::progress;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use relevo_core::bundle::BundleFiles;
-use relevo_core::bundle::{Bundle, BundleLock};
+use relevo_core::bundle::{format_of, Bundle, BundleFiles, BundleLock, PYRAMID_FORMAT};
 use relevo_core::cluster::bake::BakeOptions;
 use relevo_core::cluster::cut::{CutBand, CutOptions};
 use relevo_core::cluster::model::ModelSource;
+use relevo_core::cluster::stage::bake_database;
 use relevo_core::cluster::store::{self, NewVegetation};
+use relevo_core::cluster::Clusters;
+use relevo_core::pyramid::{self, ground::TiledGround, Pyramid};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -21,7 +24,8 @@ type Bands = Vec<CutBand>;
 
 #[derive(Args, Debug)]
 pub struct BakeArgs {
-    /// The bundle whose vegetation to cluster (rewritten in place).
+    /// The bundle or pyramid whose vegetation to cluster (rewritten in
+    /// place).
     pub bundle: PathBuf,
     /// Model of a class: CLASS=KIND (broadleaf, conifer, dead, stand) or
     /// CLASS=FILE.obj; repeatable. Other classes keep the bundle's models
@@ -45,7 +49,12 @@ pub struct BakeArgs {
 pub fn run(a: BakeArgs) -> Result<()> {
     // Locked before it is read: what is baked is what is replaced.
     let lock = BundleLock::acquire(&a.bundle)?;
-    let bundle = Bundle::open(&a.bundle)?;
+    let opened = if format_of(&a.bundle).as_deref() == Some(PYRAMID_FORMAT) {
+        Opened::Pyramid(Pyramid::open(&a.bundle)?)
+    } else {
+        Opened::Single(Bundle::open(&a.bundle)?)
+    };
+    let bundle = opened.files();
     if bundle.vegetation()?.is_none() {
         bail!(
             "{}: the bundle has no vegetation database to cluster (run `relevo veg detect` or prep with samples)",
@@ -53,7 +62,7 @@ pub fn run(a: BakeArgs) -> Result<()> {
         );
     }
     // Start from what the bundle was baked with, then apply the flags.
-    let previous = store::read_index(&bundle)?;
+    let previous = store::read_index(bundle)?;
     let mut options = previous
         .as_ref()
         .map_or_else(BakeOptions::default, |i| i.options.clone());
@@ -81,14 +90,17 @@ pub fn run(a: BakeArgs) -> Result<()> {
         options.max_frame_px = px;
     }
     let bar = progress::bar(0, "clusters");
-    let (path, clusters, off_terrain) = store::rewrite_bundle(
-        lock,
-        &bundle,
-        &NewVegetation::default(),
-        &models,
-        &options,
-        &count_on(&bar),
-    )
+    let (path, clusters, off_terrain) = match &opened {
+        Opened::Single(bundle) => store::rewrite_bundle(
+            lock,
+            bundle,
+            &NewVegetation::default(),
+            &models,
+            &options,
+            &count_on(&bar),
+        ),
+        Opened::Pyramid(p) => rebake_pyramid(lock, p, &models, &options, &count_on(&bar)),
+    }
     .with_context(|| a.bundle.display().to_string())?;
     bar.finish_and_clear();
     if a.json {
@@ -103,4 +115,44 @@ pub fn run(a: BakeArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The bundle being re-baked, of either format.
+enum Opened {
+    Single(Bundle),
+    Pyramid(Pyramid),
+}
+
+impl Opened {
+    fn files(&self) -> &dyn BundleFiles {
+        match self {
+            Opened::Single(b) => b,
+            Opened::Pyramid(p) => p,
+        }
+    }
+}
+
+/// Bake the clusters of pyramid `p`'s database, its objects standing on the
+/// level-0 tiles, and replace its clusters in place (see
+/// `pyramid::rewrite`). Returns its path, the clusters and the objects off
+/// the terrain.
+fn rebake_pyramid(
+    lock: BundleLock,
+    p: &Pyramid,
+    models: &BTreeMap<String, ModelSource>,
+    options: &BakeOptions,
+    progress: &(dyn Fn(u64, u64) + Sync),
+) -> relevo_core::Result<(PathBuf, Clusters, usize)> {
+    let database = p.vegetation()?.unwrap_or_default();
+    let ground = TiledGround::new(p, p.layout, p.manifest.grid.cell_size_m);
+    let (clusters, off_terrain) =
+        bake_database(&database, &p.frame(), &ground, models, options, progress)?;
+    let path = pyramid::rewrite(
+        lock,
+        p,
+        &store::is_cluster_artifact,
+        |files| store::write(files, &clusters, options, off_terrain),
+        &|staged| store::validate(staged),
+    )?;
+    Ok((path, clusters, off_terrain))
 }

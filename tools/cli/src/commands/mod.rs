@@ -122,7 +122,8 @@ number) shifts the projection plane instead, as before pitches existed.")]
   relevo bake olinda.relevo
   relevo bake olinda.relevo --model forest=conifer --budget-mib 64
   relevo bake olinda.relevo --model forest=models/palm.obj --bands 300:1,1000:4,4000:32
-  relevo bake olinda.relevo --json   # the bake report: counts and atlas bytes per depth")]
+  relevo bake olinda.relevo --json   # the bake report: counts and atlas bytes per depth
+  relevo bake county.relevo --budget-mib 128   # a pyramid (prep --tiled): its clusters replaced in place")]
     Bake(bake::BakeArgs),
     /// Describe a bundle.
     #[command(after_help = "Examples:

@@ -205,7 +205,7 @@ impl Bundle {
             return Err(Error::invalid(
                 dir,
                 "is a pyramid bundle (prep --tiled), which this command does not read yet; \
-                 relevo info, validate and mesh read pyramids",
+                 relevo info, validate, mesh, render, export, bake and relevo-view read pyramids",
             ));
         }
         let manifest: Manifest = serde_json::from_str(&text).map_err(|e| Error::Manifest {

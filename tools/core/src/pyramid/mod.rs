@@ -302,16 +302,29 @@ pub fn seal_build(
         parameters: description.parameters,
         timings,
     };
+    let plan_path = dir.join(PLAN_FILE);
+    std::fs::remove_file(&plan_path).map_err(|e| Error::io(&plan_path, e))?;
+    commit_staged(staging, &manifest, check, "written")
+}
+
+/// Write `manifest` into the staging folder, check the staged pyramid (its
+/// tiles, then `check`) and move it into place; refused, naming what was
+/// `done` to it, when a check fails.
+fn commit_staged(
+    staging: Staging,
+    manifest: &PyramidManifest,
+    check: &dyn Fn(&Pyramid) -> Vec<String>,
+    done: &str,
+) -> Result<PathBuf> {
+    let dir = staging.dir();
     let path = dir.join(MANIFEST_FILE);
-    let mut json = serde_json::to_string_pretty(&manifest).map_err(|e| Error::Manifest {
+    let mut json = serde_json::to_string_pretty(manifest).map_err(|e| Error::Manifest {
         path: path.clone(),
         json: e,
     })?;
     json.push('\n');
     std::fs::write(&path, json).map_err(|e| Error::io(&path, e))?;
-    let plan_path = dir.join(PLAN_FILE);
-    std::fs::remove_file(&plan_path).map_err(|e| Error::io(&plan_path, e))?;
-    let staged = Pyramid::open(&dir)?;
+    let staged = Pyramid::open(dir)?;
     let mut problems = reader::validate(&staged, false);
     problems.extend(check(&staged));
     drop(staged);
@@ -319,12 +332,51 @@ pub fn seal_build(
         return Err(Error::invalid(
             staging.target(),
             format!(
-                "the pyramid written does not pass validation, so it was not kept: {}",
+                "the pyramid {done} does not pass validation, so it was not kept: {}",
                 problems.join("; ")
             ),
         ));
     }
     staging.commit()
+}
+
+/// Replace, in place and atomically, the files of `pyramid` that
+/// `replaced` picks by keys (its clusters, say) with those `fill` writes
+/// (see [`StagedFiles`]): the other files are hard-linked (copied where the
+/// file system cannot link) into a staging folder beside it, the manifest
+/// lists them and the new ones, the staged pyramid must pass its tiles'
+/// validation and `check`, then it takes the pyramid's place; a failure
+/// leaves the pyramid as it was. `lock` is the pyramid's, taken before it
+/// was opened. Returns its path.
+pub fn rewrite(
+    lock: BundleLock,
+    pyramid: &Pyramid,
+    replaced: &dyn Fn(&str) -> bool,
+    fill: impl FnOnce(&mut StagedFiles) -> Result<()>,
+    check: &dyn Fn(&Pyramid) -> Vec<String>,
+) -> Result<PathBuf> {
+    let staging = Staging::start(lock, &pyramid.dir, true, Leftover::Clear)?;
+    let dir = staging.dir().to_path_buf();
+    let mut manifest = pyramid.manifest.clone();
+    manifest.files.retain(|key, _| !replaced(key));
+    for a in manifest.files.values() {
+        let (from, to) = (pyramid.dir.join(&a.file), dir.join(&a.file));
+        if let Some(parent) = to.parent() {
+            std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+        }
+        if std::fs::hard_link(&from, &to).is_err() {
+            std::fs::copy(&from, &to).map_err(|e| Error::io(&from, e))?;
+        }
+    }
+    let mut extras = StagedFiles::new(&dir);
+    fill(&mut extras)?;
+    for (key, artifact) in extras.into_artifacts() {
+        if manifest.files.contains_key(&key) {
+            return Err(Error::invalid(&dir, format!("{key}: written twice")));
+        }
+        manifest.files.insert(key, artifact);
+    }
+    commit_staged(staging, &manifest, check, "rewritten")
 }
 
 /// The checks a pyramid of a `side`² grid in tiles of `tile_cells` at
