@@ -539,16 +539,14 @@ fn commands_that_read_single_grids_refuse_a_pyramid_by_name() {
     let d = tempfile::tempdir().unwrap();
     let p = tiled(d.path(), "p.relevo", 128, &[]);
     let golden = d.path().join("golden.json");
-    for (args, code) in [(
-        vec![
-            "check",
-            p.to_str().unwrap(),
-            "--golden",
-            golden.to_str().unwrap(),
-            "--bless",
-        ],
-        2,
-    )] {
+    let p = p.to_str().unwrap();
+    for (args, code) in [
+        (
+            vec!["check", p, "--golden", golden.to_str().unwrap(), "--bless"],
+            2,
+        ),
+        (vec!["diff", p, p], 2),
+    ] {
         let o = relevo(&args);
         let stderr = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(code), "{args:?}: {stderr}");
@@ -556,7 +554,7 @@ fn commands_that_read_single_grids_refuse_a_pyramid_by_name() {
         assert!(!golden.exists());
     }
     // `bake` reads pyramids; this one has no vegetation to cluster.
-    let o = relevo(["bake", p.to_str().unwrap()]);
+    let o = relevo(["bake", p]);
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("no vegetation database"), "{stderr}");
