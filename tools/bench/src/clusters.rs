@@ -15,7 +15,9 @@ use relevo_core::cluster::cut::{Blobs, CutOptions, DrawList, ObjectList, Quadtre
 use relevo_core::cluster::stage::bake_database;
 use relevo_core::cluster::Clusters;
 use relevo_core::geo::{GeoTransform, TerrainFrame};
-use relevo_core::grid::fractal_heights;
+use relevo_core::grid::{fractal_heights, HeightGrid};
+use relevo_core::pyramid::ground::TiledGround;
+use relevo_core::pyramid::{TileLayout, DEFAULT_TILE_CELLS};
 use relevo_core::horizon::Terrain;
 use relevo_core::veg::db::VegObject;
 use serde_json::json;
@@ -156,14 +158,22 @@ fn large(
 ) -> Result<()> {
     let side = 4097;
     let cell = 10.0;
-    let heights = fractal_heights(side, 1);
-    let mask = vec![1u8; side * side];
     let extent = (side - 1) as f64 * cell;
+    let geotransform = GeoTransform::north_up(-cell / 2.0, extent + cell / 2.0, cell, cell);
+    let grid = HeightGrid {
+        side,
+        heights: fractal_heights(side, 1),
+        mask: vec![1u8; side * side],
+        geotransform,
+    };
+    let (heights, mask) = (&grid.heights, &grid.mask);
     let frame = TerrainFrame {
         side,
         cell_size_m: cell,
-        geotransform: GeoTransform::north_up(-cell / 2.0, extent + cell / 2.0, cell, cell),
+        geotransform,
     };
+    // The same ground read as a pyramid's 512-cell tiles would give it.
+    let layout = TileLayout::new(side, DEFAULT_TILE_CELLS)?;
     for count in [10_000usize, 100_000, 1_000_000]
         .into_iter()
         .filter(|&n| n <= max_objects)
@@ -198,10 +208,35 @@ fn large(
                 clusters.report.sharp_from_m.map(|d| d.round())
             ),
         );
+        // The bake of a pyramid: the same objects standing on the same
+        // ground read tile by tile (the same clusters, checked).
+        let start = Instant::now();
+        let tiled = TiledGround::new(&grid, layout, cell);
+        let (on_tiles, _) = bake_database(
+            &objects,
+            &frame,
+            &tiled,
+            &BTreeMap::new(),
+            &options,
+            &|_, _| {},
+        )?;
+        let tiled_ms = start.elapsed().as_secs_f64() * 1e3;
+        if on_tiles.tree.objects != clusters.tree.objects {
+            anyhow::bail!("{count} objects stand elsewhere on the tiles' ground");
+        }
+        emit(
+            json_lines,
+            json!({"bench": "clusters-bake-tiled", "objects": count, "budget_mib": budget_mib,
+                   "tile_cells": DEFAULT_TILE_CELLS, "ms": tiled_ms, "grid_ms": bake_ms}),
+            format!(
+                "bake {count} objects on {}-cell tiles' ground: {tiled_ms:.0} ms (on the whole grid {bake_ms:.0} ms)",
+                DEFAULT_TILE_CELLS
+            ),
+        );
         select_all(
             &clusters,
             &frame,
-            &heights,
+            heights,
             &options.cut,
             (count, budget_mib),
             runs,
