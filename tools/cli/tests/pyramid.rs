@@ -563,6 +563,7 @@ fn commands_that_read_single_grids_refuse_a_pyramid_by_name() {
 #[test]
 fn a_grid_beyond_the_memory_budget_and_bad_tile_sizes_are_refused() {
     let d = tempfile::tempdir().unwrap();
+    let dem_path = grenoble_dem().display().to_string();
     for (args, needle) in [
         (vec!["--tile-size", "100"], "a tile of 100 cells"),
         (
@@ -572,6 +573,10 @@ fn a_grid_beyond_the_memory_budget_and_bad_tile_sizes_are_refused() {
         (
             vec!["--cell-size", "10", "--max-memory", "256M"],
             "needs about",
+        ),
+        (
+            vec!["--image", &dem_path, &dem_path],
+            "make one VRT of them",
         ),
     ] {
         let dem = grenoble_dem();
@@ -672,4 +677,93 @@ fn a_pyramid_holds_the_single_grids_vegetation_and_clusters() {
     let out = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(1), "{out}");
     assert!(out.contains("clusters/objects.bin"), "{out}");
+}
+
+/// Olinda's pyramid takes its drape from the Landsat image, tile by tile:
+/// the same level-0 drape at tiles of 32 and 64 cells, and each vertex's
+/// colour the image over its cell — registered: the single grid's drape
+/// (the image at its own 28.5 m) averaged over each vertex's 90 m cell is
+/// closest at no shift, closer than one vertex off in any direction.
+#[test]
+fn a_pyramids_drape_is_the_imagery_at_its_vertices() {
+    let d = tempfile::tempdir().unwrap();
+    let region = repo("data/olinda/REGION.toml");
+    let prep = |out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "prep",
+            region.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "-q",
+        ];
+        args.extend(extra);
+        relevo_ok(&args);
+    };
+    let single = d.path().join("s.relevo");
+    prep(&single, &[]);
+    let drapes: Vec<Vec<u8>> = [32, 64]
+        .iter()
+        .map(|t| {
+            let out = d.path().join(format!("p{t}.relevo"));
+            prep(&out, &["--tiled", "--tile-size", &t.to_string()]);
+            let p = Pyramid::open(&out).unwrap();
+            p.level0_window(Rect::whole(p.layout.side)).unwrap().drape
+        })
+        .collect();
+    assert!(drapes[0] == drapes[1], "the drape depends on the tile size");
+    let b = Bundle::open(&single).unwrap();
+    let image = b.drape().unwrap().unwrap();
+    let (info, rgba) = (&image.info, &image.rgba);
+    let side = b.manifest.grid.side;
+    let grid = b.manifest.grid.geotransform;
+    let cell = grid.cell_size().0;
+    // The single grid's drape averaged over vertex (c, r)'s cell.
+    let averaged = |c: usize, r: usize| -> Option<[f64; 3]> {
+        let (x, y) = grid.apply(c as f64 + 0.5, r as f64 + 0.5);
+        let pixel = |x: f64, y: f64| info.geotransform.invert(x, y).unwrap();
+        let (c0, r0) = pixel(x - cell / 2.0, y + cell / 2.0);
+        let (c1, r1) = pixel(x + cell / 2.0, y - cell / 2.0);
+        let span = |a: f64, b: f64, n: usize| {
+            a.max(0.0).round() as usize..b.min(n as f64).round() as usize
+        };
+        let (mut sum, mut n) = ([0.0; 3], 0.0);
+        for py in span(r0, r1, info.height) {
+            for px in span(c0, c1, info.width) {
+                let k = 4 * (py * info.width + px);
+                if rgba[k + 3] == 255 {
+                    for ch in 0..3 {
+                        sum[ch] += rgba[k + ch] as f64;
+                    }
+                    n += 1.0;
+                }
+            }
+        }
+        (n > 0.0).then(|| sum.map(|v| v / n))
+    };
+    let mean_difference = |dc: i64, dr: i64| -> f64 {
+        let (mut total, mut n) = (0.0, 0.0);
+        for r in 2..side - 2 {
+            for c in 2..side - 2 {
+                let k = 4 * (r * side + c);
+                let (sc, sr) = ((c as i64 + dc) as usize, (r as i64 + dr) as usize);
+                if let (255, Some(avg)) = (drapes[0][k + 3], averaged(sc, sr)) {
+                    total += (0..3)
+                        .map(|ch| (drapes[0][k + ch] as f64 - avg[ch]).abs())
+                        .sum::<f64>()
+                        / 3.0;
+                    n += 1.0;
+                }
+            }
+        }
+        assert!(n > 1000.0, "{n} vertices compared");
+        total / n
+    };
+    let here = mean_difference(0, 0);
+    eprintln!("mean difference {here:.2}");
+    assert!(here < 10.0, "{here}");
+    for (dc, dr) in [(1, 0), (-1, 0), (0, 1), (0, -1)] {
+        let off = mean_difference(dc, dr);
+        eprintln!("shift ({dc}, {dr}): {off:.2}");
+        assert!(here < off, "shifted by ({dc}, {dr}) {off} ≤ {here}");
+    }
 }

@@ -5,6 +5,7 @@
 //! writing one such function and listing it.
 
 mod direct;
+mod drape;
 pub mod plan;
 pub mod region;
 pub mod tiled;

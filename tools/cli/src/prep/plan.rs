@@ -232,6 +232,7 @@ pub fn create(region: &RegionSpec, out: &Path, dir: &Path, options: PlanOptions)
             let bar = crate::progress::pass_bar();
             build::run_step(
                 Some(source.source()),
+                None,
                 &store,
                 &write.build,
                 Step::Heights,

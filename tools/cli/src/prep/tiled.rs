@@ -4,7 +4,8 @@
 //! written tile by tile through relevo-core —
 //! errors and radii, the derived drape and the coarser levels computed in
 //! memory bounded by a few tiles and their halos, resumable after a kill,
-//! with progress and an ETA per pass. The tiles' drape is derived from the
+//! with progress and an ETA per pass. The tiles' drape is sampled from the
+//! imagery of `[image]` tile by tile (`drape`), else derived from the
 //! heights. With `[vegetation]`, the vegetation is detected on the imagery
 //! as a single-grid `prep` detects it (the imagery cropped to the DEM and
 //! stretched, in memory: at most `MAX_IMAGE_SIDE` pixels a side) and its
@@ -13,6 +14,7 @@
 //! `vegetation.csv` and `clusters/` as the single-grid bundle of the region.
 
 use super::direct::DirectSource;
+use super::drape::ImageryDrape;
 use super::region::RegionSpec;
 use super::{
     detect_on_drape, imagery_drape, provenance, provenance_of, stage_dem, stage_fill, stage_grid,
@@ -25,7 +27,9 @@ use relevo_core::bundle::{BundleFiles, GridInfo, StagedFiles};
 use relevo_core::cluster::store;
 use relevo_core::grid::HeightGrid;
 use relevo_core::pyramid::ground::TiledGround;
-use relevo_core::pyramid::{self, BuildOptions, HeightSource, PyramidDescription, WriteOptions};
+use relevo_core::pyramid::{
+    self, BuildOptions, DrapeSource, HeightSource, PyramidDescription, TileLayout, WriteOptions,
+};
 use relevo_core::veg::db;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -68,13 +72,6 @@ pub struct TiledSummary {
 
 /// Prepare `region` as a pyramid at `out`.
 pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Result<TiledSummary> {
-    if region.image.is_some() && region.vegetation.is_none() {
-        bail!(
-            "a tiled bundle (--tiled) derives its drape from the heights and uses [image] only \
-             to detect vegetation; drop [image], add [vegetation], or prepare a single-grid \
-             bundle to drape the imagery"
-        );
-    }
     if out.symlink_metadata().is_ok() && !options.force && !options.resume {
         bail!(
             "{}: already exists (pass --force to replace it)",
@@ -89,11 +86,27 @@ pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Res
     let grid_ms = start.elapsed().as_secs_f64() * 1e3;
     let write = write_options(region, &description, options);
     let start = Instant::now();
+    // The imagery opened (and its stretch taken) before anything is staged.
+    let imagery = match &region.image {
+        Some(image) => Some(ImageryDrape::open(
+            image,
+            &dem,
+            description.grid.geotransform,
+            description.grid.cell_size_m,
+            TileLayout::new(description.grid.side, write.tile_cells)?,
+        )?),
+        None => None,
+    };
     let (staging, tiles) = pyramid::start_build(out, &description, &write)?;
     let bar = crate::progress::pass_bar();
-    let report = pyramid::build::build(heights.source(), &tiles, &write.build, &|p| {
-        crate::progress::show_pass(&bar, p);
-    })?;
+    let imagery_source = imagery.as_ref().map(|i| i as &dyn DrapeSource);
+    let report = pyramid::build::build(
+        heights.source(),
+        imagery_source,
+        &tiles,
+        &write.build,
+        &|p| crate::progress::show_pass(&bar, p),
+    )?;
     bar.finish_and_clear();
     let pyramid_ms = start.elapsed().as_secs_f64() * 1e3;
     let start = Instant::now();

@@ -11,9 +11,10 @@
 //! 4. the lattice: the corners' errors and radii, level by level, from the
 //!    parts and the tiles' centres, written into the tiles' corners;
 //! 5. the drape derived from the heights (tint and hillshade), each tile
-//!    from the tile ± 1;
+//!    from the tile ± 1 — or sampled from imagery ([`DrapeSource`]);
 //! 6. coarser levels: each tile every other sample of its four children,
-//!    its drape from its own samples.
+//!    its drape from its own samples (or from the imagery at its level's
+//!    cell size).
 //!
 //! Every pass records its tiles as done (see `store`), so a killed build
 //! resumes where it stopped and ends with the same bytes.
@@ -62,13 +63,24 @@ impl HeightSource for HeightGrid {
     }
 }
 
+/// The imagery a pyramid's drape is sampled from instead of being derived
+/// from the heights (the CLI warps it through GDAL, tile by tile).
+pub trait DrapeSource: Sync {
+    /// Tile `key`'s drape: RGBA8, a pixel a sample, `(T+1)²` row-major,
+    /// each the imagery over the square of the level's cell centred on the
+    /// sample's vertex (see `TileLayout::tile_geotransform`); alpha 0
+    /// where the imagery has no data.
+    fn tile_drape(&self, key: TileKey) -> Result<Vec<u8>>;
+}
+
 /// What a build computes.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct BuildOptions {
     pub metric: ErrorMetric,
     /// Vertex spacing at level 0, metres.
     pub cell_size_m: f64,
-    /// Derive each tile's drape from its heights (tint and hillshade).
+    /// Give each tile a drape: derived from its heights (tint and
+    /// hillshade), or sampled from the imagery passed to [`build`].
     pub drape: bool,
 }
 
@@ -236,9 +248,11 @@ pub fn steps(layout: &TileLayout, drape: bool) -> Vec<Step> {
     steps
 }
 
-/// Build every tile of `store` from `source`, reporting progress.
+/// Build every tile of `store` from `source`, the drape from `imagery`
+/// when given (else derived from the heights), reporting progress.
 pub fn build(
     source: &dyn HeightSource,
+    imagery: Option<&dyn DrapeSource>,
     store: &TileStore,
     options: &BuildOptions,
     progress: &(dyn Fn(Progress) + Sync),
@@ -248,6 +262,7 @@ pub fn build(
     for step in steps(&layout, options.drape) {
         let ms = run_step(
             Some(source),
+            imagery,
             store,
             options,
             step,
@@ -272,9 +287,11 @@ pub fn build(
 
 /// Compute `tiles` of `step` (those not done yet), in parallel, marking
 /// each when it is; the steps before must be complete. `source` is read
-/// by [`Step::Heights`] alone. Returns the wall time, ms.
+/// by [`Step::Heights`] alone, `imagery` (when the drape is not derived)
+/// by the drape steps. Returns the wall time, ms.
 pub fn run_step(
     source: Option<&dyn HeightSource>,
+    imagery: Option<&dyn DrapeSource>,
     store: &TileStore,
     options: &BuildOptions,
     step: Step,
@@ -311,6 +328,20 @@ pub fn run_step(
                 }
             }
             Ok(start.elapsed().as_secs_f64() * 1e3)
+        }
+        Step::Drape | Step::CoarseDrape { .. } if imagery.is_some() => {
+            each(store, tiles, pass, name, progress, &|key| {
+                let rgba = imagery.map(|i| i.tile_drape(key)).transpose()?;
+                let rgba = rgba.unwrap_or_default();
+                if rgba.len() != store.layout.tile_len() * 4 {
+                    return Err(Error::Input(format!(
+                        "the imagery gave tile {key:?} {} bytes of drape, not {}",
+                        rgba.len(),
+                        store.layout.tile_len() * 4
+                    )));
+                }
+                store.write(TileArray::Drape, key, &rgba)
+            })
         }
         Step::Drape | Step::CoarseDrape { .. } => {
             let range = height_range(store)?;
@@ -792,7 +823,7 @@ mod tests {
                 let layout = TileLayout::new(g.side, 32).unwrap();
                 let store =
                     TileStore::open(dir.path(), layout, partials_capacity(&layout)).unwrap();
-                let report = build(&g, &store, &options(&dem, metric), &|_| {}).unwrap();
+                let report = build(&g, None, &store, &options(&dem, metric), &|_| {}).unwrap();
                 assert_eq!(report.height_range_m, range);
                 assert_eq!(report.valid_vertices as usize, g.valid_count());
                 for level in 0..layout.levels() {
@@ -863,7 +894,14 @@ mod tests {
                 .unwrap();
             pool.install(|| {
                 let store = TileStore::open(dir, layout, partials_capacity(&layout)).unwrap();
-                build(source, &store, &options(&dem, ErrorMetric::Bound), &|_| {}).map(|_| ())
+                build(
+                    source,
+                    None,
+                    &store,
+                    &options(&dem, ErrorMetric::Bound),
+                    &|_| {},
+                )
+                .map(|_| ())
             })
         };
         let whole = tempfile::tempdir().unwrap();

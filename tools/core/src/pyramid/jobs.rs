@@ -98,7 +98,7 @@ pub fn run_job(
             names.join(", ")
         )));
     }
-    run_step(source, store, options, job.step, &job.tiles, progress)
+    run_step(source, None, store, options, job.step, &job.tiles, progress)
 }
 
 #[cfg(test)]
@@ -157,7 +157,7 @@ mod tests {
         let files = TileStore::file_bytes;
         let whole = tempfile::tempdir().unwrap();
         let store = TileStore::open(whole.path(), layout, partials_capacity(&layout)).unwrap();
-        build(&g, &store, &options, &|_| {}).unwrap();
+        build(&g, None, &store, &options, &|_| {}).unwrap();
         for per_step in [1, 4, 16] {
             let dir = tempfile::tempdir().unwrap();
             let store = TileStore::open(dir.path(), layout, partials_capacity(&layout))

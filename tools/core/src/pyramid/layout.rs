@@ -10,6 +10,8 @@
 //! level: a tile's data is one slice of each tile file, found without a
 //! search.
 
+use crate::geo::GeoTransform;
+use crate::lp::window::Rect;
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 
@@ -110,6 +112,36 @@ impl TileLayout {
         key.level < self.levels()
             && key.x < self.across(key.level)
             && key.y < self.across(key.level)
+    }
+
+    /// The geotransform of level `level`'s lattice from lattice vertex
+    /// (`rect.c0`, `rect.r0`) on, a pixel a vertex, for a level-0 grid
+    /// georeferenced by `grid` (a pixel a vertex): lattice pixel p (its
+    /// centre at p + ½) lies where the grid's puts level-0 column
+    /// (c0 + p − ½)·2^level + ½.
+    pub fn lattice_geotransform(
+        &self,
+        grid: &GeoTransform,
+        level: u32,
+        rect: Rect,
+    ) -> GeoTransform {
+        let g = grid;
+        let s = self.stride(level) as f64;
+        let at = |lattice: usize| (lattice as f64 - 0.5) * s + 0.5;
+        let (ox, oy) = g.apply(at(rect.c0), at(rect.r0));
+        GeoTransform([ox, g.0[1] * s, g.0[2] * s, oy, g.0[4] * s, g.0[5] * s])
+    }
+
+    /// The geotransform of tile `key`'s samples, a pixel a sample.
+    pub fn tile_geotransform(&self, grid: &GeoTransform, key: TileKey) -> GeoTransform {
+        let t = self.tile_cells;
+        let rect = Rect {
+            c0: key.x * t,
+            r0: key.y * t,
+            width: t + 1,
+            height: t + 1,
+        };
+        self.lattice_geotransform(grid, key.level, rect)
     }
 
     /// The grid vertices a tile covers: first column and row, last column

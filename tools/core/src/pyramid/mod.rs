@@ -30,7 +30,7 @@ pub mod reader;
 pub mod render;
 pub mod store;
 
-pub use build::{BuildOptions, BuildReport, HeightSource, Progress, Step};
+pub use build::{BuildOptions, BuildReport, DrapeSource, HeightSource, Progress, Step};
 pub use layout::{TileKey, TileLayout, DEFAULT_TILE_CELLS};
 pub use reader::Pyramid;
 
@@ -130,7 +130,7 @@ pub fn write_pyramid(
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<PathBuf> {
     let (staging, store) = start_build(target, &description, &options)?;
-    let report = build::build(source, &store, &options.build, progress)?;
+    let report = build::build(source, None, &store, &options.build, progress)?;
     let extras = StagedFiles::new(staging.dir());
     seal_build(
         staging,

@@ -283,7 +283,10 @@ impl Pyramid {
         self.for_each_sample(level, rect, |tile, k| {
             rgba.extend_from_slice(&tile.drape[4 * k..4 * k + 4]);
         });
-        Ok((rgba, self.lattice_geotransform(level, rect)))
+        let geo = self
+            .layout
+            .lattice_geotransform(&self.manifest.grid.geotransform, level, rect);
+        Ok((rgba, geo))
     }
 
     /// Level `level`'s heights and mask over lattice rectangle `rect`, row
@@ -307,18 +310,6 @@ impl Pyramid {
             mask.push(tile.mask[k]);
         });
         Ok((heights, mask))
-    }
-
-    /// The geotransform of level `level`'s lattice from lattice vertex
-    /// (`rect.c0`, `rect.r0`) on, a pixel a vertex: lattice pixel p (its
-    /// centre at p + ½) lies where the grid's puts level-0 column
-    /// (c0 + p − ½)·2^level + ½.
-    pub fn lattice_geotransform(&self, level: u32, rect: Rect) -> GeoTransform {
-        let g = self.manifest.grid.geotransform;
-        let s = self.layout.stride(level) as f64;
-        let at = |lattice: usize| (lattice as f64 - 0.5) * s + 0.5;
-        let (ox, oy) = g.apply(at(rect.c0), at(rect.r0));
-        GeoTransform([ox, g.0[1] * s, g.0[2] * s, oy, g.0[4] * s, g.0[5] * s])
     }
 
     /// Level 0 over `rect` of the grid as whole arrays, assembled from the

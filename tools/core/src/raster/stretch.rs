@@ -45,7 +45,13 @@ pub fn to_u8(value: f64, (lo, hi): (f64, f64)) -> u8 {
 /// Three bands to RGBA8 with [`stretch_ranges`] and [`to_u8`]. Alpha is
 /// 255 where the raster has data.
 pub fn to_rgba8(raster: &Raster, stretch: Option<[f64; 2]>) -> Vec<u8> {
-    let ranges = stretch_ranges(raster, stretch);
+    to_rgba8_in(raster, &stretch_ranges(raster, stretch))
+}
+
+/// Three bands to RGBA8 with `ranges` (one a band, from [`stretch_ranges`]
+/// of this raster or of a larger one it is part of) and [`to_u8`]. Alpha
+/// is 255 where the raster has data.
+pub fn to_rgba8_in(raster: &Raster, ranges: &[(f64, f64)]) -> Vec<u8> {
     let mut out = vec![0u8; raster.cells() * 4];
     for i in 0..raster.cells() {
         if !raster.is_valid(i) {
