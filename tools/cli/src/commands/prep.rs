@@ -66,9 +66,10 @@ pub struct PrepArgs {
     /// regions"). A single DEM on a projected grid of square cells, whose
     /// voids are holes the fill stage fills, is read window by window and
     /// never held whole; other inputs are stitched and filled in memory
-    /// first. The drape is derived from the heights; with [vegetation]
-    /// the imagery is used to detect the vegetation, whose clusters stand
-    /// on the tiles.
+    /// first. The tiles' drape is the imagery (one file, read tile by
+    /// tile) or, without it, derived from the heights; with [vegetation]
+    /// the vegetation is detected on the imagery and its clusters stand on
+    /// the tiles.
     #[arg(long)]
     pub tiled: bool,
     /// With --tiled: cells a tile side, a power of two 16–4096 (tiles have

@@ -192,8 +192,9 @@ pub struct PlanOptions {
 pub fn create(region: &RegionSpec, out: &Path, dir: &Path, options: PlanOptions) -> Result<Plan> {
     if region.image.is_some() || region.vegetation.is_some() || region.clusters.is_some() {
         bail!(
-            "a plan builds a pyramid, which derives its drape from the heights; drop [image], \
-             [vegetation] and [clusters]"
+            "the jobs of a plan derive the pyramid's drape from the heights and detect no \
+             vegetation; drop [image], [vegetation] and [clusters], or build the pyramid on one \
+             machine with `prep --tiled`, which reads them"
         );
     }
     if options.jobs_per_step == 0 {
