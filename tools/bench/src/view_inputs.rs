@@ -2,7 +2,8 @@
 //! written to a folder so that `relevo-view bench` (which needs no GDAL)
 //! can fly over them on a machine that has a GPU and nothing else: the
 //! sample regions, the 4097² fractal, and the sample region with a
-//! million objects tiled from its own detections.
+//! million objects tiled from its own detections, as a single grid and as
+//! a pyramid of 32-cell tiles.
 
 use crate::view::bench_bundles;
 use crate::view_vegetation::densify;
@@ -22,6 +23,18 @@ pub fn run(repo: &Path, data: &Path, out: &Path, objects: usize) -> Result<()> {
         true,
     )?;
     densify(&dense, objects)?;
+    let dense_pyramid = out.join(format!("olinda_{objects}_objects_tiled.relevo"));
+    let tiled = relevo::prep::tiled::TiledOptions {
+        tile_cells: 32,
+        force: true,
+        resume: false,
+    };
+    relevo::prep::tiled::prep_tiled(
+        &RegionSpec::load(&repo.join("data/olinda/REGION.toml"))?,
+        &dense_pyramid,
+        tiled,
+    )?;
+    densify(&dense_pyramid, objects)?;
     println!(
         "Copy {} (and data/olinda/objects.geojson) to the machine, then:",
         out.display()
@@ -39,6 +52,10 @@ pub fn run(repo: &Path, data: &Path, out: &Path, objects: usize) -> Result<()> {
     println!(
         "  relevo-view bench {} --size 1920x1080 --json",
         dense.display()
+    );
+    println!(
+        "  relevo-view bench {} --size 1920x1080 --json",
+        dense_pyramid.display()
     );
     Ok(())
 }

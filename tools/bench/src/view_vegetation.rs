@@ -10,13 +10,14 @@ use anyhow::{bail, Context, Result};
 use glam::DVec3;
 use relevo::prep::prep;
 use relevo::prep::region::RegionSpec;
-use relevo_core::bundle::BundleFiles;
-use relevo_core::bundle::{Bundle, BundleLock};
+use relevo_core::bundle::{format_of, names, Bundle, BundleFiles, BundleLock, PYRAMID_FORMAT};
 use relevo_core::camera::Camera;
 use relevo_core::cluster::bake::BakeOptions;
 use relevo_core::cluster::cut::CutOptions;
-use relevo_core::cluster::store::{rewrite_bundle, NewVegetation};
+use relevo_core::cluster::stage::bake_database;
+use relevo_core::cluster::store::{self, rewrite_bundle, NewVegetation};
 use relevo_core::geo::TerrainFrame;
+use relevo_core::pyramid::{self, ground::TiledGround, Pyramid};
 use relevo_core::veg::db::VegObject;
 use relevo_view::gpu::{Device, FrameStats, Queue, Renderer};
 use relevo_view::headless::{device, wait_for_gpu};
@@ -189,14 +190,7 @@ fn drape_area(bundle: &Bundle) -> Result<[[f64; 2]; 2]> {
 /// Rewrite the bundle at `path` with `objects` (numbered afresh, as a
 /// database's ids are) baked with `options`.
 fn rewrite_vegetation(path: &Path, objects: &[VegObject], options: &BakeOptions) -> Result<()> {
-    let numbered: Vec<VegObject> = objects
-        .iter()
-        .enumerate()
-        .map(|(k, o)| VegObject {
-            id: k as u64 + 1,
-            ..o.clone()
-        })
-        .collect();
+    let numbered = numbered(objects);
     let lock = BundleLock::acquire(path)?;
     let bundle = Bundle::open(path)?;
     let new = NewVegetation {
@@ -214,10 +208,26 @@ fn rewrite_vegetation(path: &Path, objects: &[VegObject], options: &BakeOptions)
     Ok(())
 }
 
+/// `objects` numbered afresh from 1, as a database's ids are.
+fn numbered(objects: &[VegObject]) -> Vec<VegObject> {
+    objects
+        .iter()
+        .enumerate()
+        .map(|(k, o)| VegObject {
+            id: k as u64 + 1,
+            ..o.clone()
+        })
+        .collect()
+}
+
 /// Rewrite the bundle at `path` with `count` objects tiled from its own
 /// detections over its colour image, default bake: the dense scenes of
-/// [`Bench::object_counts`], for `relevo-view bench`.
+/// [`Bench::object_counts`], for `relevo-view bench`. A pyramid's objects
+/// are tiled over its data's extent and stand on its tiles.
 pub fn densify(path: &Path, count: usize) -> Result<()> {
+    if format_of(path).as_deref() == Some(PYRAMID_FORMAT) {
+        return densify_pyramid(path, count);
+    }
     let bundle = Bundle::open(path)?;
     let frame = bundle.frame();
     let area = drape_area(&bundle)?;
@@ -227,6 +237,48 @@ pub fn densify(path: &Path, count: usize) -> Result<()> {
     drop(bundle);
     let objects = crate::clusters::tiled_detections(&database, &frame, &frame, area, count);
     rewrite_vegetation(path, &objects, &BakeOptions::default())
+}
+
+/// [`densify`] of the pyramid at `path`: its database and clusters
+/// replaced in place (`pyramid::rewrite`), the clusters baked on its tiles.
+fn densify_pyramid(path: &Path, count: usize) -> Result<()> {
+    let lock = BundleLock::acquire(path)?;
+    let p = Pyramid::open(path)?;
+    let frame = p.frame();
+    let database = p.vegetation()?.context("the pyramid has no vegetation")?;
+    let [x0, y0, x1, y1] = p.manifest.grid.valid_extent;
+    let corners = [(x0, y0), (x1, y1)].map(|(e, n)| frame.terrain_from_world(e, n));
+    let [Some(a), Some(b)] = corners else {
+        bail!("the pyramid's data lies off its terrain");
+    };
+    let area = [
+        [a.0.min(b.0) + 0.5, a.1.min(b.1) + 0.5],
+        [a.0.max(b.0) - 0.5, a.1.max(b.1) - 0.5],
+    ];
+    let objects = crate::clusters::tiled_detections(&database, &frame, &frame, area, count);
+    let objects = numbered(&objects);
+    let options = BakeOptions::default();
+    let ground = TiledGround::new(&p, p.layout, p.manifest.grid.cell_size_m);
+    let (clusters, off_terrain) = bake_database(
+        &objects,
+        &frame,
+        &ground,
+        &Default::default(),
+        &options,
+        &|_, _| {},
+    )?;
+    let replaced = |key: &str| key == names::VEGETATION.key || store::is_cluster_artifact(key);
+    pyramid::rewrite(
+        lock,
+        &p,
+        &replaced,
+        |files| {
+            files.write_vegetation(&objects)?;
+            store::write(files, &clusters, &options, off_terrain)
+        },
+        &|staged| store::validate(staged),
+    )?;
+    Ok(())
 }
 
 impl Bench {
