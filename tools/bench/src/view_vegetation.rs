@@ -6,7 +6,7 @@
 //! from the start of its CPU work until the GPU has finished it.
 
 use crate::measure::{emit, median};
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use glam::DVec3;
 use relevo::prep::prep;
 use relevo::prep::region::RegionSpec;
@@ -176,12 +176,19 @@ fn drape_area(bundle: &Bundle) -> Result<[[f64; 2]; 2]> {
         .color
         .as_ref()
         .context("the bundle has no colour image")?;
-    let [x0, y0, x1, y1] = colour.geotransform.bounds(colour.width, colour.height);
-    let corners = [(x0, y0), (x1, y1)].map(|(e, n)| frame.terrain_from_world(e, n));
-    let [Some(a), Some(b)] = corners else {
-        bail!("the colour image lies off the terrain");
-    };
-    Ok([
+    terrain_area(
+        &frame,
+        colour.geotransform.bounds(colour.width, colour.height),
+    )
+    .context("the colour image lies off the terrain")
+}
+
+/// World bounds `[x0, y0, x1, y1]` on `frame`'s terrain, half a metre
+/// inside; `None` when a corner lies off it.
+fn terrain_area(frame: &TerrainFrame, [x0, y0, x1, y1]: [f64; 4]) -> Option<[[f64; 2]; 2]> {
+    let a = frame.terrain_from_world(x0, y0)?;
+    let b = frame.terrain_from_world(x1, y1)?;
+    Some([
         [a.0.min(b.0) + 0.5, a.1.min(b.1) + 0.5],
         [a.0.max(b.0) - 0.5, a.1.max(b.1) - 0.5],
     ])
@@ -246,15 +253,8 @@ fn densify_pyramid(path: &Path, count: usize) -> Result<()> {
     let p = Pyramid::open(path)?;
     let frame = p.frame();
     let database = p.vegetation()?.context("the pyramid has no vegetation")?;
-    let [x0, y0, x1, y1] = p.manifest.grid.valid_extent;
-    let corners = [(x0, y0), (x1, y1)].map(|(e, n)| frame.terrain_from_world(e, n));
-    let [Some(a), Some(b)] = corners else {
-        bail!("the pyramid's data lies off its terrain");
-    };
-    let area = [
-        [a.0.min(b.0) + 0.5, a.1.min(b.1) + 0.5],
-        [a.0.max(b.0) - 0.5, a.1.max(b.1) - 0.5],
-    ];
+    let area = terrain_area(&frame, p.manifest.grid.valid_extent)
+        .context("the pyramid's data lies off its terrain")?;
     let objects = crate::clusters::tiled_detections(&database, &frame, &frame, area, count);
     let objects = numbered(&objects);
     let options = BakeOptions::default();

@@ -591,6 +591,19 @@ fn a_grid_beyond_the_memory_budget_and_bad_tile_sizes_are_refused() {
     }
 }
 
+/// `relevo prep data/olinda/REGION.toml --out OUT EXTRA…`; its output.
+fn prep_olinda(out: &Path, extra: &[&str]) -> String {
+    let region = repo("data/olinda/REGION.toml");
+    let mut args = vec![
+        "prep",
+        region.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend(extra);
+    relevo_ok(&args)
+}
+
 /// Olinda prepared as a pyramid of 32-cell tiles holds the vegetation
 /// database, its samples and every cluster file of the single-grid bundle
 /// byte for byte (the objects stand on the tiles' ground as on the whole
@@ -601,18 +614,8 @@ fn a_grid_beyond_the_memory_budget_and_bad_tile_sizes_are_refused() {
 #[test]
 fn a_pyramid_holds_the_single_grids_vegetation_and_clusters() {
     let d = tempfile::tempdir().unwrap();
-    let region = repo("data/olinda/REGION.toml");
     let (single, pyramid) = (d.path().join("s.relevo"), d.path().join("p.relevo"));
-    let prep = |out: &Path, extra: &[&str]| {
-        let mut args = vec![
-            "prep",
-            region.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ];
-        args.extend(extra);
-        relevo_ok(&args)
-    };
+    let prep = prep_olinda;
     prep(&single, &["-q"]);
     let printed = prep(&pyramid, &["--tiled", "--tile-size", "32"]);
     assert!(printed.contains("vegetation: 11764 objects"), "{printed}");
@@ -687,17 +690,8 @@ fn a_pyramid_holds_the_single_grids_vegetation_and_clusters() {
 #[test]
 fn a_pyramids_drape_is_the_imagery_at_its_vertices() {
     let d = tempfile::tempdir().unwrap();
-    let region = repo("data/olinda/REGION.toml");
     let prep = |out: &Path, extra: &[&str]| {
-        let mut args = vec![
-            "prep",
-            region.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "-q",
-        ];
-        args.extend(extra);
-        relevo_ok(&args);
+        prep_olinda(out, &[extra, &["-q"]].concat());
     };
     let single = d.path().join("s.relevo");
     prep(&single, &[]);

@@ -80,7 +80,7 @@ pub enum Command {
   relevo prep --dem alps.tif --terrain-drape --out alps.relevo   # drape tinted and lit from the heights
   relevo prep --dem country.vrt --tiled --out country.relevo      # a pyramid of 513² tiles
   relevo prep --dem county_utm.tif --tiled --out county.relevo    # a projected DEM, read window by window
-  relevo prep data/olinda/REGION.toml --tiled --out olinda.relevo   # a pyramid with its vegetation and clusters
+  relevo prep data/olinda/REGION.toml --tiled --tile-size 32 --out olinda.relevo   # a pyramid with its vegetation and clusters
   relevo prep --dem country.vrt --tiled --resume --out country.relevo   # go on after a kill
   relevo prep --dem county_utm.tif --tiled --plan /shared/plan --jobs 16 --out /shared/county.relevo
   relevo prep --plan /shared/plan --job 3        # one job of the plan, on any machine

@@ -23,7 +23,7 @@ use super::{
 use crate::clusters::{bake_with_progress, ClustersSummary};
 use crate::ingest::gdalio::GridSpec;
 use anyhow::{bail, Context, Result};
-use relevo_core::bundle::{BundleFiles, GridInfo, StagedFiles};
+use relevo_core::bundle::{GridInfo, StagedFiles};
 use relevo_core::cluster::store;
 use relevo_core::grid::HeightGrid;
 use relevo_core::pyramid::ground::TiledGround;
@@ -112,13 +112,16 @@ pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Res
     let start = Instant::now();
     let mut extras = StagedFiles::new(staging.dir());
     let ground = TiledGround::new(heights.source(), tiles.layout, description.grid.cell_size_m);
-    let clusters = vegetation(region, &dem, &description, &ground, &mut extras)?;
+    let vegetation = vegetation(region, &dem, &description, &ground, &mut extras)?;
     let vegetation_ms = start.elapsed().as_secs_f64() * 1e3;
     let bundle = pyramid::seal_build(staging, tiles, report, description, &write, extras, &|p| {
         store::validate(p)
     })?;
     let mut summary = TiledSummary::of(bundle, read_by_windows, grid_ms, pyramid_ms)?;
-    summary.clusters = clusters;
+    if let Some((objects, clusters)) = vegetation {
+        summary.vegetation = Some(objects);
+        summary.clusters = Some(clusters);
+    }
     summary.vegetation_ms = vegetation_ms;
     Ok(summary)
 }
@@ -126,14 +129,15 @@ pub fn prep_tiled(region: &RegionSpec, out: &Path, options: TiledOptions) -> Res
 /// The region's vegetation, when it has a `[vegetation]` section: detected
 /// on its imagery cropped to the DEM whose grid is `dem` (as a single-grid
 /// `prep` detects it), its clusters baked standing on `ground`; the
-/// database, its samples and the clusters written into `extras`.
+/// database, its samples and the clusters written into `extras`. Returns
+/// the database's size and what the clusters hold.
 fn vegetation(
     region: &RegionSpec,
     dem: &GridSpec,
     description: &PyramidDescription,
     ground: &TiledGround,
     extras: &mut StagedFiles,
-) -> Result<Option<ClustersSummary>> {
+) -> Result<Option<(usize, ClustersSummary)>> {
     let (Some(section), Some(image)) = (&region.vegetation, &region.image) else {
         return Ok(None);
     };
@@ -159,12 +163,16 @@ fn vegetation(
         &clusters.options,
     )?;
     store::write(extras, &baked, &clusters.options, off_terrain)?;
-    Ok(Some(ClustersSummary::of(&baked)))
+    Ok(Some((
+        extraction.objects.len(),
+        ClustersSummary::of(&baked),
+    )))
 }
 
 impl TiledSummary {
     /// What the pyramid written at `bundle` reports, with how its heights
-    /// were read and the grid's and the pyramid's wall times, ms.
+    /// were read and the grid's and the pyramid's wall times, ms (the
+    /// vegetation, when prepared with it, is its caller's to fill in).
     pub fn of(
         bundle: PathBuf,
         read_by_windows: bool,
@@ -172,10 +180,9 @@ impl TiledSummary {
         pyramid_ms: f64,
     ) -> Result<TiledSummary> {
         let opened = pyramid::Pyramid::open(&bundle)?;
-        let vegetation = opened.vegetation()?.map(|objects| objects.len());
         let m = &opened.manifest;
         Ok(TiledSummary {
-            vegetation,
+            vegetation: None,
             clusters: None,
             vegetation_ms: 0.0,
             region: m.region.clone(),
