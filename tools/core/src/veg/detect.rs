@@ -8,7 +8,9 @@
 //!   filtering for the extraction of tree locations and basal area from high
 //!   spatial resolution imagery", 2000). They are kept greedily from the
 //!   brightest with at least `spacing_px` between centres. An object's size
-//!   is the diameter of the largest disc of vegetation around its centre.
+//!   is the diameter of the largest disc of vegetation around its centre,
+//!   scaled and drawn towards the marked crowns' size (see
+//!   [`Placement::Crowns`]).
 //! - Fill (coarse imagery, e.g. 30 m Landsat, where a pixel holds many trees):
 //!   each vegetation pixel area receives objects from a jittered grid of
 //!   `spacing_px`, the jitter a hash of the grid cell, so the same region
@@ -33,10 +35,17 @@ pub enum Placement {
         /// measured in them), 1 when nothing tells.
         #[serde(default = "unit_gain")]
         size_gain: f32,
-        /// Largest size a crown is given (pixels): half again the largest
-        /// marked crown; none when no crown was marked.
+        /// Largest size a crown is measured at (pixels): half again the
+        /// largest marked crown; none when no crown was marked.
         #[serde(default)]
         max_size_px: Option<f32>,
+        /// The marked crowns' median size (pixels), which a crown's
+        /// measured size is drawn towards (their geometric mean): the
+        /// measured disc is cut by shadow and gaps or runs into a
+        /// neighbour, while crowns of one stand are of like size. None
+        /// when no crown was marked.
+        #[serde(default)]
+        marked_size_px: Option<f32>,
     },
     /// Objects on a jittered grid inside vegetation regions.
     Fill {
@@ -136,6 +145,7 @@ pub fn detect(
             min_radius_px,
             size_gain,
             max_size_px,
+            marked_size_px,
         } => {
             let DetectBuffers {
                 outside,
@@ -157,7 +167,12 @@ pub fn detect(
             kept.into_iter()
                 .map(|(i, radius)| {
                     let (x, y) = (i % w, i / w);
-                    let size_px = (2.0 * radius * size_gain).min(max_size_px.unwrap_or(f32::MAX));
+                    let measured_px =
+                        (2.0 * radius * size_gain).min(max_size_px.unwrap_or(f32::MAX));
+                    let size_px = match marked_size_px {
+                        Some(marked_px) => (measured_px * marked_px).sqrt(),
+                        None => measured_px,
+                    };
                     object(x as f64 + 0.5, y as f64 + 0.5, size_px)
                 })
                 .collect()
@@ -513,6 +528,74 @@ mod tests {
         assert_eq!(right.len(), all.iter().filter(|o| o.x >= 20.0).count());
         // A class that is not vegetation gets nothing.
         assert!(place(&[false], None).is_empty());
+    }
+
+    /// One crown on a disc of vegetation 10 px in radius: measured, it is
+    /// the disc's diameter times the gain, capped at the largest size; with
+    /// marked crowns of 80 px it is drawn to the geometric mean of the two.
+    #[test]
+    fn a_crowns_size_is_drawn_towards_the_marked_crowns() {
+        use super::super::segment::{Segment, Segmentation};
+        use super::super::Image;
+        let (w, h, radius) = (61usize, 61usize, 10.0f64);
+        let inside = |i: usize| {
+            let (x, y) = ((i % w) as f64 - 30.0, (i / w) as f64 - 30.0);
+            x.hypot(y) <= radius
+        };
+        // Brightest at the disc's centre.
+        let pixels: Vec<u8> = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f64 - 30.0, (i / w) as f64 - 30.0);
+                (200.0 - 4.0 * x.hypot(y)).max(0.0) as u8
+            })
+            .collect();
+        let image = Image::new(w, h, 1, pixels).unwrap();
+        let region = |pixels: u32| Segment {
+            pixels,
+            bbox: [0, 0, w as u32, h as u32],
+            centroid: [30.0, 30.0],
+            mean: [0.0; 4],
+            std: [0.0; 4],
+        };
+        let segmentation = Segmentation {
+            width: w,
+            height: h,
+            labels: (0..w * h).map(|i| u32::from(!inside(i))).collect(),
+            regions: vec![region(0), region(0)],
+            leaves: 2,
+            steps: Default::default(),
+        };
+        let labels = [0, 1].map(|class| Label { class, score: 0.9 });
+        let size = |max_size_px, marked_size_px| {
+            let placement = Placement::Crowns {
+                spacing_px: 20.0,
+                min_radius_px: 2.0,
+                size_gain: 1.5,
+                max_size_px,
+                marked_size_px,
+            };
+            let found = detect(
+                &image,
+                &segmentation,
+                &labels,
+                &[true, false],
+                None,
+                placement,
+                [0, 0],
+                &mut DetectBuffers::default(),
+            );
+            assert_eq!(found.len(), 1);
+            assert_eq!((found[0].x, found[0].y), (30.5, 30.5));
+            found[0].size_px
+        };
+        let measured = size(None, None);
+        assert!(
+            (measured / 1.5 - 2.0 * radius as f32).abs() <= 2.0,
+            "{measured}"
+        );
+        assert_eq!(size(Some(25.0), None), 25.0);
+        assert!((size(None, Some(80.0)) - (measured * 80.0).sqrt()).abs() < 1e-3);
+        assert!((size(Some(25.0), Some(80.0)) - (25.0f32 * 80.0).sqrt()).abs() < 1e-3);
     }
 
     #[test]

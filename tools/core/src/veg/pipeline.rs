@@ -193,6 +193,7 @@ impl VegOptions {
                 min_radius_px: (self.crown_min_radius_m / pixel_m) as f32,
                 size_gain: 1.0,
                 max_size_px: None,
+                marked_size_px: None,
             }
         } else {
             let spacing_m = (10_000.0 / self.density_per_ha).sqrt();
@@ -842,6 +843,7 @@ impl<'a> Work<'a> {
                         min_radius_px,
                     ),
                     max_size_px: spacing::max_crown_size_px(&marked_crowns),
+                    marked_size_px: spacing::marked_crown_size_px(&marked_crowns),
                 }
             }
             placement => placement,

@@ -141,6 +141,7 @@ pub fn learn_spacing_m(
                 min_radius_px,
                 size_gain: 1.0,
                 max_size_px: None,
+                marked_size_px: None,
             };
             crowns
                 .iter()
@@ -173,6 +174,7 @@ pub fn learn_size_gain(
         min_radius_px,
         size_gain: 1.0,
         max_size_px: None,
+        marked_size_px: None,
     };
     let mut ratios: Vec<f32> = crowns
         .iter()
@@ -187,17 +189,17 @@ pub fn learn_size_gain(
             }
         })
         .collect();
-    ratios.sort_by(f32::total_cmp);
-    match ratios.len() {
-        0 => 1.0,
-        n => {
-            let median = if n % 2 == 1 {
-                ratios[n / 2]
-            } else {
-                (ratios[n / 2 - 1] + ratios[n / 2]) / 2.0
-            };
-            median.clamp(1.0 / MAX_SIZE_GAIN, MAX_SIZE_GAIN)
-        }
+    median(&mut ratios).map_or(1.0, |m| m.clamp(1.0 / MAX_SIZE_GAIN, MAX_SIZE_GAIN))
+}
+
+/// The median of `values` (sorting them); `None` when there are none.
+fn median(values: &mut [f32]) -> Option<f32> {
+    values.sort_by(f32::total_cmp);
+    let n = values.len();
+    match n {
+        0 => None,
+        _ if n % 2 == 1 => Some(values[n / 2]),
+        _ => Some((values[n / 2 - 1] + values[n / 2]) / 2.0),
     }
 }
 
@@ -211,6 +213,19 @@ pub fn max_crown_size_px(crowns: &[MarkedCrown]) -> Option<f32> {
             (1.5 * (x1 - x0 + y1 - y0) / 2.0) as f32
         })
         .max_by(f32::total_cmp)
+}
+
+/// The marked crowns' median mean side (pixels); `None` when no crown was
+/// marked.
+pub fn marked_crown_size_px(crowns: &[MarkedCrown]) -> Option<f32> {
+    let mut sides: Vec<f32> = crowns
+        .iter()
+        .map(|c| {
+            let [x0, y0, x1, y1] = c.sample.bounds();
+            ((x1 - x0 + y1 - y0) / 2.0) as f32
+        })
+        .collect();
+    median(&mut sides)
 }
 
 /// Pixels of neighbourhood a marked crown is cut with: placement at the

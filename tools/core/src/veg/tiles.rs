@@ -134,6 +134,7 @@ mod tests {
             min_radius_px: 5.0,
             size_gain: 1.0,
             max_size_px: None,
+            marked_size_px: None,
         };
         assert_eq!(Tiling::for_placement(crowns, CORE_PX).margin_px, 128);
         assert_eq!(Tiling::for_placement(crowns, 300).core_px, 320);
