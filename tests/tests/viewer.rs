@@ -610,7 +610,7 @@ fn vegetation_over_a_pyramid_draws_as_over_a_single_grid() {
     let toml = repo("data/olinda/REGION.toml");
     let region = relevo::prep::region::RegionSpec::load(&toml).unwrap();
     let options = relevo::prep::tiled::TiledOptions {
-        tile_cells: 32,
+        tile_cells: Some(32),
         force: false,
         resume: false,
     };
@@ -967,7 +967,7 @@ fn grenoble_both(dir: &Path) -> (Scene, Scene) {
     let single = prep_region(&toml, &dir.join("single.relevo"));
     let region = relevo::prep::region::RegionSpec::load(&toml).unwrap();
     let options = relevo::prep::tiled::TiledOptions {
-        tile_cells: 64,
+        tile_cells: Some(64),
         force: false,
         resume: false,
     };

@@ -25,7 +25,7 @@ pub fn run(repo: &Path, data: &Path, out: &Path, objects: usize) -> Result<()> {
     densify(&dense, objects)?;
     let dense_pyramid = out.join(format!("olinda_{objects}_objects_tiled.relevo"));
     let tiled = relevo::prep::tiled::TiledOptions {
-        tile_cells: 32,
+        tile_cells: Some(32),
         force: true,
         resume: false,
     };

@@ -642,7 +642,17 @@ fn a_pyramid_holds_the_single_grids_vegetation_and_clusters() {
     );
 
     std::fs::write(pyramid.join("notes.txt"), "mine").unwrap();
-    prep(&pyramid, &["--tiled", "--tile-size", "64", "--force", "-q"]);
+    // Without --tile-size a grid smaller than the default tile (129² here)
+    // is one tile.
+    prep(&pyramid, &["--tiled", "--force", "-q"]);
+    let replaced = Pyramid::open(&pyramid).unwrap();
+    assert_eq!(
+        (
+            replaced.manifest.tiling.tile_cells,
+            replaced.manifest.tiling.levels
+        ),
+        (128, 1)
+    );
     assert_eq!(
         std::fs::read_to_string(pyramid.join("notes.txt")).unwrap(),
         "mine"

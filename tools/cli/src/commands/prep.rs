@@ -73,9 +73,10 @@ pub struct PrepArgs {
     #[arg(long)]
     pub tiled: bool,
     /// With --tiled: cells a tile side, a power of two 16–4096 (tiles have
-    /// one more vertex a side).
-    #[arg(long, default_value_t = relevo_core::pyramid::DEFAULT_TILE_CELLS, requires = "tiled")]
-    pub tile_size: usize,
+    /// one more vertex a side). Default: 512, or the whole grid in one tile
+    /// when it is smaller.
+    #[arg(long, requires = "tiled")]
+    pub tile_size: Option<usize>,
     /// With --tiled: go on from the build a killed `prep` left beside --out.
     #[arg(long, requires = "tiled")]
     pub resume: bool,

@@ -181,7 +181,8 @@ fn step_table(jobs: &[Job]) -> Vec<PlannedStep> {
 /// How a plan is made.
 #[derive(Debug, Clone, Copy)]
 pub struct PlanOptions {
-    pub tile_cells: usize,
+    /// Cells a tile side (2^k); none: the default for the grid.
+    pub tile_cells: Option<usize>,
     pub jobs_per_step: usize,
     /// Replace an existing plan in DIR and, at the finish, the bundle.
     pub force: bool,

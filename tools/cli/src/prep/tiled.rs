@@ -28,7 +28,8 @@ use relevo_core::cluster::store;
 use relevo_core::grid::HeightGrid;
 use relevo_core::pyramid::ground::TiledGround;
 use relevo_core::pyramid::{
-    self, BuildOptions, DrapeSource, HeightSource, PyramidDescription, TileLayout, WriteOptions,
+    self, default_tile_cells, BuildOptions, DrapeSource, HeightSource, PyramidDescription,
+    TileLayout, WriteOptions,
 };
 use relevo_core::veg::db;
 use serde::Serialize;
@@ -38,8 +39,8 @@ use std::time::Instant;
 /// How a pyramid is prepared.
 #[derive(Debug, Clone, Copy)]
 pub struct TiledOptions {
-    /// Cells a tile side (2^k).
-    pub tile_cells: usize,
+    /// Cells a tile side (2^k); none: [`default_tile_cells`] of the grid.
+    pub tile_cells: Option<usize>,
     pub force: bool,
     /// Go on from a killed build's staging folder.
     pub resume: bool,
@@ -217,7 +218,9 @@ pub fn write_options(
     options: TiledOptions,
 ) -> WriteOptions {
     WriteOptions {
-        tile_cells: options.tile_cells,
+        tile_cells: options
+            .tile_cells
+            .unwrap_or_else(|| default_tile_cells(description.grid.side)),
         build: BuildOptions {
             metric: region.grid.error_metric,
             cell_size_m: description.grid.cell_size_m,
@@ -254,10 +257,11 @@ pub fn height_source(
     region: &RegionSpec,
     name: &str,
     out: &Path,
-    tile_cells: usize,
+    tile_cells: Option<usize>,
     resume: bool,
 ) -> Result<(Heights, PyramidDescription, GridSpec)> {
     if let Some(mut d) = DirectSource::open(region)? {
+        let tile_cells = tile_cells.unwrap_or_else(|| default_tile_cells(d.grid.side));
         pyramid::preflight(out, d.grid.side, tile_cells, resume)?;
         if d.scan()? {
             let (inputs, parameters) = provenance_of(region)?;

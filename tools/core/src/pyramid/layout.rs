@@ -39,6 +39,19 @@ pub const TILE_CELLS_RANGE: [usize; 2] = [16, 4096];
 /// The default tile: 512 cells, 513² vertices (see docs/formats.md).
 pub const DEFAULT_TILE_CELLS: usize = 512;
 
+/// The tile a `side`² grid is cut into when none is asked for: the
+/// default tile, or one tile of the whole grid when that is smaller (never
+/// below the smallest tile).
+///
+/// ```
+/// use relevo_core::pyramid::layout::default_tile_cells;
+/// assert_eq!(default_tile_cells(16385), 512);
+/// assert_eq!(default_tile_cells(129), 128);
+/// ```
+pub fn default_tile_cells(side: usize) -> usize {
+    DEFAULT_TILE_CELLS.min(side.saturating_sub(1).max(TILE_CELLS_RANGE[0]))
+}
+
 impl TileLayout {
     /// The tiling of a `side`² grid into tiles of `tile_cells` cells: a
     /// power of two within [`TILE_CELLS_RANGE`], at most the grid's cells.

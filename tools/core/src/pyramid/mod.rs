@@ -31,7 +31,7 @@ pub mod render;
 pub mod store;
 
 pub use build::{BuildOptions, BuildReport, DrapeSource, HeightSource, Progress, Step};
-pub use layout::{TileKey, TileLayout, DEFAULT_TILE_CELLS};
+pub use layout::{default_tile_cells, TileKey, TileLayout, DEFAULT_TILE_CELLS};
 pub use reader::Pyramid;
 
 use crate::bundle::{
