@@ -214,21 +214,29 @@ pub fn run(a: PrepArgs) -> Result<()> {
     Ok(())
 }
 
+/// `n` and `noun`, plural unless `n` is 1.
+fn count(n: usize, noun: &str) -> String {
+    match n {
+        1 => format!("1 {noun}"),
+        _ => format!("{n} {noun}s"),
+    }
+}
+
 /// Print what a pyramid build reports.
 fn print_tiled(s: &TiledSummary, json: bool) -> Result<()> {
     if json {
         println!("{}", serde_json::to_string(s)?);
     } else {
         println!(
-            "{}: pyramid of a {}×{} grid, {:.2} m cells, {} levels of tiles of {} cells ({} tiles), \
+            "{}: pyramid of a {}×{} grid, {:.2} m cells, {} of tiles of {} cells ({}), \
              {} vertices with data, heights {:.1}..{:.1} m, {:.0} ms",
             s.bundle.display(),
             s.side,
             s.side,
             s.cell_size_m,
-            s.levels,
+            count(s.levels as usize, "level"),
             s.tile_cells,
-            s.tiles,
+            count(s.tiles, "tile"),
             s.valid_vertices,
             s.height_range_m[0],
             s.height_range_m[1],

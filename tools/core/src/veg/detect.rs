@@ -550,8 +550,10 @@ mod tests {
             })
             .collect();
         let image = Image::new(w, h, 1, pixels).unwrap();
-        let region = |pixels: u32| Segment {
-            pixels,
+        // Placement reads only the labels: the regions' descriptions are
+        // placeholders.
+        let region = Segment {
+            pixels: 0,
             bbox: [0, 0, w as u32, h as u32],
             centroid: [30.0, 30.0],
             mean: [0.0; 4],
@@ -561,7 +563,7 @@ mod tests {
             width: w,
             height: h,
             labels: (0..w * h).map(|i| u32::from(!inside(i))).collect(),
-            regions: vec![region(0), region(0)],
+            regions: vec![region; 2],
             leaves: 2,
             steps: Default::default(),
         };
