@@ -18,8 +18,9 @@ use crate::horizon::{
 };
 use crate::lp::window::Rect;
 use crate::Result;
-use std::sync::mpsc::{sync_channel, Receiver, TryRecvError};
+use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, TryRecvError};
 use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Duration;
 
 /// How a pyramid is raycast beyond the raycaster's own options.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -182,7 +183,7 @@ impl LevelWindows {
             slot.ahead.take().filter(|a| contains(&a.rect, &wanted))
         };
         let (rect, (terrain, read)) =
-            match pending.and_then(|a| Some((a.rect, a.arrived.recv().ok()?))) {
+            match pending.and_then(|a| Some((a.rect, wait_for(&a.arrived)?))) {
                 Some((rect, arrived)) => (rect, arrived?),
                 None => {
                     let rect = grown();
@@ -218,6 +219,30 @@ impl LevelWindows {
             .unwrap_or_else(PoisonError::into_inner)
             .ahead += 1;
         ReadAhead { rect, arrived }
+    }
+}
+
+/// The window a read ahead sends, `None` when its thread ended without
+/// one. On a rayon worker the wait runs other rayon work meanwhile: the
+/// read itself runs on the pool (its heights are prepared in parallel), and
+/// workers that all blocked here would leave it none to run on.
+fn wait_for<T>(arrived: &Receiver<T>) -> Option<T> {
+    loop {
+        match arrived.try_recv() {
+            Ok(window) => return Some(window),
+            Err(TryRecvError::Disconnected) => return None,
+            Err(TryRecvError::Empty) => match rayon::yield_now() {
+                Some(rayon::Yield::Executed) => {}
+                Some(rayon::Yield::Idle) => {
+                    match arrived.recv_timeout(Duration::from_micros(200)) {
+                        Ok(window) => return Some(window),
+                        Err(RecvTimeoutError::Timeout) => {}
+                        Err(RecvTimeoutError::Disconnected) => return None,
+                    }
+                }
+                None => return arrived.recv().ok(),
+            },
+        }
     }
 }
 
