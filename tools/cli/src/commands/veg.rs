@@ -343,13 +343,26 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
                 ""
             }
         );
-        if let (relevo_core::veg::detect::Placement::Crowns { spacing_px, .. }, None) =
-            (r.placement, options.crown_spacing_m)
+        if let relevo_core::veg::detect::Placement::Crowns {
+            spacing_px,
+            template,
+            ..
+        } = &r.placement
         {
-            println!(
-                "  crowns at least {:.1} m apart, learnt from the marked crowns",
-                spacing_px as f64 * r.pixel_m
-            );
+            if options.crown_spacing_m.is_none() {
+                println!(
+                    "  crowns at least {:.1} m apart, learnt from the marked crowns",
+                    *spacing_px as f64 * r.pixel_m
+                );
+            }
+            if let Some(t) = template {
+                let taps = 2 * t.reach + 1;
+                println!(
+                    "  crowns centred where brightness and likeness to the marked crowns peak \
+                     ({taps}×{taps} taps {} px apart)",
+                    2 * t.tap_radius_px + 1
+                );
+            }
         }
         if r.threshold_gain != 1.0 {
             println!(

@@ -27,6 +27,7 @@ pub fn excess_green_crowns(image: &Image, spacing_px: f32, min_radius_px: f32) -
         h,
         spacing_px,
         min_radius_px,
+        None,
     );
     crowns
         .into_iter()

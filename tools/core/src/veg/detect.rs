@@ -6,11 +6,13 @@
 //!   smoothed over about a quarter of the crown spacing, inside the mask
 //!   (local-maximum filtering: Wulder, Niemann & Goodenough, "Local maximum
 //!   filtering for the extraction of tree locations and basal area from high
-//!   spatial resolution imagery", 2000). They are kept greedily from the
-//!   brightest with at least `spacing_px` between centres. An object's size
-//!   is the diameter of the largest disc of vegetation around its centre,
-//!   scaled and drawn towards the marked crowns' size (see
-//!   [`Placement::Crowns`]).
+//!   spatial resolution imagery", 2000). Where crowns were marked, the value
+//!   whose maxima are centres adds the likeness to the marked crowns'
+//!   brightness pattern ([`super::template`]), and a centre must look like
+//!   them. Centres are kept greedily from the highest value with at least
+//!   `spacing_px` between them. An object's size is what most marked crowns
+//!   reach, or without marks the diameter of the largest disc of vegetation
+//!   around its centre (see [`Placement::Crowns`]).
 //! - Fill (coarse imagery, e.g. 30 m Landsat, where a pixel holds many trees):
 //!   each vegetation pixel area receives objects from a jittered grid of
 //!   `spacing_px`, the jitter a hash of the grid cell, so the same region
@@ -18,10 +20,21 @@
 
 use super::classify::Label;
 use super::segment::Segmentation;
+use super::template::CrownTemplate;
 use rayon::prelude::*;
 
+/// Weight of the likeness to the marked crowns (a correlation, −1..1)
+/// against brightness (in units of the marked crowns' contrast) in the
+/// value whose local maxima are crown centres: a correlation 0.25 higher
+/// outweighs one unit of contrast.
+pub const LIKENESS_WEIGHT: f32 = 4.0;
+
+/// A centre whose likeness to the marked crowns is this or less is not a
+/// crown.
+pub const MIN_LIKENESS: f32 = 0.2;
+
 /// How vegetation regions become objects.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(tag = "mode", rename_all = "lowercase")]
 pub enum Placement {
     /// One object per crown.
@@ -30,22 +43,18 @@ pub enum Placement {
         spacing_px: f32,
         /// Crowns whose disc radius is smaller are dropped (pixels).
         min_radius_px: f32,
-        /// A crown's size is its disc of vegetation's diameter times this:
-        /// learnt from the marked crowns (their marks' sides over the discs
-        /// measured in them), 1 when nothing tells.
-        #[serde(default = "unit_gain")]
-        size_gain: f32,
-        /// Largest size a crown is measured at (pixels): half again the
-        /// largest marked crown; none when no crown was marked.
-        #[serde(default)]
-        max_size_px: Option<f32>,
-        /// The marked crowns' median size (pixels), which a crown's
-        /// measured size is drawn towards (their geometric mean): the
-        /// measured disc is cut by shadow and gaps or runs into a
-        /// neighbour, while crowns of one stand are of like size. None
-        /// when no crown was marked.
+        /// The size every crown is given (pixels): what most marked crowns
+        /// reach ([`super::spacing::marked_crown_size_px`]). None when no
+        /// crown was marked: a crown's size is then the diameter of its
+        /// disc of vegetation.
         #[serde(default)]
         marked_size_px: Option<f32>,
+        /// The marked crowns' brightness pattern: crowns are centred
+        /// where brightness and likeness to it together peak, and only
+        /// where the likeness exceeds [`MIN_LIKENESS`]. None when no crown
+        /// was marked (then brightness alone places them).
+        #[serde(default)]
+        template: Option<CrownTemplate>,
     },
     /// Objects on a jittered grid inside vegetation regions.
     Fill {
@@ -54,11 +63,6 @@ pub enum Placement {
         /// Size given to every object (pixels).
         diameter_px: f32,
     },
-}
-
-/// The size gain of crowns placed before it was learnt.
-fn unit_gain() -> f32 {
-    1.0
 }
 
 /// A detected object in pixel coordinates.
@@ -73,13 +77,15 @@ pub struct Object {
 }
 
 /// Per-pixel working arrays of crown placement (whether a pixel is outside
-/// vegetation, its smoothed brightness, the blur's rows: 9 bytes a pixel),
+/// vegetation, its smoothed brightness, its likeness to the marked crowns,
+/// the blurs' rows: 13 bytes a pixel),
 /// kept by a worker that places crowns on tile after tile so their memory
 /// is mapped once.
 #[derive(Default)]
 pub struct DetectBuffers {
     outside: Vec<bool>,
     value: Vec<f32>,
+    likeness: Vec<f32>,
     rows: Vec<f32>,
 }
 
@@ -95,7 +101,7 @@ pub fn detect(
     labels: &[Label],
     vegetation: &[bool],
     valid: Option<&[bool]>,
-    placement: Placement,
+    placement: &Placement,
     origin: [usize; 2],
     buffers: &mut DetectBuffers,
 ) -> Vec<Object> {
@@ -117,7 +123,7 @@ pub fn detect(
         }
     };
     let mut objects: Vec<Object> = match placement {
-        Placement::Fill {
+        &Placement::Fill {
             spacing_px,
             diameter_px,
         } => {
@@ -143,36 +149,44 @@ pub fn detect(
         Placement::Crowns {
             spacing_px,
             min_radius_px,
-            size_gain,
-            max_size_px,
             marked_size_px,
+            template,
         } => {
+            let (spacing_px, min_radius_px) = (*spacing_px, *min_radius_px);
             let DetectBuffers {
                 outside,
                 value,
+                likeness,
                 rows,
             } = buffers;
             outside.clear();
             outside.par_extend((0..w * h).into_par_iter().map(|i| !is_vegetation(i)));
             let outside: &[bool] = outside;
             // Sunlit tops: smoothed brightness, only inside vegetation.
-            value.clear();
-            value.par_extend(
-                image
-                    .pixels
-                    .par_chunks_exact(image.bands)
-                    .map(|px| super::opponent(px)[0]),
+            image.brightness_into(value);
+            let likeness = template.as_ref().map(|t| {
+                likeness.clear();
+                likeness.extend_from_slice(value);
+                t.correlate(likeness, rows, w, h, origin);
+                Likeness {
+                    correlation: likeness,
+                    contrast: t.contrast,
+                }
+            });
+            let kept = place_crowns(
+                value,
+                rows,
+                outside,
+                w,
+                h,
+                spacing_px,
+                min_radius_px,
+                likeness,
             );
-            let kept = place_crowns(value, rows, outside, w, h, spacing_px, min_radius_px);
             kept.into_iter()
                 .map(|(i, radius)| {
                     let (x, y) = (i % w, i / w);
-                    let measured_px =
-                        (2.0 * radius * size_gain).min(max_size_px.unwrap_or(f32::MAX));
-                    let size_px = match marked_size_px {
-                        Some(marked_px) => (measured_px * marked_px).sqrt(),
-                        None => measured_px,
-                    };
+                    let size_px = marked_size_px.unwrap_or(2.0 * radius);
                     object(x as f64 + 0.5, y as f64 + 0.5, size_px)
                 })
                 .collect()
@@ -182,15 +196,27 @@ pub fn detect(
     objects
 }
 
+/// How much each cell looks like the marked crowns, and the brightness
+/// unit it is weighed against.
+pub struct Likeness<'a> {
+    /// Correlation with the marked crowns' template (−1..1), per cell.
+    pub correlation: &'a [f32],
+    /// The marked crowns' brightness contrast (brightness units).
+    pub contrast: f32,
+}
+
 /// Crown centres on a `w`×`h` grid of `value`s (brightness, a greenness
 /// index: larger at a crown's top), outside the cells marked `outside`:
-/// the values are smoothed over about a third of `spacing_px`, a centre is
+/// the values are smoothed over about a third of `spacing_px` (and, with a
+/// `likeness`, taken in its contrast's units plus [`LIKENESS_WEIGHT`] times
+/// its correlation, and a centre must be liker than [`MIN_LIKENESS`]), a centre is
 /// the maximum of its window of `spacing_px` inside the mask with a disc of
 /// at least `min_radius_px` of mask around it, and centres are kept from
 /// the highest value down, at least `spacing_px` apart (Wulder, Niemann &
 /// Goodenough 2000). Returns each centre's cell index and disc radius
 /// (pixels), best first; `value` is left smoothed (−∞-like outside) and
 /// `rows` is scratch of the same size.
+#[allow(clippy::too_many_arguments)]
 pub fn place_crowns(
     value: &mut [f32],
     rows: &mut Vec<f32>,
@@ -199,12 +225,19 @@ pub fn place_crowns(
     h: usize,
     spacing_px: f32,
     min_radius_px: f32,
+    likeness: Option<Likeness<'_>>,
 ) -> Vec<(usize, f32)> {
     let blur = (0.3 * spacing_px).round() as usize;
     // The blur writes every row's means before it reads them.
     rows.resize(w * h, 0.0);
     box_blur(value, rows, w, h, blur);
     box_blur(value, rows, w, h, blur);
+    if let Some(l) = &likeness {
+        value
+            .par_iter_mut()
+            .zip(l.correlation)
+            .for_each(|(v, &c)| *v = *v / l.contrast + LIKENESS_WEIGHT * c);
+    }
     value.par_iter_mut().zip(outside).for_each(|(v, &out)| {
         if out {
             *v = f32::MIN;
@@ -218,6 +251,11 @@ pub fn place_crowns(
     let min_radius = min_radius_px.max(1.0);
     let mut candidates: Vec<(usize, f32)> = local_maxima(value, outside, w, h)
         .into_par_iter()
+        .filter(|&i| {
+            likeness
+                .as_ref()
+                .is_none_or(|l| l.correlation[i] > MIN_LIKENESS)
+        })
         .filter(|&i| is_window_max(value, w, h, i % w, i / w, r))
         .map(|i| (i, vegetation_radius(outside, w, h, i, limit)))
         .filter(|&(_, radius)| radius >= min_radius)
@@ -512,7 +550,7 @@ mod tests {
                 &labels,
                 vegetation,
                 valid,
-                fill,
+                &fill,
                 origin,
                 &mut buffers,
             )
@@ -534,7 +572,7 @@ mod tests {
     /// the disc's diameter times the gain, capped at the largest size; with
     /// marked crowns of 80 px it is drawn to the geometric mean of the two.
     #[test]
-    fn a_crowns_size_is_drawn_towards_the_marked_crowns() {
+    fn a_crown_has_the_marked_size_or_else_its_discs() {
         use super::super::segment::{Segment, Segmentation};
         use super::super::Image;
         let (w, h, radius) = (61usize, 61usize, 10.0f64);
@@ -568,13 +606,12 @@ mod tests {
             steps: Default::default(),
         };
         let labels = [0, 1].map(|class| Label { class, score: 0.9 });
-        let size = |max_size_px, marked_size_px| {
+        let size = |marked_size_px| {
             let placement = Placement::Crowns {
                 spacing_px: 20.0,
                 min_radius_px: 2.0,
-                size_gain: 1.5,
-                max_size_px,
                 marked_size_px,
+                template: None,
             };
             let found = detect(
                 &image,
@@ -582,7 +619,7 @@ mod tests {
                 &labels,
                 &[true, false],
                 None,
-                placement,
+                &placement,
                 [0, 0],
                 &mut DetectBuffers::default(),
             );
@@ -590,14 +627,9 @@ mod tests {
             assert_eq!((found[0].x, found[0].y), (30.5, 30.5));
             found[0].size_px
         };
-        let measured = size(None, None);
-        assert!(
-            (measured / 1.5 - 2.0 * radius as f32).abs() <= 2.0,
-            "{measured}"
-        );
-        assert_eq!(size(Some(25.0), None), 25.0);
-        assert!((size(None, Some(80.0)) - (measured * 80.0).sqrt()).abs() < 1e-3);
-        assert!((size(Some(25.0), Some(80.0)) - (25.0f32 * 80.0).sqrt()).abs() < 1e-3);
+        let measured = size(None);
+        assert!((measured - 2.0 * radius as f32).abs() <= 2.0, "{measured}");
+        assert_eq!(size(Some(25.0)), 25.0);
     }
 
     #[test]

@@ -11,6 +11,8 @@
 //! - [`classify`]: nearest-signature classifier with a score.
 //! - [`detect`]: vegetation objects from classified regions.
 //! - [`spacing`]: the crown spacing learnt from the marked crowns.
+//! - [`template`]: the marked crowns' brightness pattern, and each place's
+//!   likeness to it.
 //! - [`db`]: the `id;x;y;class;size;score` database.
 //! - [`eval`]: precision, recall and F1 against truth boxes.
 //! - [`tiles`]: cutting a large image into tiles with a margin of context.
@@ -58,6 +60,7 @@ pub mod protocol;
 pub mod samples;
 pub mod segment;
 pub mod spacing;
+pub mod template;
 pub mod tiles;
 
 use crate::{Error, Result};
@@ -99,6 +102,17 @@ impl Image {
             bands,
             pixels,
         })
+    }
+
+    /// Replace `out` by every pixel's brightness (the first opponent
+    /// component, [`opponent`]), row by row.
+    pub fn brightness_into(&self, out: &mut Vec<f32>) {
+        out.clear();
+        out.par_extend(
+            self.pixels
+                .par_chunks_exact(self.bands)
+                .map(|px| opponent(px)[0]),
+        );
     }
 
     /// Span between the 1st and 99th percentiles of brightness (the mean of

@@ -33,7 +33,7 @@ impl Tiling {
     /// maximum must dominate, the disc of vegetation measured around it and
     /// the spacing the greedy selection keeps all lie within that). Both are
     /// rounded up to multiples of [`ALIGN_PX`].
-    pub fn for_placement(placement: Placement, core_px: usize) -> Tiling {
+    pub fn for_placement(placement: &Placement, core_px: usize) -> Tiling {
         let context = match placement {
             Placement::Crowns { spacing_px, .. } => (4.0 * spacing_px).ceil() as usize,
             Placement::Fill { .. } => 0,
@@ -132,18 +132,17 @@ mod tests {
         let crowns = Placement::Crowns {
             spacing_px: 25.0,
             min_radius_px: 5.0,
-            size_gain: 1.0,
-            max_size_px: None,
             marked_size_px: None,
+            template: None,
         };
-        assert_eq!(Tiling::for_placement(crowns, CORE_PX).margin_px, 128);
-        assert_eq!(Tiling::for_placement(crowns, 300).core_px, 320);
+        assert_eq!(Tiling::for_placement(&crowns, CORE_PX).margin_px, 128);
+        assert_eq!(Tiling::for_placement(&crowns, 300).core_px, 320);
         let fill = Placement::Fill {
             spacing_px: 0.3,
             diameter_px: 0.3,
         };
         assert_eq!(
-            Tiling::for_placement(fill, CORE_PX).margin_px,
+            Tiling::for_placement(&fill, CORE_PX).margin_px,
             MIN_MARGIN_PX
         );
     }
