@@ -343,27 +343,7 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
                 ""
             }
         );
-        if let relevo_core::veg::detect::Placement::Crowns {
-            spacing_px,
-            template,
-            ..
-        } = &r.placement
-        {
-            if options.crown_spacing_m.is_none() {
-                println!(
-                    "  crowns at least {:.1} m apart, learnt from the marked crowns",
-                    *spacing_px as f64 * r.pixel_m
-                );
-            }
-            if let Some(t) = template {
-                let taps = 2 * t.reach + 1;
-                println!(
-                    "  crowns centred where brightness and likeness to the marked crowns peak \
-                     ({taps}×{taps} taps {} px apart)",
-                    2 * t.tap_radius_px + 1
-                );
-            }
-        }
+        print_crown_placement(&r.placement, r.pixel_m, options.crown_spacing_m.is_none());
         if r.threshold_gain != 1.0 {
             println!(
                 "  thresholds scaled by {:.2} to the samples' contrast",
@@ -405,6 +385,36 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The report's lines on how crowns were placed: the spacing when it was
+/// learnt, and the marked crowns' pattern when crowns were centred by it.
+fn print_crown_placement(
+    placement: &relevo_core::veg::detect::Placement,
+    pixel_m: f64,
+    spacing_learnt: bool,
+) {
+    if let relevo_core::veg::detect::Placement::Crowns {
+        spacing_px,
+        template,
+        ..
+    } = placement
+    {
+        if spacing_learnt {
+            println!(
+                "  crowns at least {:.1} m apart, learnt from the marked crowns",
+                *spacing_px as f64 * pixel_m
+            );
+        }
+        if let Some(t) = template {
+            let taps = 2 * t.reach + 1;
+            println!(
+                "  crowns centred where brightness and likeness to the marked crowns peak \
+                 ({taps}×{taps} taps {} px apart)",
+                2 * t.tap_radius_px + 1
+            );
+        }
+    }
 }
 
 /// The classified pixels against land-cover `labels`, and the
