@@ -20,7 +20,7 @@
 
 use super::classify::Label;
 use super::segment::Segmentation;
-use super::template::CrownTemplate;
+use super::template::{CrownTemplate, Likeness};
 use rayon::prelude::*;
 
 /// Weight of the likeness to the marked crowns (a correlation, −1..1)
@@ -77,15 +77,13 @@ pub struct Object {
 }
 
 /// Per-pixel working arrays of crown placement (whether a pixel is outside
-/// vegetation, its smoothed brightness, its likeness to the marked crowns,
-/// the blurs' rows: 13 bytes a pixel),
+/// vegetation, its smoothed brightness, the blur's rows: 9 bytes a pixel),
 /// kept by a worker that places crowns on tile after tile so their memory
 /// is mapped once.
 #[derive(Default)]
 pub struct DetectBuffers {
     outside: Vec<bool>,
     value: Vec<f32>,
-    likeness: Vec<f32>,
     rows: Vec<f32>,
 }
 
@@ -156,7 +154,6 @@ pub fn detect(
             let DetectBuffers {
                 outside,
                 value,
-                likeness,
                 rows,
             } = buffers;
             outside.clear();
@@ -164,15 +161,7 @@ pub fn detect(
             let outside: &[bool] = outside;
             // Sunlit tops: smoothed brightness, only inside vegetation.
             image.brightness_into(value);
-            let likeness = template.as_ref().map(|t| {
-                likeness.clear();
-                likeness.extend_from_slice(value);
-                t.correlate(likeness, rows, w, h, origin);
-                Likeness {
-                    correlation: likeness,
-                    contrast: t.contrast,
-                }
-            });
+            let likeness = template.as_ref().map(|t| t.likeness(value, w, h, origin));
             let kept = place_crowns(
                 value,
                 rows,
@@ -181,7 +170,7 @@ pub fn detect(
                 h,
                 spacing_px,
                 min_radius_px,
-                likeness,
+                likeness.as_ref(),
             );
             kept.into_iter()
                 .map(|(i, radius)| {
@@ -194,15 +183,6 @@ pub fn detect(
     };
     objects.sort_by(|a, b| a.y.total_cmp(&b.y).then(a.x.total_cmp(&b.x)));
     objects
-}
-
-/// How much each cell looks like the marked crowns, and the brightness
-/// unit it is weighed against.
-pub struct Likeness<'a> {
-    /// Correlation with the marked crowns' template (−1..1), per cell.
-    pub correlation: &'a [f32],
-    /// The marked crowns' brightness contrast (brightness units).
-    pub contrast: f32,
 }
 
 /// Crown centres on a `w`×`h` grid of `value`s (brightness, a greenness
@@ -225,18 +205,15 @@ pub fn place_crowns(
     h: usize,
     spacing_px: f32,
     min_radius_px: f32,
-    likeness: Option<Likeness<'_>>,
+    likeness: Option<&Likeness>,
 ) -> Vec<(usize, f32)> {
     let blur = (0.3 * spacing_px).round() as usize;
     // The blur writes every row's means before it reads them.
     rows.resize(w * h, 0.0);
     box_blur(value, rows, w, h, blur);
     box_blur(value, rows, w, h, blur);
-    if let Some(l) = &likeness {
-        value
-            .par_iter_mut()
-            .zip(l.correlation)
-            .for_each(|(v, &c)| *v = *v / l.contrast + LIKENESS_WEIGHT * c);
+    if let Some(l) = likeness {
+        l.blend_into(value, w, LIKENESS_WEIGHT);
     }
     value.par_iter_mut().zip(outside).for_each(|(v, &out)| {
         if out {
@@ -251,11 +228,7 @@ pub fn place_crowns(
     let min_radius = min_radius_px.max(1.0);
     let mut candidates: Vec<(usize, f32)> = local_maxima(value, outside, w, h)
         .into_par_iter()
-        .filter(|&i| {
-            likeness
-                .as_ref()
-                .is_none_or(|l| l.correlation[i] > MIN_LIKENESS)
-        })
+        .filter(|&i| likeness.is_none_or(|l| l.at(i % w, i / w) > MIN_LIKENESS))
         .filter(|&i| is_window_max(value, w, h, i % w, i / w, r))
         .map(|i| (i, vegetation_radius(outside, w, h, i, limit)))
         .filter(|&(_, radius)| radius >= min_radius)
