@@ -93,7 +93,7 @@ pub struct VegPlanRequest<'a> {
 
 impl VegPlan {
     /// Read `dir/plan.json`; refused when its jobs do not cut the
-    /// model's tiles.
+    /// model's tiles or its crown template cannot be used.
     pub fn load(dir: &Path) -> Result<VegPlan> {
         let plan: VegPlan = crate::plan::load(dir, VEG_PLAN_FORMAT, VERSION)?;
         let tiles = plan.model.tiles().len();
@@ -112,6 +112,17 @@ impl VegPlan {
                 "{}: its jobs leave tiles out; make the plan again",
                 dir.join("plan.json").display()
             );
+        }
+        if let relevo_core::veg::detect::Placement::Crowns {
+            template: Some(t), ..
+        } = &plan.model.placement
+        {
+            if let Some(problem) = t.problem() {
+                bail!(
+                    "{}: {problem}; make the plan again",
+                    dir.join("plan.json").display()
+                );
+            }
         }
         Ok(plan)
     }

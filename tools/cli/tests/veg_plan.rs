@@ -118,12 +118,25 @@ fn a_detection_run_as_jobs_writes_the_single_machine_database() {
                 let path = plan.join("plan.json");
                 let mut edited: serde_json::Value =
                     serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+                let jobs_cut = edited["jobs"].clone();
                 edited["jobs"] = serde_json::json!([[0, 9999]]);
                 std::fs::write(&path, edited.to_string()).unwrap();
                 let o = plan_command(&plan, &["--job", "0"]);
                 let e = String::from_utf8_lossy(&o.stderr);
                 assert_eq!(o.status.code(), Some(1), "{e}");
                 assert!(e.contains("do not cut the 25 tiles"), "{e}");
+                // A crown template that does not hold together is refused
+                // by name, not used.
+                edited["jobs"] = jobs_cut;
+                edited["model"]["placement"]["template"]["weights"] = serde_json::json!([1.0]);
+                std::fs::write(&path, edited.to_string()).unwrap();
+                let o = plan_command(&plan, &["--job", "0"]);
+                let e = String::from_utf8_lossy(&o.stderr);
+                assert_eq!(o.status.code(), Some(1), "{e}");
+                assert!(
+                    e.contains("plan.json: crown template with 1 weights"),
+                    "{e}"
+                );
             }
         }
     }

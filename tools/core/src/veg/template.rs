@@ -14,7 +14,7 @@
 //!
 //! A tap reads the brightness averaged over a `(2r+1)²` window, and taps
 //! lie `2r+1` pixels apart, so the taps cover the template's square without
-//! gaps and a template holds about 11×11 taps whatever the crowns' size.
+//! gaps and a template holds 9×9 to 13×13 taps whatever the crowns' size.
 //! The correlation is computed on a grid of that pitch fixed to the whole
 //! image (a tile's values are the whole image's) and bilinear between its
 //! nodes.
@@ -22,7 +22,8 @@
 use rayon::prelude::*;
 
 /// The template spans this many marked crowns' sides (its square's side
-/// over the median side): the crown and the ground around it.
+/// over the marked side, [`super::spacing::marked_crown_size_px`]): the
+/// crown and the ground around it.
 const SPAN_SIDES: f32 = 1.5;
 
 /// About this many tap pitches across the template.
@@ -45,7 +46,15 @@ pub struct CrownTemplate {
     pub contrast: f32,
 }
 
-/// A tap pattern's place and size, from the marked crowns' median side.
+/// The most taps from a template's centre to its edge a template read
+/// from a file may have (those learnt have about 5).
+const MAX_REACH: usize = 64;
+
+/// The largest tap window radius a template read from a file may have,
+/// pixels.
+const MAX_TAP_RADIUS_PX: usize = 1024;
+
+/// A tap pattern's place and size, from the marked crowns' side.
 fn layout(side_px: f32) -> (usize, usize) {
     let span_px = SPAN_SIDES * side_px;
     let tap_radius_px = ((span_px / PITCHES_ACROSS - 1.0) / 2.0).round().max(0.0) as usize;
@@ -55,7 +64,32 @@ fn layout(side_px: f32) -> (usize, usize) {
 }
 
 impl CrownTemplate {
-    /// The template of marked crowns of median side `side_px`, each given
+    /// Why a template (read from a file) cannot be used, if it cannot: taps
+    /// out of bounds, weights not one per tap or not finite, a contrast
+    /// not positive.
+    pub fn problem(&self) -> Option<String> {
+        let taps = (2 * self.reach + 1).pow(2);
+        if self.reach == 0 || self.reach > MAX_REACH || self.tap_radius_px > MAX_TAP_RADIUS_PX {
+            Some(format!(
+                "crown template of reach {} and tap radius {} px (at most {MAX_REACH} and {MAX_TAP_RADIUS_PX})",
+                self.reach, self.tap_radius_px
+            ))
+        } else if self.weights.len() != taps || !self.weights.iter().all(|w| w.is_finite()) {
+            Some(format!(
+                "crown template with {} weights where its {taps} taps need one finite weight each",
+                self.weights.len()
+            ))
+        } else if !(self.contrast.is_finite() && self.contrast > 0.0) {
+            Some(format!(
+                "crown template of contrast {}: not positive",
+                self.contrast
+            ))
+        } else {
+            None
+        }
+    }
+
+    /// The template of marked crowns of side `side_px`, each given
     /// as a `w`×`h` grid of brightness and its mark's centre in that grid
     /// (pixels); windows are clipped at the grid's edges. `None` when no
     /// crown varies in brightness.
@@ -330,6 +364,26 @@ mod tests {
                 100.0 + 0.2 * x + bumps + ((i * 7919) % 13) as f32
             })
             .collect()
+    }
+
+    #[test]
+    fn a_template_read_from_a_file_is_checked() {
+        let values = field(80, 80);
+        let good = CrownTemplate::learn([(&values[..], 80, 80, [40.5, 40.5])], 20.0).unwrap();
+        assert_eq!(good.problem(), None);
+        let mut short = good.clone();
+        short.weights.pop();
+        assert!(short.problem().unwrap().contains("weights"));
+        let far = CrownTemplate {
+            reach: 1_000_000,
+            ..good.clone()
+        };
+        assert!(far.problem().unwrap().contains("reach"));
+        let flat = CrownTemplate {
+            contrast: 0.0,
+            ..good
+        };
+        assert!(flat.problem().unwrap().contains("contrast"));
     }
 
     #[test]
