@@ -541,9 +541,9 @@ mod tests {
         assert!(place(&[false], None).is_empty());
     }
 
-    /// One crown on a disc of vegetation 10 px in radius: measured, it is
-    /// the disc's diameter times the gain, capped at the largest size; with
-    /// marked crowns of 80 px it is drawn to the geometric mean of the two.
+    /// One crown on a disc of vegetation 10 px in radius: with no crown
+    /// marked its size is the disc's diameter; with a marked size, that
+    /// size.
     #[test]
     fn a_crown_has_the_marked_size_or_else_its_discs() {
         use super::super::segment::{Segment, Segmentation};

@@ -820,7 +820,9 @@ impl<'a> Work<'a> {
                 min_radius_px,
                 ..
             } => {
-                let template = spacing::crown_template(&marked_crowns);
+                let marked_size_px = spacing::marked_crown_size_px(&marked_crowns);
+                let template = marked_size_px
+                    .and_then(|side_px| spacing::crown_template(&marked_crowns, side_px));
                 let spacing_m = match options.crown_spacing_m {
                     Some(_) => spacing_px as f64 * self.pixel_m,
                     None => spacing::learn_spacing_m(
@@ -836,7 +838,7 @@ impl<'a> Work<'a> {
                 Placement::Crowns {
                     spacing_px,
                     min_radius_px,
-                    marked_size_px: spacing::marked_crown_size_px(&marked_crowns),
+                    marked_size_px,
                     template,
                 }
             }

@@ -156,8 +156,8 @@ pub fn learn_spacing_m(
 /// the marks' mean sides, `None` when no crown was marked. A person marks
 /// crowns that stand out, and corrections add the crowns that were missed,
 /// often the largest, so the marks run larger than the typical crown; the
-/// lower quartile (the second smallest of four to seven marks) stays with
-/// the typical crown where a median follows the added ones.
+/// lower quartile stays with the typical crown where a median follows the
+/// added ones.
 pub fn marked_crown_size_px(crowns: &[MarkedCrown]) -> Option<f32> {
     let mut sides: Vec<f32> = crowns
         .iter()
@@ -166,15 +166,21 @@ pub fn marked_crown_size_px(crowns: &[MarkedCrown]) -> Option<f32> {
             ((x1 - x0 + y1 - y0) / 2.0) as f32
         })
         .collect();
-    sides.sort_by(f32::total_cmp);
-    let last = sides.len().checked_sub(1)?;
-    Some(sides[(last as f32 * 0.25).round() as usize])
+    lower_quartile(&mut sides)
 }
 
-/// The marked crowns' brightness pattern, at [`marked_crown_size_px`]; `None`
-/// when no crown was marked (or none varies in brightness).
-pub fn crown_template(crowns: &[MarkedCrown]) -> Option<CrownTemplate> {
-    let side_px = marked_crown_size_px(crowns)?;
+/// The value a quarter of the way up `values` once sorted (sorting them;
+/// the nearest rank, the second smallest of four to six): `None` when there
+/// are none.
+fn lower_quartile(values: &mut [f32]) -> Option<f32> {
+    values.sort_by(f32::total_cmp);
+    let last = values.len().checked_sub(1)?;
+    Some(values[(last as f32 * 0.25).round() as usize])
+}
+
+/// The marked crowns' brightness pattern at `side_px` (their
+/// [`marked_crown_size_px`]); `None` when none varies in brightness.
+pub fn crown_template(crowns: &[MarkedCrown], side_px: f32) -> Option<CrownTemplate> {
     let brightness: Vec<Vec<f32>> = crowns
         .iter()
         .map(|c| {
@@ -208,6 +214,19 @@ mod tests {
     use super::*;
     use crate::testdata;
     use crate::veg::pipeline::{extract, Model, VegOptions};
+
+    #[test]
+    fn the_lower_quartile_is_the_nearest_rank() {
+        assert_eq!(lower_quartile(&mut []), None);
+        assert_eq!(lower_quartile(&mut [7.0]), Some(7.0));
+        assert_eq!(lower_quartile(&mut [9.0, 4.0, 6.0, 5.0]), Some(5.0));
+        assert_eq!(
+            lower_quartile(&mut [1.0, 9.0, 2.0, 8.0, 3.0, 7.0]),
+            Some(2.0)
+        );
+        let mut seven = [7.0, 6.0, 5.0, 4.0, 3.0, 2.0, 1.0];
+        assert_eq!(lower_quartile(&mut seven), Some(3.0));
+    }
 
     /// On SOAP_061 a marked dead crown (several bright branches, each like
     /// the marked crowns' pattern) holds three centres at 2 m and two at

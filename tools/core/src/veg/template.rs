@@ -235,12 +235,8 @@ pub struct Likeness {
 impl Likeness {
     /// The likeness at cell `(x, y)` of the grid.
     pub fn at(&self, x: usize, y: usize) -> f32 {
-        let (i, fx) = self.along(0, x);
         let (j, fy) = self.along(1, y);
-        let at = |i: usize, j: usize| self.nodes[j * self.size[0] + i];
-        let top = at(i, j) * (1.0 - fx) + at(i + 1, j) * fx;
-        let bottom = at(i, j + 1) * (1.0 - fx) + at(i + 1, j + 1) * fx;
-        top * (1.0 - fy) + bottom * fy
+        self.between(j, fy, self.along(0, x))
     }
 
     /// Replace each of `values` (a grid `w` wide, brightness) by itself in
@@ -250,14 +246,20 @@ impl Likeness {
         let columns: Vec<(usize, f32)> = (0..w).map(|x| self.along(0, x)).collect();
         values.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
             let (j, fy) = self.along(1, y);
-            let nodes = |j: usize| &self.nodes[j * self.size[0]..(j + 1) * self.size[0]];
-            let (top, bottom) = (nodes(j), nodes(j + 1));
-            for (v, &(i, fx)) in row.iter_mut().zip(&columns) {
-                let upper = top[i] * (1.0 - fx) + top[i + 1] * fx;
-                let lower = bottom[i] * (1.0 - fx) + bottom[i + 1] * fx;
-                *v = *v / self.contrast + weight * (upper * (1.0 - fy) + lower * fy);
+            for (v, &column) in row.iter_mut().zip(&columns) {
+                *v = *v / self.contrast + weight * self.between(j, fy, column);
             }
         });
+    }
+
+    /// Bilinear between the nodes of rows `j` and `j + 1`, `fy` of the way
+    /// down, at `column` (the node before it and the fraction across).
+    #[inline]
+    fn between(&self, j: usize, fy: f32, (i, fx): (usize, f32)) -> f32 {
+        let at = |i: usize, j: usize| self.nodes[j * self.size[0] + i];
+        let top = at(i, j) * (1.0 - fx) + at(i + 1, j) * fx;
+        let bottom = at(i, j + 1) * (1.0 - fx) + at(i + 1, j + 1) * fx;
+        top * (1.0 - fy) + bottom * fy
     }
 
     /// Along axis `a`, the node before cell `c` of the grid (an index into
