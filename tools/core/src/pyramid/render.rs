@@ -18,9 +18,8 @@ use crate::horizon::{
 };
 use crate::lp::window::Rect;
 use crate::Result;
-use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, TryRecvError};
-use std::sync::{Arc, Mutex, PoisonError};
-use std::time::Duration;
+use std::sync::mpsc::{sync_channel, Receiver, TryRecvError};
+use std::sync::{Arc, Mutex, OnceLock, PoisonError};
 
 /// How a pyramid is raycast beyond the raycaster's own options.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -72,9 +71,10 @@ pub struct LevelRead {
 /// level holds reads nothing; once its ground has moved a quarter of the
 /// margin toward the window's edge, the window around it grown by
 /// [`WINDOW_MARGIN`] of its size on each side (clamped to the level) is
-/// read on a thread of its own while frames go on with the one held, and
-/// replaces it once it has arrived. A frame waits only when its band has left the window held
-/// before the next one arrived (a jump, or the first frame). The raycast is
+/// read on the windows' own thread pool while frames go on with the one
+/// held, and replaces it once it has arrived. A frame waits only when its
+/// band has left the window held before the next one arrived (a jump, or
+/// the first frame). The raycast is
 /// the same whichever window a level comes from: a sample reads its
 /// lattice vertices' heights, mask and colour, and a baked hillshade's
 /// normals look past the window's edge (where a level's cell is under a
@@ -87,6 +87,12 @@ pub struct LevelWindows {
     /// Per level, the window held and the one being read ahead.
     levels: Mutex<Vec<LevelSlot>>,
     reads: Mutex<WindowReads>,
+    /// The threads windows are read ahead on, made at the first read
+    /// ahead (`None` when they could not be made). Never the frames' pool:
+    /// a frame's worker waiting for a window would otherwise hold up the
+    /// read it waits for (rayon may run the read's parallel work beneath
+    /// that very wait on the worker's stack).
+    readers: OnceLock<Option<rayon::ThreadPool>>,
 }
 
 /// How a raycast's level windows were read, since the windows were made.
@@ -111,7 +117,7 @@ struct HeldWindow {
     terrain: Arc<LevelTerrain>,
 }
 
-/// A window being read on a thread of its own.
+/// A window being read ahead.
 struct ReadAhead {
     rect: Rect,
     arrived: Receiver<Result<(LevelTerrain, LevelRead)>>,
@@ -129,6 +135,7 @@ impl LevelWindows {
             hillshade: None,
             levels: Mutex::default(),
             reads: Mutex::default(),
+            readers: OnceLock::new(),
         }
     }
 
@@ -182,8 +189,9 @@ impl LevelWindows {
             // window under way if it will cover the band.
             slot.ahead.take().filter(|a| contains(&a.rect, &wanted))
         };
+        // The read runs on `readers`, which need nothing from this thread.
         let (rect, (terrain, read)) =
-            match pending.and_then(|a| Some((a.rect, wait_for(&a.arrived)?))) {
+            match pending.and_then(|a| Some((a.rect, a.arrived.recv().ok()?))) {
                 Some((rect, arrived)) => (rect, arrived?),
                 None => {
                     let rect = grown();
@@ -203,46 +211,28 @@ impl LevelWindows {
         Ok((terrain, Some(read)))
     }
 
-    /// Start reading level `level`'s window `rect` on a thread of its own.
-    /// Should no thread start, the window never arrives and a frame that
+    /// Start reading level `level`'s window `rect` on the readers' pool.
+    /// Should the pool not start, the window never arrives and a frame that
     /// needs it reads it itself.
     fn read_ahead(&self, level: u32, rect: Rect) -> ReadAhead {
         let (send, arrived) = sync_channel(1);
         let (pyramid, hillshade) = (self.pyramid.clone(), self.hillshade);
-        let _ = std::thread::Builder::new()
-            .name("relevo level window".into())
-            .spawn(move || {
+        let readers = self.readers.get_or_init(|| {
+            rayon::ThreadPoolBuilder::new()
+                .thread_name(|i| format!("relevo level window {i}"))
+                .build()
+                .ok()
+        });
+        if let Some(readers) = readers {
+            readers.spawn(move || {
                 let _ = send.send(load_level(&pyramid, level, rect, hillshade));
             });
+        }
         self.reads
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
             .ahead += 1;
         ReadAhead { rect, arrived }
-    }
-}
-
-/// The window a read ahead sends, `None` when its thread ended without
-/// one. On a rayon worker the wait runs other rayon work meanwhile: the
-/// read itself runs on the pool (its heights are prepared in parallel), and
-/// workers that all blocked here would leave it none to run on.
-fn wait_for<T>(arrived: &Receiver<T>) -> Option<T> {
-    loop {
-        match arrived.try_recv() {
-            Ok(window) => return Some(window),
-            Err(TryRecvError::Disconnected) => return None,
-            Err(TryRecvError::Empty) => match rayon::yield_now() {
-                Some(rayon::Yield::Executed) => {}
-                Some(rayon::Yield::Idle) => {
-                    match arrived.recv_timeout(Duration::from_micros(200)) {
-                        Ok(window) => return Some(window),
-                        Err(RecvTimeoutError::Timeout) => {}
-                        Err(RecvTimeoutError::Disconnected) => return None,
-                    }
-                }
-                None => return arrived.recv().ok(),
-            },
-        }
     }
 }
 
@@ -474,6 +464,57 @@ mod tests {
     use crate::lp::refine::tests::terrains;
     use crate::pyramid::paging::tests::pyramid_of;
     use glam::DVec3;
+    use std::sync::{Barrier, Condvar};
+    use std::time::Duration;
+
+    /// A window read ahead arrives while every worker of rayon's global
+    /// pool, on which frames raycast, is blocked waiting: the read needs
+    /// none of them. (Read on the frames' pool, its parallel work could
+    /// land beneath a frame's wait for it on a worker's stack, and the
+    /// flight hung.)
+    #[test]
+    fn a_window_read_ahead_arrives_while_every_frame_worker_waits() {
+        let t = terrains().into_iter().next().unwrap();
+        let (_dir, p) = pyramid_of(&t, 32);
+        let windows = LevelWindows::new(Arc::new(p));
+        let rect = Rect {
+            c0: 0,
+            r0: 0,
+            width: t.h.side,
+            height: t.h.side / 2,
+        };
+        let workers = rayon::current_num_threads();
+        let all_blocked = Barrier::new(workers + 1);
+        let (give, take) = std::sync::mpsc::channel::<ReadAhead>();
+        let take = Mutex::new(take);
+        let arrived = (Mutex::new(None::<bool>), Condvar::new());
+        std::thread::scope(|s| {
+            let frames = s.spawn(|| {
+                rayon::broadcast(|worker| {
+                    all_blocked.wait();
+                    if worker.index() == 0 {
+                        let ahead = take.lock().unwrap().recv().unwrap();
+                        let window = ahead.arrived.recv_timeout(Duration::from_secs(60));
+                        *arrived.0.lock().unwrap() = Some(matches!(window, Ok(Ok(_))));
+                        arrived.1.notify_all();
+                    } else {
+                        let mut got = arrived.0.lock().unwrap();
+                        while got.is_none() {
+                            got = arrived.1.wait(got).unwrap();
+                        }
+                    }
+                })
+            });
+            all_blocked.wait();
+            give.send(windows.read_ahead(0, rect)).unwrap();
+            frames.join().unwrap();
+        });
+        assert_eq!(
+            *arrived.0.lock().unwrap(),
+            Some(true),
+            "the window read ahead did not arrive within a minute"
+        );
+    }
 
     /// A flight low over two crops, forward and turning, four bands deep
     /// (`max_cell_px` 16), with a baked hillshade: the level windows kept
