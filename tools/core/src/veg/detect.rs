@@ -33,6 +33,16 @@ pub const LIKENESS_WEIGHT: f32 = 4.0;
 /// crown.
 pub const MIN_LIKENESS: f32 = 0.2;
 
+/// A ray from a crown's centre stops once the placement value climbs this
+/// much above the lowest it has passed: it is on the next crown's slope
+/// (the value's units: the marks' contrasts, see [`place_crowns`]).
+pub const VALLEY_RISE: f32 = 0.2;
+
+/// A crown's size stays within these fractions of the marked size: the
+/// span over which a box of the marked size still overlaps a crown's box
+/// by IoU 0.4 (0.63–1.58).
+pub const SIZE_RANGE: [f32; 2] = [0.6, 1.6];
+
 /// How vegetation regions become objects.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(tag = "mode", rename_all = "lowercase")]
@@ -43,10 +53,11 @@ pub enum Placement {
         spacing_px: f32,
         /// Crowns whose disc radius is smaller are dropped (pixels).
         min_radius_px: f32,
-        /// The size every crown is given (pixels): what most marked crowns
-        /// reach ([`super::spacing::marked_crown_size_px`]). None when no
-        /// crown was marked: a crown's size is then the diameter of its
-        /// disc of vegetation.
+        /// What most marked crowns reach (pixels,
+        /// [`super::spacing::marked_crown_size_px`]): each crown's size is
+        /// drawn from it toward the valleys around the crown
+        /// (valley following). None when no crown was marked: a crown's
+        /// size is then the diameter of its disc of vegetation.
         #[serde(default)]
         marked_size_px: Option<f32>,
         /// The marked crowns' brightness pattern: crowns are centred
@@ -172,10 +183,14 @@ pub fn detect(
                 min_radius_px,
                 likeness.as_ref(),
             );
+            let value: &[f32] = value;
             kept.into_iter()
                 .map(|(i, radius)| {
                     let (x, y) = (i % w, i / w);
-                    let size_px = marked_size_px.unwrap_or(2.0 * radius);
+                    let size_px = match *marked_size_px {
+                        Some(marked) => valley_size_px(value, w, h, i, marked),
+                        None => 2.0 * radius,
+                    };
                     object(x as f64 + 0.5, y as f64 + 0.5, size_px)
                 })
                 .collect()
@@ -235,6 +250,60 @@ pub fn place_crowns(
         .collect();
     candidates.sort_by(|a, b| value[b.0].total_cmp(&value[a.0]).then(a.0.cmp(&b.0)));
     suppress(&candidates, w, spacing_px.max(1.0))
+}
+
+/// The size of the crown centred on cell `i` of the placement values
+/// `value` (smoothed, `f32::MIN` outside vegetation, as [`place_crowns`]
+/// leaves them), given the marked crowns' size `marked_px`: valley
+/// following (Gougeon 1995) along eight rays from the centre, each ending
+/// at the lowest value it passes before the value climbs [`VALLEY_RISE`]
+/// again, or at the first cell outside vegetation; the crown's diameter
+/// measured is twice the median ray. One crown's valleys are noisy (a
+/// shadow, a gap, a branch), so the size is the geometric mean of the
+/// measured and the marked sizes, within [`SIZE_RANGE`] of the marked.
+fn valley_size_px(value: &[f32], w: usize, h: usize, i: usize, marked_px: f32) -> f32 {
+    let [low, high] = SIZE_RANGE.map(|f| f * marked_px);
+    // A ray looks as far as the largest crown's radius.
+    let max_len_px = (high / 2.0).ceil();
+    let (x, y) = ((i % w) as isize, (i / w) as isize);
+    let mut rays: Vec<f32> = [
+        (1, 0),
+        (1, 1),
+        (0, 1),
+        (-1, 1),
+        (-1, 0),
+        (-1, -1),
+        (0, -1),
+        (1, -1),
+    ]
+    .iter()
+    .map(|&(dx, dy): &(isize, isize)| {
+        let step_px = ((dx * dx + dy * dy) as f32).sqrt();
+        let (mut lowest, mut valley) = (value[i], 0);
+        let mut n = 1;
+        while n as f32 * step_px <= max_len_px {
+            let (cx, cy) = (x + dx * n, y + dy * n);
+            if cx < 0 || cy < 0 || cx >= w as isize || cy >= h as isize {
+                break;
+            }
+            let v = value[cy as usize * w + cx as usize];
+            if v == f32::MIN {
+                valley = n;
+                break;
+            }
+            if v < lowest {
+                (lowest, valley) = (v, n);
+            } else if v > lowest + VALLEY_RISE {
+                break;
+            }
+            n += 1;
+        }
+        valley as f32 * step_px
+    })
+    .collect();
+    rays.sort_by(f32::total_cmp);
+    let measured_px = (rays[3] + rays[4]).max(1.0);
+    (marked_px * measured_px).sqrt().clamp(low, high)
 }
 
 /// Replace each cell of `values` by the mean over the `(2r+1)²` window
@@ -541,11 +610,12 @@ mod tests {
         assert!(place(&[false], None).is_empty());
     }
 
-    /// One crown on a disc of vegetation 10 px in radius: with no crown
-    /// marked its size is the disc's diameter; with a marked size, that
-    /// size.
+    /// One crown on a disc of vegetation 10 px in radius, brightest at its
+    /// centre: with no crown marked its size is the disc's diameter; with
+    /// a marked size, the geometric mean of that size and the disc's
+    /// diameter along the rays (no valley before the disc's edge).
     #[test]
-    fn a_crown_has_the_marked_size_or_else_its_discs() {
+    fn a_crown_has_the_disc_size_drawn_toward_the_marked_size() {
         use super::super::segment::{Segment, Segmentation};
         use super::super::Image;
         let (w, h, radius) = (61usize, 61usize, 10.0f64);
@@ -602,7 +672,47 @@ mod tests {
         };
         let measured = size(None);
         assert!((measured - 2.0 * radius as f32).abs() <= 2.0, "{measured}");
-        assert_eq!(size(Some(25.0)), 25.0);
+        // The rays leave the disc at 11 px along the axes and at 8
+        // diagonal steps (11.3 px).
+        let rays_px = 11.0 + 8.0 * std::f32::consts::SQRT_2;
+        let drawn = size(Some(25.0));
+        assert!((drawn - (25.0 * rays_px).sqrt()).abs() < 1e-3, "{drawn}");
+    }
+
+    /// Cones on a lattice 20 px apart: rays from a cone's top end in the
+    /// valleys, 10 px away along the axes and 10√2 px along the diagonals,
+    /// so the crown measures 10 + 10√2 px; its size is the geometric mean
+    /// with the marked size, kept within [`SIZE_RANGE`] of it; a ray
+    /// leaving vegetation ends at the first cell outside.
+    #[test]
+    fn a_crowns_size_follows_the_valleys_toward_the_marked_size() {
+        let (w, h) = (101usize, 101usize);
+        let mut value: Vec<f32> = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f32, (i / w) as f32);
+                let (dx, dy) = ((x + 10.0) % 20.0 - 10.0, (y + 10.0) % 20.0 - 10.0);
+                30.0 - dx.hypot(dy)
+            })
+            .collect();
+        let top = 60 * w + 40;
+        assert_eq!(value[top], 30.0);
+        let measured = 10.0 + 10.0 * std::f32::consts::SQRT_2;
+        let size = valley_size_px(&value, w, h, top, 20.0);
+        assert!((size - (20.0 * measured).sqrt()).abs() < 1e-3, "{size}");
+        // A marked size far above the measured one holds the size up.
+        let held = valley_size_px(&value, w, h, top, 100.0);
+        assert!((held - SIZE_RANGE[0] * 100.0).abs() < 1e-3, "{held}");
+        // Vegetation ending 6 px from the top: the rays end at 7 px along
+        // the axes and at 5 diagonal steps.
+        for (i, v) in value.iter_mut().enumerate() {
+            let (dx, dy) = ((i % w) as f32 - 40.0, (i / w) as f32 - 60.0);
+            if dx.hypot(dy) > 6.0 {
+                *v = f32::MIN;
+            }
+        }
+        let edge = 7.0 + 5.0 * std::f32::consts::SQRT_2;
+        let size = valley_size_px(&value, w, h, top, 20.0);
+        assert!((size - (20.0 * edge).sqrt()).abs() < 1e-3, "{size}");
     }
 
     #[test]
