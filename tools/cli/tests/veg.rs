@@ -124,6 +124,57 @@ fn the_contrast_flag_scales_the_thresholds_to_the_samples() {
     assert_eq!(gain(&png, &[]), 1.0);
 }
 
+/// On SOAP_061 with its committed marks, the report says which size crowns
+/// are drawn toward and within which range, and the database's crowns
+/// hold sizes of their own inside it (read from their valleys), but for
+/// those placed in marked crowns nothing was found in.
+#[test]
+fn crown_sizes_follow_their_valleys_within_the_reported_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("db.csv");
+    let text = veg_detect_ok(
+        &shared("trees/SOAP_061.png"),
+        &repo("data/trees/soap_061_samples.csv"),
+        &db,
+        &["--pixel-size", "0.1"],
+    );
+    let line = text
+        .lines()
+        .find(|l| l.contains("crown sizes from the valleys"))
+        .unwrap_or_else(|| panic!("no crown size line: {text}"));
+    let metres: Vec<f64> = line
+        .split(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .filter_map(|w| w.parse().ok())
+        .collect();
+    let [marked_m, low_m, high_m] = metres[..] else {
+        panic!("{line}")
+    };
+    assert!(low_m < marked_m && marked_m < high_m, "{line}");
+    let sizes_m: Vec<f64> = std::fs::read_to_string(&db)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(';').nth(4).unwrap().parse().unwrap())
+        .collect();
+    assert!(sizes_m.len() > 10, "{} crowns", sizes_m.len());
+    // A marked crown that no crown was found in gets one of the mark's
+    // size: only those may lie outside.
+    let crown_marks = std::fs::read_to_string(repo("data/trees/soap_061_samples.csv"))
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with("class") && !l.starts_with("other"))
+        .count();
+    let outside: Vec<&f64> = sizes_m
+        .iter()
+        .filter(|s| !(low_m - 0.05..=high_m + 0.05).contains(*s))
+        .collect();
+    assert!(outside.len() <= crown_marks, "{outside:?} outside {line}");
+    let mut distinct = sizes_m.clone();
+    distinct.sort_by(f64::total_cmp);
+    distinct.dedup();
+    assert!(distinct.len() > sizes_m.len() / 2, "{distinct:?}");
+}
+
 /// SOAP_061's truth names Alive and Dead trees: `veg eval` reports each
 /// class's recall, the confusion, and writes the matches as GeoJSON.
 #[test]

@@ -396,6 +396,7 @@ fn print_crown_placement(
 ) {
     if let relevo_core::veg::detect::Placement::Crowns {
         spacing_px,
+        marked_size_px,
         template,
         ..
     } = placement
@@ -412,6 +413,15 @@ fn print_crown_placement(
                 "  crowns centred where brightness and likeness to the marked crowns peak \
                  ({taps}×{taps} taps {} px apart)",
                 2 * t.tap_radius_px + 1
+            );
+        }
+        if let Some(marked_px) = marked_size_px {
+            let [low, high] = relevo_core::veg::detect::SIZE_RANGE
+                .map(|f| f as f64 * *marked_px as f64 * pixel_m);
+            println!(
+                "  crown sizes from the valleys around each crown, drawn toward the marked \
+                 crowns' {:.1} m (within {low:.1}–{high:.1} m)",
+                *marked_px as f64 * pixel_m
             );
         }
     }
