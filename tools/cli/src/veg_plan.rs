@@ -113,16 +113,11 @@ impl VegPlan {
                 dir.join("plan.json").display()
             );
         }
-        if let relevo_core::veg::detect::Placement::Crowns {
-            template: Some(t), ..
-        } = &plan.model.placement
-        {
-            if let Some(problem) = t.problem() {
-                bail!(
-                    "{}: {problem}; make the plan again",
-                    dir.join("plan.json").display()
-                );
-            }
+        if let Some(problem) = plan.model.placement.problem() {
+            bail!(
+                "{}: {problem}; make the plan again",
+                dir.join("plan.json").display()
+            );
         }
         Ok(plan)
     }

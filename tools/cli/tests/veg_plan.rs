@@ -137,6 +137,18 @@ fn a_detection_run_as_jobs_writes_the_single_machine_database() {
                     e.contains("plan.json: crown template with 1 weights"),
                     "{e}"
                 );
+                // So is a marked crown size that is not positive (crown
+                // sizes are kept within a range of it).
+                edited["model"]["placement"]["template"] = serde_json::Value::Null;
+                edited["model"]["placement"]["marked_size_px"] = serde_json::json!(-5.0);
+                std::fs::write(&path, edited.to_string()).unwrap();
+                let o = plan_command(&plan, &["--job", "0"]);
+                let e = String::from_utf8_lossy(&o.stderr);
+                assert_eq!(o.status.code(), Some(1), "{e}");
+                assert!(
+                    e.contains("plan.json: marked crown size of -5 px: not positive"),
+                    "{e}"
+                );
             }
         }
     }

@@ -76,6 +76,28 @@ pub enum Placement {
     },
 }
 
+impl Placement {
+    /// Why a placement read from a file cannot be used, if it cannot: a
+    /// marked crown size that is not a positive number of pixels, or a
+    /// crown template that does not hold together
+    /// ([`CrownTemplate::problem`]).
+    pub fn problem(&self) -> Option<String> {
+        match self {
+            Placement::Crowns {
+                marked_size_px,
+                template,
+                ..
+            } => match marked_size_px {
+                Some(m) if !(m.is_finite() && *m > 0.0) => {
+                    Some(format!("marked crown size of {m} px: not positive"))
+                }
+                _ => template.as_ref().and_then(CrownTemplate::problem),
+            },
+            Placement::Fill { .. } => None,
+        }
+    }
+}
+
 /// A detected object in pixel coordinates.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Object {
@@ -266,7 +288,7 @@ fn valley_size_px(value: &[f32], w: usize, h: usize, i: usize, marked_px: f32) -
     // A ray looks as far as the largest crown's radius.
     let max_len_px = (high / 2.0).ceil();
     let (x, y) = ((i % w) as isize, (i / w) as isize);
-    let mut rays: Vec<f32> = [
+    let mut rays: [f32; 8] = [
         (1, 0),
         (1, 1),
         (0, 1),
@@ -276,8 +298,7 @@ fn valley_size_px(value: &[f32], w: usize, h: usize, i: usize, marked_px: f32) -
         (0, -1),
         (1, -1),
     ]
-    .iter()
-    .map(|&(dx, dy): &(isize, isize)| {
+    .map(|(dx, dy): (isize, isize)| {
         let step_px = ((dx * dx + dy * dy) as f32).sqrt();
         let (mut lowest, mut valley) = (value[i], 0);
         let mut n = 1;
@@ -299,8 +320,7 @@ fn valley_size_px(value: &[f32], w: usize, h: usize, i: usize, marked_px: f32) -
             n += 1;
         }
         valley as f32 * step_px
-    })
-    .collect();
+    });
     rays.sort_by(f32::total_cmp);
     let measured_px = (rays[3] + rays[4]).max(1.0);
     (marked_px * measured_px).sqrt().clamp(low, high)
@@ -713,6 +733,33 @@ mod tests {
         let edge = 7.0 + 5.0 * std::f32::consts::SQRT_2;
         let size = valley_size_px(&value, w, h, top, 20.0);
         assert!((size - (20.0 * edge).sqrt()).abs() < 1e-3, "{size}");
+    }
+
+    /// A placement read from a file is refused when its marked crown size
+    /// is not a positive number of pixels (sizes are kept within a range of
+    /// it) or its template does not hold together.
+    #[test]
+    fn placements_read_from_a_file_are_checked() {
+        let crowns = |marked_size_px, template| Placement::Crowns {
+            spacing_px: 10.0,
+            min_radius_px: 2.0,
+            marked_size_px,
+            template,
+        };
+        assert_eq!(crowns(Some(20.0), None).problem(), None);
+        assert_eq!(crowns(None, None).problem(), None);
+        for bad in [0.0, -5.0, f32::NAN, f32::INFINITY] {
+            let problem = crowns(Some(bad), None).problem().unwrap();
+            assert!(problem.contains("not positive"), "{problem}");
+        }
+        let broken = CrownTemplate {
+            tap_radius_px: 1,
+            reach: 1,
+            weights: vec![1.0],
+            contrast: 1.0,
+        };
+        let problem = crowns(Some(20.0), Some(broken)).problem().unwrap();
+        assert!(problem.contains("weights"), "{problem}");
     }
 
     #[test]
