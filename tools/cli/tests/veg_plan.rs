@@ -118,36 +118,28 @@ fn a_detection_run_as_jobs_writes_the_single_machine_database() {
                 let path = plan.join("plan.json");
                 let mut edited: serde_json::Value =
                     serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+                // Each edit is refused by name, before any tile is read.
+                let refused = |edited: &serde_json::Value, message: &str| {
+                    std::fs::write(&path, edited.to_string()).unwrap();
+                    let o = plan_command(&plan, &["--job", "0"]);
+                    let e = String::from_utf8_lossy(&o.stderr);
+                    assert_eq!(o.status.code(), Some(1), "{e}");
+                    assert!(e.contains(message), "{e}");
+                };
                 let jobs_cut = edited["jobs"].clone();
                 edited["jobs"] = serde_json::json!([[0, 9999]]);
-                std::fs::write(&path, edited.to_string()).unwrap();
-                let o = plan_command(&plan, &["--job", "0"]);
-                let e = String::from_utf8_lossy(&o.stderr);
-                assert_eq!(o.status.code(), Some(1), "{e}");
-                assert!(e.contains("do not cut the 25 tiles"), "{e}");
-                // A crown template that does not hold together is refused
-                // by name, not used.
+                refused(&edited, "do not cut the 25 tiles");
+                // A crown template that does not hold together.
                 edited["jobs"] = jobs_cut;
                 edited["model"]["placement"]["template"]["weights"] = serde_json::json!([1.0]);
-                std::fs::write(&path, edited.to_string()).unwrap();
-                let o = plan_command(&plan, &["--job", "0"]);
-                let e = String::from_utf8_lossy(&o.stderr);
-                assert_eq!(o.status.code(), Some(1), "{e}");
-                assert!(
-                    e.contains("plan.json: crown template with 1 weights"),
-                    "{e}"
-                );
-                // So is a marked crown size that is not positive (crown
-                // sizes are kept within a range of it).
+                refused(&edited, "plan.json: crown template with 1 weights");
+                // A marked crown size that is not positive (crown sizes are
+                // kept within a range of it).
                 edited["model"]["placement"]["template"] = serde_json::Value::Null;
                 edited["model"]["placement"]["marked_size_px"] = serde_json::json!(-5.0);
-                std::fs::write(&path, edited.to_string()).unwrap();
-                let o = plan_command(&plan, &["--job", "0"]);
-                let e = String::from_utf8_lossy(&o.stderr);
-                assert_eq!(o.status.code(), Some(1), "{e}");
-                assert!(
-                    e.contains("plan.json: marked crown size of -5 px: not positive"),
-                    "{e}"
+                refused(
+                    &edited,
+                    "plan.json: marked crown size of -5 px: not positive",
                 );
             }
         }
