@@ -416,8 +416,8 @@ fn print_crown_placement(
             );
         }
         if let Some(marked_px) = marked_size_px {
-            let [low, high] = relevo_core::veg::detect::SIZE_RANGE
-                .map(|f| f as f64 * *marked_px as f64 * pixel_m);
+            let [low, high] = relevo_core::veg::detect::crown_size_range(*marked_px)
+                .map(|px| px as f64 * pixel_m);
             println!(
                 "  crown sizes from the valleys around each crown, drawn toward the marked \
                  crowns' {:.1} m (within {low:.1}–{high:.1} m)",

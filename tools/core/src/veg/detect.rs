@@ -274,6 +274,12 @@ pub fn place_crowns(
     suppress(&candidates, w, spacing_px.max(1.0))
 }
 
+/// The smallest and largest size a crown may be given when the marked
+/// crowns' size is `marked` ([`SIZE_RANGE`] of it, same unit).
+pub fn crown_size_range(marked: f32) -> [f32; 2] {
+    SIZE_RANGE.map(|f| f * marked)
+}
+
 /// The size of the crown centred on cell `i` of the placement values
 /// `value` (smoothed, `f32::MIN` outside vegetation, as [`place_crowns`]
 /// leaves them), given the marked crowns' size `marked_px`: valley
@@ -284,7 +290,7 @@ pub fn place_crowns(
 /// shadow, a gap, a branch), so the size is the geometric mean of the
 /// measured and the marked sizes, within [`SIZE_RANGE`] of the marked.
 fn valley_size_px(value: &[f32], w: usize, h: usize, i: usize, marked_px: f32) -> f32 {
-    let [low, high] = SIZE_RANGE.map(|f| f * marked_px);
+    let [low, high] = crown_size_range(marked_px);
     // A ray looks as far as the largest crown's radius.
     let max_len_px = (high / 2.0).ceil();
     let (x, y) = ((i % w) as isize, (i / w) as isize);
