@@ -35,6 +35,9 @@ struct Job {
 pub struct Detection {
     pub objects: Vec<VegObject>,
     pub overlay: Vec<u8>,
+    /// The marked crown that kept the learnt crown spacing from being
+    /// closer, said for a person (relevo-core's report).
+    pub spacing_note: Option<String>,
 }
 
 /// What the tab keeps between frames.
@@ -261,6 +264,9 @@ impl SamplesTab {
                     "{} objects detected; accept to write them",
                     found.objects.len()
                 );
+                if let Some(note) = &found.spacing_note {
+                    self.status += &format!("\nlearnt crown spacing: {note}");
+                }
                 self.detections = found.objects;
                 self.pending_overlay = Some(found.overlay);
                 self.fresh = true;
@@ -590,6 +596,7 @@ pub fn detect(
         pipeline::extract_watched(&image, &samples, options, pipeline::RegionMap::Keep, watch)?;
     let overlay = pipeline::overlay(&image, &extraction, &samples, &options.negative_class)?;
     Ok(Detection {
+        spacing_note: extraction.report.spacing_split_note(&samples),
         objects: extraction.objects,
         overlay,
     })

@@ -175,6 +175,58 @@ fn crown_sizes_follow_their_valleys_within_the_reported_range() {
     assert!(distinct.len() > sizes_m.len() / 2, "{distinct:?}");
 }
 
+/// When the crown spacing is learnt, the report names the marked crown
+/// that split at the closer spacing: its number in the samples file, class
+/// and rectangle as the file gives them; with `--crown-spacing` it names
+/// none.
+#[test]
+fn the_report_names_the_mark_that_kept_crowns_apart() {
+    let dir = tempfile::tempdir().unwrap();
+    let samples_csv = repo("data/trees/soap_061_samples.csv");
+    let run = |extra: &[&str]| {
+        let mut args = vec!["--pixel-size", "0.1", "--force"];
+        args.extend(extra);
+        veg_detect_ok(
+            &shared("trees/SOAP_061.png"),
+            &samples_csv,
+            &dir.path().join("db.csv"),
+            &args,
+        )
+    };
+    let text = run(&[]);
+    let numbers = |line: &str| -> Vec<f64> {
+        line.split(|c: char| !(c.is_ascii_digit() || c == '.'))
+            .filter_map(|w| w.parse().ok())
+            .collect()
+    };
+    let learnt = text
+        .lines()
+        .position(|l| l.contains("apart, learnt from the marked crowns"))
+        .unwrap_or_else(|| panic!("no spacing line: {text}"));
+    let lines: Vec<&str> = text.lines().collect();
+    let spacing_m = numbers(lines[learnt])[0];
+    let named = lines[learnt + 1];
+    let [closer_m, sample, x0, x1, y0, y1, centres] = numbers(named)[..] else {
+        panic!("{named}")
+    };
+    assert!(closer_m < spacing_m && centres >= 2.0, "{named}");
+    let marks: Vec<String> = std::fs::read_to_string(&samples_csv)
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with("class"))
+        .map(str::to_string)
+        .collect();
+    let fields: Vec<&str> = marks[sample as usize - 1].split(';').collect();
+    assert!(
+        named.contains(&format!("the {} marked", fields[0])),
+        "{named}"
+    );
+    let rectangle: Vec<f64> = fields[1..].iter().map(|f| f.parse().unwrap()).collect();
+    assert_eq!(rectangle, [x0, y0, x1, y1], "{named}");
+    let given = run(&["--crown-spacing", "2.5"]);
+    assert!(!given.contains("marked as sample"), "{given}");
+}
+
 /// SOAP_061's truth names Alive and Dead trees: `veg eval` reports each
 /// class's recall, the confusion, and writes the matches as GeoJSON.
 #[test]

@@ -343,7 +343,7 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
                 ""
             }
         );
-        print_crown_placement(&r.placement, r.pixel_m, options.crown_spacing_m.is_none());
+        print_crown_placement(r, options.crown_spacing_m.is_none(), &samples);
         if r.threshold_gain != 1.0 {
             println!(
                 "  thresholds scaled by {:.2} to the samples' contrast",
@@ -388,24 +388,23 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
 }
 
 /// The report's lines on how crowns were placed: the spacing when it was
-/// learnt, and the marked crowns' pattern when crowns were centred by it.
-fn print_crown_placement(
-    placement: &relevo_core::veg::detect::Placement,
-    pixel_m: f64,
-    spacing_learnt: bool,
-) {
+/// learnt (and the mark of `samples` that kept it from being closer), and
+/// the marked crowns' pattern when crowns were centred by it.
+fn print_crown_placement(r: &pipeline::Report, spacing_learnt: bool, samples: &[samples::Sample]) {
+    let pixel_m = r.pixel_m;
     if let relevo_core::veg::detect::Placement::Crowns {
         spacing_px,
         marked_size_px,
         template,
         ..
-    } = placement
+    } = &r.placement
     {
         if spacing_learnt {
-            println!(
-                "  crowns at least {:.1} m apart, learnt from the marked crowns",
-                *spacing_px as f64 * pixel_m
-            );
+            let spacing_m = *spacing_px as f64 * pixel_m;
+            println!("  crowns at least {spacing_m:.1} m apart, learnt from the marked crowns");
+            if let Some(split) = r.spacing_split_note(samples) {
+                println!("    {split}");
+            }
         }
         if let Some(t) = template {
             let taps = 2 * t.reach + 1;

@@ -8,7 +8,7 @@ use super::db::VegObject;
 use super::detect::{detect, DetectBuffers, Object, Placement};
 use super::samples::Sample;
 use super::segment::{segment, Segment, SegmentBuffers, SegmentParams, SegmentSteps, Segmentation};
-use super::spacing::{self, MarkedCrown, MAX_CROWN_SPACING_M};
+use super::spacing::{self, MarkedCrown, SplitMark, MAX_CROWN_SPACING_M};
 use super::tiles::{Tile, Tiling};
 use super::Image;
 use crate::geo::GeoTransform;
@@ -310,6 +310,9 @@ pub struct Report {
     /// [`Contrast`]; 1 with absolute thresholds).
     pub threshold_gain: f32,
     pub placement: Placement,
+    /// When the crown spacing was learnt and is not the closest tried: the
+    /// marked crown that split at the closer spacing.
+    pub spacing_split: Option<SplitMark>,
     /// Tiles the image was analysed in (1: whole).
     pub tiles: usize,
     pub leaves: usize,
@@ -323,6 +326,19 @@ pub struct Report {
     pub detect_ms: f64,
     /// Wall time of the whole extraction, ms.
     pub total_ms: f64,
+}
+
+impl Report {
+    /// For a person: the marked crown that kept the learnt crown spacing
+    /// from being closer ([`SplitMark::describe`]), with the extraction's
+    /// `samples`.
+    pub fn spacing_split_note(&self, samples: &[Sample]) -> Option<String> {
+        let Placement::Crowns { spacing_px, .. } = self.placement else {
+            return None;
+        };
+        self.spacing_split?
+            .describe(samples, spacing_px as f64 * self.pixel_m)
+    }
 }
 
 #[derive(Debug, Serialize)]
@@ -512,6 +528,7 @@ pub fn extract_tiled(
         brightness_span,
         threshold_gain,
         placement: learnt.placement.clone(),
+        spacing_split: learnt.spacing_split,
         tiles: work.tiles.len(),
         leaves: gathered.leaves,
         regions: gathered.regions.len(),
@@ -638,6 +655,7 @@ impl Model {
             marked: Vec::new(),
             vegetation,
             placement: self.placement.clone(),
+            spacing_split: None,
             segment_ms: 0.0,
             ms: 0.0,
         };
@@ -789,7 +807,7 @@ impl<'a> Work<'a> {
                         context.image(),
                         context.valid(),
                         &segmentation,
-                        &local,
+                        (k, &local),
                         spacing::margin_px(self.pixel_m),
                         options.window_px,
                     ));
@@ -814,6 +832,7 @@ impl<'a> Work<'a> {
                 options.negative_class
             )));
         }
+        let mut spacing_split = None;
         let placement = match placement {
             Placement::Crowns {
                 spacing_px,
@@ -825,14 +844,18 @@ impl<'a> Work<'a> {
                     .and_then(|side_px| spacing::crown_template(&marked_crowns, side_px));
                 let spacing_m = match options.crown_spacing_m {
                     Some(_) => spacing_px as f64 * self.pixel_m,
-                    None => spacing::learn_spacing_m(
-                        &marked_crowns,
-                        &classifier,
-                        &vegetation,
-                        self.pixel_m,
-                        min_radius_px,
-                        template.as_ref(),
-                    ),
+                    None => {
+                        let learnt = spacing::learn_spacing(
+                            &marked_crowns,
+                            &classifier,
+                            &vegetation,
+                            self.pixel_m,
+                            min_radius_px,
+                            template.as_ref(),
+                        );
+                        spacing_split = learnt.split;
+                        learnt.spacing_m
+                    }
                 };
                 let spacing_px = (spacing_m / self.pixel_m) as f32;
                 Placement::Crowns {
@@ -849,6 +872,7 @@ impl<'a> Work<'a> {
             marked,
             vegetation,
             placement,
+            spacing_split,
             segment_ms: learn_segment_ms,
             ms: start.elapsed().as_secs_f64() * 1e3,
         })
@@ -1156,6 +1180,8 @@ struct Learnt {
     vegetation: Vec<bool>,
     /// The placement, with the crown spacing learnt when it is.
     placement: Placement,
+    /// The marked crown that kept the spacing learnt from being closer.
+    spacing_split: Option<SplitMark>,
     /// Time segmenting the samples' tiles, and all of learning, ms.
     segment_ms: f64,
     ms: f64,

@@ -26,6 +26,8 @@ pub const MAX_CROWN_SPACING_M: f64 = CROWN_SPACINGS_M[CROWN_SPACINGS_M.len() - 1
 
 /// A marked crown with the neighbourhood crown placement looks at.
 pub struct MarkedCrown {
+    /// Which of the extraction's samples it is (an index into them).
+    sample_index: usize,
     image: Image,
     valid: Option<Vec<bool>>,
     /// Every pixel's region as an index into `signatures` (no region
@@ -38,14 +40,15 @@ pub struct MarkedCrown {
 }
 
 impl MarkedCrown {
-    /// Cut `sample` (in the pixels of `image`) with `margin_px` around it
-    /// from `image`, its validity and its `segmentation`; region signatures
-    /// over windows of at least `window_px` (as the classifier takes them).
+    /// Cut `sample` (in the pixels of `image`; the extraction's sample
+    /// number `sample_index`) with `margin_px` around it from `image`, its
+    /// validity and its `segmentation`; region signatures over windows of
+    /// at least `window_px` (as the classifier takes them).
     pub fn cut(
         image: &Image,
         valid: Option<&[bool]>,
         segmentation: &Segmentation,
-        sample: &Sample,
+        (sample_index, sample): (usize, &Sample),
         margin_px: usize,
         window_px: u32,
     ) -> MarkedCrown {
@@ -75,6 +78,7 @@ impl MarkedCrown {
             .map(|&r| region_signature(image, segmentation, r as usize, window_px))
             .collect();
         MarkedCrown {
+            sample_index,
             image: image.window([x0, y0, x1, y1], Vec::new()),
             valid: window_valid,
             segmentation: Segmentation {
@@ -121,35 +125,108 @@ fn classified(crowns: &[MarkedCrown], classifier: &Classifier) -> Vec<Vec<Label>
         .collect()
 }
 
+/// The crown spacing learnt, and the marked crown that kept it from being
+/// closer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LearntSpacing {
+    pub spacing_m: f64,
+    /// The marked crown holding the most centres at the closest spacing
+    /// tried that split one: the spacing before the one learnt, or the
+    /// one learnt when every spacing splits a crown. None when the
+    /// closest spacing keeps every marked crown whole.
+    pub split: Option<SplitMark>,
+}
+
+/// A marked crown that holds several crown centres at a spacing: the mark
+/// a person may redraw (around one crown) or leave, knowing that it keeps
+/// every crown of the image at least the spacing learnt apart.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct SplitMark {
+    /// Which of the extraction's samples it is (an index into them).
+    pub sample: usize,
+    /// The spacing (m) at which it holds `centres` centres (two or more).
+    pub spacing_m: f64,
+    pub centres: usize,
+}
+
+impl SplitMark {
+    /// For a person, with the extraction's `samples` (pixels) and the
+    /// spacing learnt: which mark held several centres at which spacing,
+    /// and what to do about it.
+    ///
+    /// ```
+    /// use relevo_core::veg::samples::Sample;
+    /// use relevo_core::veg::spacing::SplitMark;
+    /// let marks = [Sample::rectangle("tree", [147.0, 403.0, 188.0, 449.0])];
+    /// let split = SplitMark { sample: 0, spacing_m: 2.0, centres: 2 };
+    /// assert_eq!(
+    ///     split.describe(&marks, 2.5).unwrap(),
+    ///     "at 2.0 m apart, the tree marked as sample 1 (x 147–188, y 403–449 px) holds 2 \
+    ///      centres: if it holds more than one crown, redraw it around one; \
+    ///      --crown-spacing sets the spacing"
+    /// );
+    /// ```
+    pub fn describe(&self, samples: &[Sample], spacing_learnt_m: f64) -> Option<String> {
+        let sample = samples.get(self.sample)?;
+        let [x0, y0, x1, y1] = sample.bounds();
+        let at = if self.spacing_m < spacing_learnt_m {
+            format!("at {:.1} m apart,", self.spacing_m)
+        } else {
+            format!("even at {:.1} m apart,", self.spacing_m)
+        };
+        Some(format!(
+            "{at} the {} marked as sample {} (x {x0:.0}–{x1:.0}, y {y0:.0}–{y1:.0} px) holds {} \
+             centres: if it holds more than one crown, redraw it around one; \
+             --crown-spacing sets the spacing",
+            sample.class,
+            self.sample + 1,
+            self.centres
+        ))
+    }
+}
+
 /// The smallest of [`CROWN_SPACINGS_M`], at least a pixel of `pixel_m`, at
 /// which no marked crown holds two centres (placed with the crowns'
 /// `template`, where there is one); the largest when every one splits a
-/// crown (and when nothing was marked).
-pub fn learn_spacing_m(
+/// crown. With it, the crown that split at the spacing tried before.
+pub fn learn_spacing(
     crowns: &[MarkedCrown],
     classifier: &Classifier,
     vegetation: &[bool],
     pixel_m: f64,
     min_radius_px: f32,
     template: Option<&CrownTemplate>,
-) -> f64 {
+) -> LearntSpacing {
     let classes = classified(crowns, classifier);
-    CROWN_SPACINGS_M
-        .into_iter()
-        .filter(|&s| s >= pixel_m)
-        .find(|&spacing_m| {
-            let placement = Placement::Crowns {
-                spacing_px: (spacing_m / pixel_m) as f32,
-                min_radius_px,
-                marked_size_px: None,
-                template: template.cloned(),
-            };
-            crowns
-                .iter()
-                .zip(&classes)
-                .all(|(crown, classes)| crown.crowns(classes, vegetation, &placement).len() <= 1)
-        })
-        .unwrap_or(MAX_CROWN_SPACING_M)
+    let mut split = None;
+    for spacing_m in CROWN_SPACINGS_M.into_iter().filter(|&s| s >= pixel_m) {
+        let placement = Placement::Crowns {
+            spacing_px: (spacing_m / pixel_m) as f32,
+            min_radius_px,
+            marked_size_px: None,
+            template: template.cloned(),
+        };
+        // The first of the crowns holding the most centres.
+        let most = crowns
+            .iter()
+            .zip(&classes)
+            .map(|(crown, classes)| (crown.crowns(classes, vegetation, &placement).len(), crown))
+            .reduce(|a, b| if b.0 > a.0 { b } else { a });
+        match most {
+            Some((centres, crown)) if centres > 1 => {
+                split = Some(SplitMark {
+                    sample: crown.sample_index,
+                    spacing_m,
+                    centres,
+                });
+            }
+            _ => return LearntSpacing { spacing_m, split },
+        }
+    }
+    LearntSpacing {
+        spacing_m: MAX_CROWN_SPACING_M,
+        split,
+    }
 }
 
 /// A size that most marked crowns reach (pixels): the lower quartile of
@@ -230,8 +307,8 @@ mod tests {
 
     /// On SOAP_061 a marked dead crown (several bright branches, each like
     /// the marked crowns' pattern) holds three centres at 2 m and two at
-    /// 2.5 m: the spacing learnt is the largest, 3 m; a spacing given is
-    /// used as it is.
+    /// 2.5 m: the spacing learnt is the largest, 3 m, and the report names
+    /// that crown; a spacing given is used as it is, naming none.
     #[test]
     fn the_spacing_is_the_smallest_that_keeps_each_marked_crown_whole() {
         let (image, samples) = testdata::soap_061_marked();
@@ -247,9 +324,15 @@ mod tests {
             };
             (found, spacing_m)
         };
-        assert!((extract_at(None).1 - 3.0).abs() < 1e-6);
+        let (learnt, spacing_m) = extract_at(None);
+        assert!((spacing_m - 3.0).abs() < 1e-6);
+        let split = learnt.report.spacing_split.expect("the crown that split");
+        assert_eq!(samples[split.sample].class, "dead");
+        assert_eq!((split.spacing_m, split.centres), (2.5, 2));
         for (spacing_m, most) in [(2.0, 3), (2.5, 2)] {
-            assert!((extract_at(Some(spacing_m)).1 - spacing_m).abs() < 1e-6);
+            let (given, used_m) = extract_at(Some(spacing_m));
+            assert!((used_m - spacing_m).abs() < 1e-6);
+            assert_eq!(given.report.spacing_split, None);
             // The crowns placed before the marks are held (one in each).
             let options = VegOptions {
                 crown_spacing_m: Some(spacing_m),
