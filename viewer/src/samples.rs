@@ -6,7 +6,9 @@
 //! database into the bundle and re-bakes its clusters, atomically, and the
 //! 3D view reloads them. With truth boxes loaded, each detection is scored
 //! as a round of the correction loop (relevo-core's protocol figures), and
-//! the rectangles added since the round before are drawn apart.
+//! the rectangles added since the round before are drawn apart. The mark
+//! that kept the learnt crown spacing from being closer is drawn in red and
+//! named in the status.
 
 use anyhow::Context;
 use eframe::egui;
@@ -36,8 +38,10 @@ pub struct Detection {
     pub objects: Vec<VegObject>,
     pub overlay: Vec<u8>,
     /// The marked crown that kept the learnt crown spacing from being
-    /// closer, said for a person (relevo-core's report).
+    /// closer, said for a person (relevo-core's report), and its rectangle
+    /// (drape pixels).
     pub spacing_note: Option<String>,
+    pub spacing_mark: Option<[f32; 4]>,
 }
 
 /// What the tab keeps between frames.
@@ -88,6 +92,9 @@ pub struct SamplesTab {
     runs: usize,
     marks: usize,
     added_from: usize,
+    /// The rectangle of the mark the last detection named as keeping the
+    /// crown spacing from being closer: drawn in red while it is marked.
+    spacing_mark: Option<[f32; 4]>,
 }
 
 /// One detection scored against the truth boxes.
@@ -133,6 +140,7 @@ impl SamplesTab {
             runs: 0,
             marks: 0,
             added_from: 0,
+            spacing_mark: None,
         };
         // The samples the bundle keeps, to go on from.
         let kept = opened.as_ref().and_then(|b| {
@@ -265,8 +273,9 @@ impl SamplesTab {
                     found.objects.len()
                 );
                 if let Some(note) = &found.spacing_note {
-                    self.status += &format!("\nlearnt crown spacing: {note}");
+                    self.status += &format!("\nlearnt crown spacing (the mark in red): {note}");
                 }
+                self.spacing_mark = found.spacing_mark;
                 self.detections = found.objects;
                 self.pending_overlay = Some(found.overlay);
                 self.fresh = true;
@@ -469,11 +478,14 @@ impl SamplesTab {
                     }
                 }
                 // The marks the last round added to the one before, in
-                // orange.
+                // orange; the one that kept the crown spacing from being
+                // closer, in red.
                 let added = self.added_from..self.marks;
                 for (k, (class, [x0, y0, x1, y1])) in self.samples.iter().enumerate() {
                     let r = egui::Rect::from_min_max(egui::pos2(*x0, *y0), egui::pos2(*x1, *y1));
-                    let colour = if added.contains(&k) && self.runs > 1 {
+                    let colour = if self.spacing_mark == Some([*x0, *y0, *x1, *y1]) {
+                        egui::Color32::from_rgb(230, 40, 40)
+                    } else if added.contains(&k) && self.runs > 1 {
                         egui::Color32::from_rgb(255, 150, 30)
                     } else {
                         egui::Color32::WHITE
@@ -595,8 +607,13 @@ pub fn detect(
     let extraction =
         pipeline::extract_watched(&image, &samples, options, pipeline::RegionMap::Keep, watch)?;
     let overlay = pipeline::overlay(&image, &extraction, &samples, &options.negative_class)?;
+    let spacing_mark = extraction.report.spacing_split.and_then(|split| {
+        let [x0, y0, x1, y1] = samples.get(split.sample)?.bounds();
+        Some([x0, y0, x1, y1].map(|v| v as f32))
+    });
     Ok(Detection {
         spacing_note: extraction.report.spacing_split_note(&samples),
+        spacing_mark,
         objects: extraction.objects,
         overlay,
     })

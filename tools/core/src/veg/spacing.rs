@@ -130,10 +130,10 @@ fn classified(crowns: &[MarkedCrown], classifier: &Classifier) -> Vec<Vec<Label>
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LearntSpacing {
     pub spacing_m: f64,
-    /// The marked crown holding the most centres at the closest spacing
-    /// tried that split one: the spacing before the one learnt, or the
-    /// one learnt when every spacing splits a crown. None when the
-    /// closest spacing keeps every marked crown whole.
+    /// The marked crown holding the most centres at the largest spacing
+    /// tried that split a marked crown: the spacing just before the one
+    /// learnt, or the one learnt itself when every spacing splits one.
+    /// None when the closest spacing tried keeps every marked crown whole.
     pub split: Option<SplitMark>,
 }
 
@@ -206,7 +206,7 @@ pub fn learn_spacing(
             marked_size_px: None,
             template: template.cloned(),
         };
-        // The first of the crowns holding the most centres.
+        // The crown holding the most centres (the first found, on a tie).
         let most = crowns
             .iter()
             .zip(&classes)
