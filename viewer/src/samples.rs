@@ -93,8 +93,9 @@ pub struct SamplesTab {
     marks: usize,
     added_from: usize,
     /// The rectangle of the mark the last detection named as keeping the
-    /// crown spacing from being closer: drawn in red while it is marked.
-    spacing_mark: Option<[f32; 4]>,
+    /// crown spacing from being closer (as detection was given it, in
+    /// whole pixels): drawn in red while it is marked.
+    pub spacing_mark: Option<[f32; 4]>,
 }
 
 /// One detection scored against the truth boxes.
@@ -483,7 +484,10 @@ impl SamplesTab {
                 let added = self.added_from..self.marks;
                 for (k, (class, [x0, y0, x1, y1])) in self.samples.iter().enumerate() {
                     let r = egui::Rect::from_min_max(egui::pos2(*x0, *y0), egui::pos2(*x1, *y1));
-                    let colour = if self.spacing_mark == Some([*x0, *y0, *x1, *y1]) {
+                    // Detection is given the rectangles rounded to whole
+                    // pixels (`samples_csv`).
+                    let sent = [*x0, *y0, *x1, *y1].map(f32::round);
+                    let colour = if self.spacing_mark == Some(sent) {
                         egui::Color32::from_rgb(230, 40, 40)
                     } else if added.contains(&k) && self.runs > 1 {
                         egui::Color32::from_rgb(255, 150, 30)

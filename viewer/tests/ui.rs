@@ -371,6 +371,51 @@ fn the_samples_tab_scores_each_round_against_truth_boxes() {
     harness.get_by_label_contains("round 1: 3 marks (+1)");
 }
 
+/// On a drape of 0.1 m pixels (SOAP_061 with its committed marks) crowns
+/// are placed: the status shown names the mark that kept the learnt crown
+/// spacing from being closer, as `veg detect` does, and the tab keeps that
+/// mark's rectangle to draw it in red.
+#[test]
+fn the_samples_tab_names_the_mark_that_kept_crowns_apart() {
+    use relevo_core::bundle::{Bundle, BundleLock, BundleWriter, ColorInfo};
+    let dir = tempfile::tempdir().unwrap();
+    let path = common::grenoble_bundle(dir.path());
+    let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let png = std::fs::read(repo.join("data/crops/SOAP_061.png")).unwrap();
+    let (rgba, w, h) = relevo_core::raster::png::decode_rgba(&png).unwrap();
+    let bundle = Bundle::open(&path).unwrap();
+    let [x0, _, _, y0, _, _] = bundle.manifest.grid.geotransform.0;
+    let info = ColorInfo {
+        width: w,
+        height: h,
+        geotransform: relevo_core::geo::GeoTransform::north_up(x0, y0, 0.1, 0.1),
+        bands: [0, 0, 0],
+    };
+    let mut writer =
+        BundleWriter::rewrite(BundleLock::acquire(&bundle.dir).unwrap(), &bundle, |_| true)
+            .unwrap();
+    writer.write_drape(&rgba, info).unwrap();
+    drop(bundle);
+    let bundle = writer.commit().unwrap();
+    let mut harness = samples_tab_of(&bundle);
+    let marks = repo.join("data/trees/soap_061_samples.csv");
+    harness.state_mut().samples_tab().unwrap().samples_path = marks.display().to_string();
+    harness.get_by_label("load").click();
+    harness.run_steps(2);
+    detect(&mut harness);
+    harness.run_steps(2);
+    let tab = harness.state_mut().samples_tab().unwrap();
+    assert!(
+        tab.status
+            .contains("the dead marked as sample 2 (x 90–138, y 147–196 px)"),
+        "{}",
+        tab.status
+    );
+    assert_eq!(tab.spacing_mark, Some([90.0, 147.0, 138.0, 196.0]));
+    assert_eq!(tab.samples[1].1, [90.0, 147.0, 138.0, 196.0]);
+    harness.get_by_label_contains("marked as sample 2");
+}
+
 /// The window on `bundle` with its samples tab open.
 fn samples_tab_of(bundle: &std::path::Path) -> Harness<'static, ViewerApp> {
     let mut harness = window(bundle);
