@@ -35,6 +35,13 @@ fn veg_detect_ok(image: &Path, samples: &Path, out: &Path, extra: &[&str]) -> St
     String::from_utf8_lossy(&result.stdout).to_string()
 }
 
+/// The numbers a report line gives, in order.
+fn numbers_in(line: &str) -> Vec<f64> {
+    line.split(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .filter_map(|w| w.parse().ok())
+        .collect()
+}
+
 /// Detect with the committed samples, the documented flags and `extra`,
 /// then score.
 fn detect_and_score(image: &str, samples: &str, out: &Path, extra: &[&str]) -> serde_json::Value {
@@ -142,11 +149,7 @@ fn crown_sizes_follow_their_valleys_within_the_reported_range() {
         .lines()
         .find(|l| l.contains("crown sizes from the valleys"))
         .unwrap_or_else(|| panic!("no crown size line: {text}"));
-    let metres: Vec<f64> = line
-        .split(|c: char| !(c.is_ascii_digit() || c == '.'))
-        .filter_map(|w| w.parse().ok())
-        .collect();
-    let [marked_m, low_m, high_m] = metres[..] else {
+    let [marked_m, low_m, high_m] = numbers_in(line)[..] else {
         panic!("{line}")
     };
     assert!(low_m < marked_m && marked_m < high_m, "{line}");
@@ -194,19 +197,14 @@ fn the_report_names_the_mark_that_kept_crowns_apart() {
         )
     };
     let text = run(&[]);
-    let numbers = |line: &str| -> Vec<f64> {
-        line.split(|c: char| !(c.is_ascii_digit() || c == '.'))
-            .filter_map(|w| w.parse().ok())
-            .collect()
-    };
     let learnt = text
         .lines()
         .position(|l| l.contains("apart, learnt from the marked crowns"))
         .unwrap_or_else(|| panic!("no spacing line: {text}"));
     let lines: Vec<&str> = text.lines().collect();
-    let spacing_m = numbers(lines[learnt])[0];
+    let spacing_m = numbers_in(lines[learnt])[0];
     let named = lines[learnt + 1];
-    let [closer_m, sample, x0, x1, y0, y1, centres] = numbers(named)[..] else {
+    let [closer_m, sample, x0, x1, y0, y1, centres] = numbers_in(named)[..] else {
         panic!("{named}")
     };
     assert!(closer_m < spacing_m && centres >= 2.0, "{named}");
