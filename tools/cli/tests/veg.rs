@@ -135,25 +135,46 @@ fn the_contrast_flag_scales_the_thresholds_to_the_samples() {
 /// are drawn toward and within which range, and the database's crowns
 /// hold sizes of their own inside it (read from their valleys), but for
 /// those placed in marked crowns nothing was found in.
+///
+/// With `--crown-size` the sizes are drawn toward the size given instead
+/// of the marks' (3.4 m on SOAP_061), and the report says so.
 #[test]
 fn crown_sizes_follow_their_valleys_within_the_reported_range() {
-    let dir = tempfile::tempdir().unwrap();
-    let db = dir.path().join("db.csv");
-    let text = veg_detect_ok(
-        &shared("trees/SOAP_061.png"),
-        &repo("data/trees/soap_061_samples.csv"),
-        &db,
-        &["--pixel-size", "0.1"],
-    );
-    let line = text
-        .lines()
-        .find(|l| l.contains("crown sizes from the valleys"))
-        .unwrap_or_else(|| panic!("no crown size line: {text}"));
-    let [marked_m, low_m, high_m] = numbers_in(line)[..] else {
-        panic!("{line}")
-    };
-    assert!(low_m < marked_m && marked_m < high_m, "{line}");
-    let sizes_m: Vec<f64> = std::fs::read_to_string(&db)
+    for (extra, toward, given_m) in [
+        (&[][..], "toward the marked crowns'", None),
+        (&["--crown-size", "5"][..], "toward the given", Some(5.0)),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let db = dir.path().join("db.csv");
+        let mut args = vec!["--pixel-size", "0.1"];
+        args.extend(extra);
+        let text = veg_detect_ok(
+            &shared("trees/SOAP_061.png"),
+            &repo("data/trees/soap_061_samples.csv"),
+            &db,
+            &args,
+        );
+        let line = text
+            .lines()
+            .find(|l| l.contains("crown sizes from the valleys"))
+            .unwrap_or_else(|| panic!("no crown size line: {text}"));
+        assert!(line.contains(toward), "{extra:?}: {line}");
+        let [marked_m, low_m, high_m] = numbers_in(line)[..] else {
+            panic!("{line}")
+        };
+        if let Some(given_m) = given_m {
+            assert_eq!(marked_m, given_m, "{line}");
+        }
+        crowns_are_sized_within(&db, low_m, high_m, line);
+    }
+}
+
+/// Every crown in the database `db` is sized within `low_m..=high_m` (to
+/// the printed rounding) but those placed in marked crowns nothing was
+/// found in, and the sizes vary (they are read from each crown's valleys).
+fn crowns_are_sized_within(db: &Path, low_m: f64, high_m: f64, line: &str) {
+    assert!(low_m < high_m, "{line}");
+    let sizes_m: Vec<f64> = std::fs::read_to_string(db)
         .unwrap()
         .lines()
         .skip(1)
@@ -619,6 +640,11 @@ fn bad_options_and_outputs_are_refused_before_any_work() {
         (
             vec!["--crown-spacing", "-1"],
             "crown_spacing_m must be positive",
+        ),
+        (vec!["--crown-size", "-2"], "crown_size_m must be positive"),
+        (
+            vec!["--crown-size", "0.15"],
+            "crown_size_m: crowns of 0.150 m are narrower than two 1.000 m pixels",
         ),
         (vec!["--brightness-std", "-3"], "thresholds must be finite"),
         (vec!["--min-block", "3"], "power of two"),

@@ -28,6 +28,8 @@ Examples:
   relevo veg detect landsat.tif --bands 3,2,1 --stretch 1,99 --samples forest.geojson \\
       --density 150 --labels regions.tif --out forest.csv
   relevo veg detect dull.tif --pixel-size 0.1 --contrast samples --samples marks.csv --out trees.csv
+  relevo veg detect crop.png --pixel-size 0.1 --samples round2.csv --crown-spacing 3 \\
+      --crown-size 5.7 --out trees.csv   # keep the spacing and size an earlier round reported
   relevo veg detect rgb.vrt --samples marks.csv --out forest.csv --land-cover labels.gpkg
   relevo veg detect state_naip.vrt --samples marks.csv --plan /shared/veg --jobs 64 \\
       --out /shared/trees.csv --submit slurm --mem 8G   # as Slurm array jobs
@@ -127,6 +129,12 @@ pub struct VegDetectArgs {
     /// from the marked crowns, 1 to 3 m).
     #[arg(long, allow_negative_numbers = true)]
     pub crown_spacing: Option<f64>,
+    /// The typical crown's side, metres, which each crown's size is drawn
+    /// toward (default: learnt from the marked crowns, the lower quartile
+    /// of their sides); e.g. the size a round that looked right reported,
+    /// when the marks added since move it.
+    #[arg(long, allow_negative_numbers = true)]
+    pub crown_size: Option<f64>,
     /// Smallest crown radius kept, metres.
     #[arg(long, allow_negative_numbers = true)]
     pub crown_min_radius: Option<f64>,
@@ -190,6 +198,9 @@ impl VegDetectArgs {
         }
         if self.crown_spacing.is_some() {
             o.crown_spacing_m = self.crown_spacing;
+        }
+        if self.crown_size.is_some() {
+            o.crown_size_m = self.crown_size;
         }
         if let Some(contrast) = self.contrast {
             o.contrast = match contrast {
@@ -343,7 +354,7 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
                 ""
             }
         );
-        print_crown_placement(r, options.crown_spacing_m.is_none(), &samples);
+        print_crown_placement(r, &options, &samples);
         if r.threshold_gain != 1.0 {
             println!(
                 "  thresholds scaled by {:.2} to the samples' contrast",
@@ -390,7 +401,7 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
 /// The report's lines on how crowns were placed: the spacing when it was
 /// learnt (and the mark of `samples` that kept it from being closer), and
 /// the marked crowns' pattern when crowns were centred by it.
-fn print_crown_placement(r: &pipeline::Report, spacing_learnt: bool, samples: &[samples::Sample]) {
+fn print_crown_placement(r: &pipeline::Report, options: &VegOptions, samples: &[samples::Sample]) {
     let pixel_m = r.pixel_m;
     if let relevo_core::veg::detect::Placement::Crowns {
         spacing_px,
@@ -399,7 +410,7 @@ fn print_crown_placement(r: &pipeline::Report, spacing_learnt: bool, samples: &[
         ..
     } = &r.placement
     {
-        if spacing_learnt {
+        if options.crown_spacing_m.is_none() {
             let spacing_m = *spacing_px as f64 * pixel_m;
             println!("  crowns at least {spacing_m:.1} m apart, learnt from the marked crowns");
             if let Some(split) = r.spacing_split_note(samples) {
@@ -417,9 +428,13 @@ fn print_crown_placement(r: &pipeline::Report, spacing_learnt: bool, samples: &[
         if let Some(marked_px) = marked_size_px {
             let [low, high] = relevo_core::veg::detect::crown_size_range(*marked_px)
                 .map(|px| px as f64 * pixel_m);
+            let toward = match options.crown_size_m {
+                Some(_) => "the given",
+                None => "the marked crowns'",
+            };
             println!(
-                "  crown sizes from the valleys around each crown, drawn toward the marked \
-                 crowns' {:.1} m (within {low:.1}–{high:.1} m)",
+                "  crown sizes from the valleys around each crown, drawn toward {toward} \
+                 {:.1} m (within {low:.1}–{high:.1} m)",
                 *marked_px as f64 * pixel_m
             );
         }

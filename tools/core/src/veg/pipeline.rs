@@ -41,6 +41,12 @@ pub struct VegOptions {
     /// Crowns: smallest distance between crown centres (m); unset, it is
     /// learnt from the marked crowns (see [`super::spacing`]).
     pub crown_spacing_m: Option<f64>,
+    /// Crowns: the typical crown's side (m), which each crown's size is
+    /// drawn toward and the marked crowns' pattern is read at; unset, it
+    /// is learnt from the marked crowns (see
+    /// [`super::spacing::marked_crown_size_px`]). Given, correction marks
+    /// on large missed crowns no longer move it.
+    pub crown_size_m: Option<f64>,
     /// Crowns: smallest crown radius kept (m).
     pub crown_min_radius_m: f64,
     /// Fill: objects per hectare of vegetation.
@@ -65,6 +71,7 @@ impl Default for VegOptions {
             negative_class: "other".into(),
             mode: DetectionMode::Auto,
             crown_spacing_m: None,
+            crown_size_m: None,
             crown_min_radius_m: 0.2,
             density_per_ha: 100.0,
             tile_px: super::tiles::CORE_PX,
@@ -160,6 +167,7 @@ impl VegOptions {
         let spacing_m = self.crown_spacing_m.unwrap_or(MAX_CROWN_SPACING_M);
         for (name, v) in [
             ("crown_spacing_m", spacing_m),
+            ("crown_size_m", self.crown_size_m.unwrap_or(1.0)),
             ("crown_min_radius_m", self.crown_min_radius_m),
             ("density_per_ha", self.density_per_ha),
         ] {
@@ -180,6 +188,11 @@ impl VegOptions {
                 "crown_spacing_m: crowns {spacing_m:.3} m apart are closer than one {pixel_m:.3} m pixel"
             )));
         }
+        if let Some(size_m) = self.crown_size_m.filter(|&s| crowns && s < 2.0 * pixel_m) {
+            return Err(Error::Input(format!(
+                "crown_size_m: crowns of {size_m:.3} m are narrower than two {pixel_m:.3} m pixels"
+            )));
+        }
         if !crowns && self.density_per_ha > MAX_DENSITY_PER_HA {
             return Err(Error::Input(format!(
                 "density_per_ha: {} objects per ha is denser than one per square metre \
@@ -191,7 +204,7 @@ impl VegOptions {
             Placement::Crowns {
                 spacing_px: (spacing_m / pixel_m) as f32,
                 min_radius_px: (self.crown_min_radius_m / pixel_m) as f32,
-                marked_size_px: None,
+                marked_size_px: self.crown_size_m.map(|s| (s / pixel_m) as f32),
                 template: None,
             }
         } else {
@@ -837,9 +850,11 @@ impl<'a> Work<'a> {
             Placement::Crowns {
                 spacing_px,
                 min_radius_px,
+                marked_size_px,
                 ..
             } => {
-                let marked_size_px = spacing::marked_crown_size_px(&marked_crowns);
+                let marked_size_px =
+                    marked_size_px.or_else(|| spacing::marked_crown_size_px(&marked_crowns));
                 let template = marked_size_px
                     .and_then(|side_px| spacing::crown_template(&marked_crowns, side_px));
                 let spacing_m = match options.crown_spacing_m {
