@@ -8,7 +8,10 @@
 //! as a round of the correction loop (relevo-core's protocol figures), and
 //! the rectangles added since the round before are drawn apart. The mark
 //! that kept the learnt crown spacing from being closer is drawn in red and
-//! named in the status.
+//! named in the status. Each round shows the crown spacing and size it
+//! placed crowns at; a person may keep them for the rounds after, so that
+//! the marks added then teach the classes and hold their places without
+//! moving the scale.
 
 use anyhow::Context;
 use eframe::egui;
@@ -17,7 +20,7 @@ use relevo_core::bundle::{Bundle, BundleLock};
 use relevo_core::cluster::model::ModelSource;
 use relevo_core::cluster::store::{self, NewVegetation};
 use relevo_core::veg::db::VegObject;
-use relevo_core::veg::pipeline::{self, VegImage, VegOptions, Watch};
+use relevo_core::veg::pipeline::{self, CrownScale, VegImage, VegOptions, Watch};
 use relevo_core::veg::samples::Sample;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -42,6 +45,9 @@ pub struct Detection {
     /// (drape pixels).
     pub spacing_note: Option<String>,
     pub spacing_mark: Option<[f32; 4]>,
+    /// The crown spacing and size crowns were placed at (none in fill
+    /// mode).
+    pub scale: Option<CrownScale>,
 }
 
 /// What the tab keeps between frames.
@@ -96,6 +102,10 @@ pub struct SamplesTab {
     /// crown spacing from being closer (as detection was given it, in
     /// whole pixels): drawn in red while it is marked.
     pub spacing_mark: Option<[f32; 4]>,
+    /// The crown scale of the last detection, and the one the person
+    /// chose to keep: detections give it instead of learning it.
+    pub scale: Option<CrownScale>,
+    pub kept_scale: Option<CrownScale>,
 }
 
 /// One detection scored against the truth boxes.
@@ -104,7 +114,17 @@ pub struct Round {
     /// Marks it ran with, and how many of them were new.
     pub marks: usize,
     pub added: usize,
+    pub scale: Option<CrownScale>,
     pub scores: relevo_core::veg::protocol::Scores,
+}
+
+/// A crown scale for a person: "crowns ≥ 3.0 m apart, sized toward 5.7 m".
+fn scale_text(scale: &CrownScale) -> String {
+    let mut text = format!("crowns ≥ {:.1} m apart", scale.spacing_m);
+    if let Some(size_m) = scale.size_m {
+        text += &format!(", sized toward {size_m:.1} m");
+    }
+    text
 }
 
 impl SamplesTab {
@@ -142,6 +162,8 @@ impl SamplesTab {
             marks: 0,
             added_from: 0,
             spacing_mark: None,
+            scale: None,
+            kept_scale: None,
         };
         // The samples the bundle keeps, to go on from.
         let kept = opened.as_ref().and_then(|b| {
@@ -230,6 +252,7 @@ impl SamplesTab {
         self.rounds.push(Round {
             marks: self.marks,
             added: self.marks - self.added_from,
+            scale: self.scale,
             scores: relevo_core::veg::protocol::Scores::of(&detections, truth),
         });
     }
@@ -247,7 +270,10 @@ impl SamplesTab {
         self.runs += 1;
         let bundle = self.bundle.clone();
         let csv = self.samples_csv();
-        let options = self.options.clone();
+        let mut options = self.options.clone();
+        if let Some(kept) = &self.kept_scale {
+            kept.keep_in(&mut options);
+        }
         let watch = Arc::new(Watch::default());
         let watched = watch.clone();
         let handle = std::thread::spawn(move || {
@@ -273,10 +299,14 @@ impl SamplesTab {
                     "{} objects detected; accept to write them",
                     found.objects.len()
                 );
+                if let Some(scale) = &found.scale {
+                    self.status += &format!("\n{}", scale_text(scale));
+                }
                 if let Some(note) = &found.spacing_note {
                     self.status += &format!("\nlearnt crown spacing (the mark in red): {note}");
                 }
                 self.spacing_mark = found.spacing_mark;
+                self.scale = found.scale;
                 self.detections = found.objects;
                 self.pending_overlay = Some(found.overlay);
                 self.fresh = true;
@@ -346,10 +376,18 @@ impl SamplesTab {
             });
             for (k, round) in self.rounds.iter().enumerate() {
                 let (a, b) = (&round.scores.iou_0_4, &round.scores.iou_0_5);
+                let scale = round.scale.as_ref().map(scale_text).unwrap_or_default();
                 ui.label(format!(
-                    "round {k}: {} marks (+{}) · IoU 0.4: P {:.2} R {:.2} F1 {:.3} · IoU 0.5: F1 {:.3}",
+                    "round {k}: {} marks (+{}) · {scale} · IoU 0.4: P {:.2} R {:.2} F1 {:.3} · IoU 0.5: F1 {:.3}",
                     round.marks, round.added, a.precision, a.recall, a.f1, b.f1
                 ));
+            }
+            if let Some(scale) = self.kept_scale.or(self.scale) {
+                let mut keep = self.kept_scale.is_some();
+                let text = format!("keep {} in the next detections", scale_text(&scale));
+                if ui.checkbox(&mut keep, text).changed() {
+                    self.kept_scale = keep.then_some(scale);
+                }
             }
             ui.horizontal(|ui| {
                 let label = ui.label("class");
@@ -618,6 +656,7 @@ pub fn detect(
     Ok(Detection {
         spacing_note: extraction.report.spacing_split_note(&samples),
         spacing_mark,
+        scale: extraction.report.crown_scale(),
         objects: extraction.objects,
         overlay,
     })

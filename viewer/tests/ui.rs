@@ -377,9 +377,89 @@ fn the_samples_tab_scores_each_round_against_truth_boxes() {
 /// mark's rectangle to draw it in red.
 #[test]
 fn the_samples_tab_names_the_mark_that_kept_crowns_apart() {
-    use relevo_core::bundle::{Bundle, BundleLock, BundleWriter, ColorInfo};
     let dir = tempfile::tempdir().unwrap();
-    let path = common::grenoble_bundle(dir.path());
+    let (mut harness, _) = soap_061_marked(dir.path());
+    detect(&mut harness);
+    harness.run_steps(2);
+    let tab = harness.state_mut().samples_tab().unwrap();
+    assert!(
+        tab.status
+            .contains("the dead marked as sample 2 (x 90–138, y 147–196 px)"),
+        "{}",
+        tab.status
+    );
+    assert_eq!(tab.spacing_mark, Some([90.0, 147.0, 138.0, 196.0]));
+    assert_eq!(tab.samples[1].1, [90.0, 147.0, 138.0, 196.0]);
+    harness.get_by_label_contains("marked as sample 2");
+}
+
+/// Each detection shows the crown spacing and size it placed crowns at.
+/// Kept, they hold when crown marks on large crowns are added (the
+/// simulated user's two rounds on SOAP_061, which move the learnt
+/// spacing and size); let go, those marks move them again.
+#[test]
+fn the_samples_tab_keeps_a_rounds_crown_scale() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut harness, marks) = soap_061_marked(dir.path());
+    detect(&mut harness);
+    harness.run_steps(2);
+    let tab = harness.state_mut().samples_tab().unwrap();
+    let first = tab.scale.unwrap();
+    assert!(
+        tab.status
+            .contains("crowns ≥ 3.0 m apart, sized toward 3.4 m"),
+        "{}",
+        tab.status
+    );
+    harness
+        .get_by_label_contains("keep crowns ≥ 3.0 m apart")
+        .click();
+    harness.run_steps(2);
+    let tab = harness.state_mut().samples_tab().unwrap();
+    assert_eq!(tab.kept_scale, Some(first));
+    assert_eq!(tab.samples.len(), marks);
+    tab.samples.extend(
+        [
+            ("alive", [48.0, 226.0, 120.0, 306.0]),
+            ("alive", [179.0, 184.0, 225.0, 234.0]),
+            ("dead", [20.0, 148.0, 59.0, 203.0]),
+            ("dead", [95.0, 91.0, 131.0, 140.0]),
+            ("dead", [2.0, 75.0, 39.0, 119.0]),
+            ("dead", [1.0, 172.0, 26.0, 236.0]),
+            ("dead", [53.0, 79.0, 81.0, 117.0]),
+        ]
+        .map(|(class, r)| (class.to_string(), r)),
+    );
+    let close = |a: f64, b: f64| (a - b).abs() < 1e-4;
+    // (Laid out again first: the new rectangles' rows move the buttons.)
+    harness.run_steps(2);
+    detect(&mut harness);
+    let kept = harness.state_mut().samples_tab().unwrap().scale.unwrap();
+    assert!(close(kept.spacing_m, first.spacing_m), "{kept:?} {first:?}");
+    assert!(
+        close(kept.size_m.unwrap(), first.size_m.unwrap()),
+        "{kept:?} {first:?}"
+    );
+    harness.run_steps(2);
+    harness
+        .get_by_label_contains("keep crowns ≥ 3.0 m apart")
+        .click();
+    harness.run_steps(2);
+    assert_eq!(harness.state_mut().samples_tab().unwrap().kept_scale, None);
+    detect(&mut harness);
+    let learnt = harness.state_mut().samples_tab().unwrap().scale.unwrap();
+    assert!(
+        !close(learnt.spacing_m, first.spacing_m)
+            || !close(learnt.size_m.unwrap(), first.size_m.unwrap()),
+        "{learnt:?} {first:?}"
+    );
+}
+
+/// The window on a bundle whose drape is SOAP_061 at 0.1 m, in `dir`, its
+/// samples tab open with the committed marks loaded; and how many marks.
+fn soap_061_marked(dir: &std::path::Path) -> (Harness<'static, ViewerApp>, usize) {
+    use relevo_core::bundle::{Bundle, BundleLock, BundleWriter, ColorInfo};
+    let path = common::grenoble_bundle(dir);
     let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let png = std::fs::read(repo.join("data/crops/SOAP_061.png")).unwrap();
     let (rgba, w, h) = relevo_core::raster::png::decode_rgba(&png).unwrap();
@@ -402,18 +482,8 @@ fn the_samples_tab_names_the_mark_that_kept_crowns_apart() {
     harness.state_mut().samples_tab().unwrap().samples_path = marks.display().to_string();
     harness.get_by_label("load").click();
     harness.run_steps(2);
-    detect(&mut harness);
-    harness.run_steps(2);
-    let tab = harness.state_mut().samples_tab().unwrap();
-    assert!(
-        tab.status
-            .contains("the dead marked as sample 2 (x 90–138, y 147–196 px)"),
-        "{}",
-        tab.status
-    );
-    assert_eq!(tab.spacing_mark, Some([90.0, 147.0, 138.0, 196.0]));
-    assert_eq!(tab.samples[1].1, [90.0, 147.0, 138.0, 196.0]);
-    harness.get_by_label_contains("marked as sample 2");
+    let marks = harness.state_mut().samples_tab().unwrap().samples.len();
+    (harness, marks)
 }
 
 /// The window on `bundle` with its samples tab open.

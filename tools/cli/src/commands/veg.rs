@@ -402,16 +402,11 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
 /// learnt (and the mark of `samples` that kept it from being closer), and
 /// the marked crowns' pattern when crowns were centred by it.
 fn print_crown_placement(r: &pipeline::Report, options: &VegOptions, samples: &[samples::Sample]) {
-    let pixel_m = r.pixel_m;
-    if let relevo_core::veg::detect::Placement::Crowns {
-        spacing_px,
-        marked_size_px,
-        template,
-        ..
-    } = &r.placement
+    if let (relevo_core::veg::detect::Placement::Crowns { template, .. }, Some(scale)) =
+        (&r.placement, r.crown_scale())
     {
         if options.crown_spacing_m.is_none() {
-            let spacing_m = *spacing_px as f64 * pixel_m;
+            let spacing_m = scale.spacing_m;
             println!("  crowns at least {spacing_m:.1} m apart, learnt from the marked crowns");
             if let Some(split) = r.spacing_split_note(samples) {
                 println!("    {split}");
@@ -425,17 +420,16 @@ fn print_crown_placement(r: &pipeline::Report, options: &VegOptions, samples: &[
                 2 * t.tap_radius_px + 1
             );
         }
-        if let Some(marked_px) = marked_size_px {
-            let [low, high] = relevo_core::veg::detect::crown_size_range(*marked_px)
-                .map(|px| px as f64 * pixel_m);
+        if let Some(size_m) = scale.size_m {
+            let [low, high] =
+                relevo_core::veg::detect::crown_size_range(size_m as f32).map(|m| m as f64);
             let toward = match options.crown_size_m {
                 Some(_) => "the given",
                 None => "the marked crowns'",
             };
             println!(
                 "  crown sizes from the valleys around each crown, drawn toward {toward} \
-                 {:.1} m (within {low:.1}–{high:.1} m)",
-                *marked_px as f64 * pixel_m
+                 {size_m:.1} m (within {low:.1}–{high:.1} m)"
             );
         }
     }

@@ -346,11 +346,53 @@ impl Report {
     /// from being closer ([`SplitMark::describe`]), with the extraction's
     /// `samples`.
     pub fn spacing_split_note(&self, samples: &[Sample]) -> Option<String> {
-        let Placement::Crowns { spacing_px, .. } = self.placement else {
+        let scale = self.crown_scale()?;
+        self.spacing_split?.describe(samples, scale.spacing_m)
+    }
+
+    /// The crown spacing and size the extraction placed crowns at, learnt
+    /// or given; None in fill mode.
+    pub fn crown_scale(&self) -> Option<CrownScale> {
+        let Placement::Crowns {
+            spacing_px,
+            marked_size_px,
+            ..
+        } = self.placement
+        else {
             return None;
         };
-        self.spacing_split?
-            .describe(samples, spacing_px as f64 * self.pixel_m)
+        Some(CrownScale {
+            spacing_m: spacing_px as f64 * self.pixel_m,
+            size_m: marked_size_px.map(|px| px as f64 * self.pixel_m),
+        })
+    }
+}
+
+/// The scale crowns are placed at: the smallest distance between their
+/// centres and the size each crown's is drawn toward (none when no crown
+/// was marked or given), metres. A correction round learns both again
+/// from all its marks; keeping a round's scale
+/// ([`CrownScale::keep_in`]) lets the marks added after it teach the
+/// classes and hold their places without moving it.
+///
+/// ```
+/// use relevo_core::veg::pipeline::{CrownScale, VegOptions};
+/// let mut options = VegOptions::default();
+/// CrownScale { spacing_m: 3.0, size_m: Some(5.7) }.keep_in(&mut options);
+/// assert_eq!((options.crown_spacing_m, options.crown_size_m), (Some(3.0), Some(5.7)));
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct CrownScale {
+    pub spacing_m: f64,
+    pub size_m: Option<f64>,
+}
+
+impl CrownScale {
+    /// Give this scale to the extractions run with `options`, instead of
+    /// learning it from the marks.
+    pub fn keep_in(&self, options: &mut VegOptions) {
+        options.crown_spacing_m = Some(self.spacing_m);
+        options.crown_size_m = self.size_m;
     }
 }
 
