@@ -643,6 +643,11 @@ fn bad_options_and_outputs_are_refused_before_any_work() {
         ),
         (vec!["--crown-size", "-2"], "crown_size_m must be positive"),
         (
+            vec!["--crown-size", "150"],
+            "crown_size_m: crowns of 150 m are wider than 100 m",
+        ),
+        (vec!["--crown-size", "1e30"], "are wider than 100 m"),
+        (
             vec!["--crown-size", "0.15"],
             "crown_size_m: crowns of 0.150 m are narrower than two 1.000 m pixels",
         ),

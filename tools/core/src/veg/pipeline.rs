@@ -193,6 +193,11 @@ impl VegOptions {
                 "crown_size_m: crowns of {size_m:.3} m are narrower than two {pixel_m:.3} m pixels"
             )));
         }
+        if let Some(size_m) = self.crown_size_m.filter(|&s| s > MAX_CROWN_SIZE_M) {
+            return Err(Error::Input(format!(
+                "crown_size_m: crowns of {size_m} m are wider than {MAX_CROWN_SIZE_M} m"
+            )));
+        }
         if !crowns && self.density_per_ha > MAX_DENSITY_PER_HA {
             return Err(Error::Input(format!(
                 "density_per_ha: {} objects per ha is denser than one per square metre \
@@ -227,6 +232,11 @@ const SEGMENTATION_BYTES_PER_PIXEL: u64 = 8;
 
 /// Smallest tile side, pixels.
 pub const MIN_TILE_PX: usize = 256;
+
+/// The widest crown size that may be given, metres: well above the
+/// widest crowns that grow (about 40 m), and the crown pattern's taps stay
+/// a bounded number of pixels.
+pub const MAX_CROWN_SIZE_M: f64 = 100.0;
 
 /// Densest fill a vegetation class may ask for: one object per square
 /// metre.
