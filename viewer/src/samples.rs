@@ -114,6 +114,7 @@ pub struct Round {
     /// Marks it ran with, and how many of them were new.
     pub marks: usize,
     pub added: usize,
+    /// The crown spacing and size it placed crowns at.
     pub scale: Option<CrownScale>,
     pub scores: relevo_core::veg::protocol::Scores,
 }

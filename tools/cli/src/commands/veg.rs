@@ -399,8 +399,9 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
 }
 
 /// The report's lines on how crowns were placed: the spacing when it was
-/// learnt (and the mark of `samples` that kept it from being closer), and
-/// the marked crowns' pattern when crowns were centred by it.
+/// learnt (and the mark of `samples` that kept it from being closer), the
+/// marked crowns' pattern when crowns were centred by it, and the size
+/// crowns are drawn toward (the marks' or the one given).
 fn print_crown_placement(r: &pipeline::Report, options: &VegOptions, samples: &[samples::Sample]) {
     if let (relevo_core::veg::detect::Placement::Crowns { template, .. }, Some(scale)) =
         (&r.placement, r.crown_scale())
