@@ -166,6 +166,26 @@ fn crown_sizes_follow_their_valleys_within_the_reported_range() {
             assert_eq!(marked_m, given_m, "{line}");
         }
         crowns_are_sized_within(&db, low_m, high_m, line);
+        // The JSON report gives the same scale in metres, to be given back.
+        args.extend(["--json", "--force"]);
+        let json = veg_detect_ok(
+            &shared("trees/SOAP_061.png"),
+            &repo("data/trees/soap_061_samples.csv"),
+            &db,
+            &args,
+        );
+        let scale = &serde_json::from_str::<serde_json::Value>(&json).unwrap()["crown_scale"];
+        let size_m = scale["size_m"].as_f64().unwrap();
+        assert!((size_m - marked_m).abs() <= 0.05, "{scale} against {line}");
+        let spacing_line = text
+            .lines()
+            .find(|l| l.contains("apart, learnt from the marked crowns"))
+            .unwrap_or_else(|| panic!("no spacing line: {text}"));
+        let spacing_m = scale["spacing_m"].as_f64().unwrap();
+        assert!(
+            (spacing_m - numbers_in(spacing_line)[0]).abs() <= 0.05,
+            "{scale} against {spacing_line}"
+        );
     }
 }
 

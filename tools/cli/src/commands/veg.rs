@@ -334,6 +334,7 @@ fn detect(a: Box<VegDetectArgs>) -> Result<()> {
     if a.json {
         let mut report = serde_json::to_value(r)?;
         report["bands"] = serde_json::to_value(&band_roles)?;
+        report["crown_scale"] = serde_json::to_value(r.crown_scale())?;
         if let Some((figures, baseline)) = &land_cover {
             report["land_cover"] = serde_json::to_value(figures)?;
             report["land_cover_excess_green"] = serde_json::to_value(baseline)?;
