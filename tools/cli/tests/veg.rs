@@ -35,6 +35,13 @@ fn veg_detect_ok(image: &Path, samples: &Path, out: &Path, extra: &[&str]) -> St
     String::from_utf8_lossy(&result.stdout).to_string()
 }
 
+/// The first line of a report `text` that holds `needle`.
+fn report_line<'a>(text: &'a str, needle: &str) -> &'a str {
+    text.lines()
+        .find(|l| l.contains(needle))
+        .unwrap_or_else(|| panic!("no line with {needle:?}: {text}"))
+}
+
 /// The numbers a report line gives, in order.
 fn numbers_in(line: &str) -> Vec<f64> {
     line.split(|c: char| !(c.is_ascii_digit() || c == '.'))
@@ -154,10 +161,7 @@ fn crown_sizes_follow_their_valleys_within_the_reported_range() {
             &db,
             &args,
         );
-        let line = text
-            .lines()
-            .find(|l| l.contains("crown sizes from the valleys"))
-            .unwrap_or_else(|| panic!("no crown size line: {text}"));
+        let line = report_line(&text, "crown sizes from the valleys");
         assert!(line.contains(toward), "{extra:?}: {line}");
         let [marked_m, low_m, high_m] = numbers_in(line)[..] else {
             panic!("{line}")
@@ -177,10 +181,7 @@ fn crown_sizes_follow_their_valleys_within_the_reported_range() {
         let scale = &serde_json::from_str::<serde_json::Value>(&json).unwrap()["crown_scale"];
         let size_m = scale["size_m"].as_f64().unwrap();
         assert!((size_m - marked_m).abs() <= 0.05, "{scale} against {line}");
-        let spacing_line = text
-            .lines()
-            .find(|l| l.contains("apart, learnt from the marked crowns"))
-            .unwrap_or_else(|| panic!("no spacing line: {text}"));
+        let spacing_line = report_line(&text, "apart, learnt from the marked crowns");
         let spacing_m = scale["spacing_m"].as_f64().unwrap();
         assert!(
             (spacing_m - numbers_in(spacing_line)[0]).abs() <= 0.05,
