@@ -142,17 +142,19 @@ enum BenchCommand {
     /// Vegetation on images it was not tuned on: leave each annotated crop
     /// out, choose the options on the others and score it (IoU 0.4 and
     /// 0.5), beside the defaults and the excess-green + local-maximum
-    /// baseline; the simulated user's correction loop; the defaults on
+    /// baseline; the simulated user's correction loop; the defaults with
+    /// marks drawn at random from the truth; the defaults on
     /// contrast-changed copies.
     #[command(after_help = "Examples:
   relevo-bench veg-protocol
   relevo-bench veg-protocol --json
-  relevo-bench veg-protocol --rounds-dir rounds   # each round's marks as samples CSV")]
+  relevo-bench veg-protocol --rounds-dir rounds   # each round's and drawn set's marks as samples CSV")]
     VegProtocol {
         #[command(flatten)]
         common: BenchArgs,
-        /// Write the marks of each crop's correction rounds there, as
-        /// samples CSV (`{crop}_round{k}.csv`), to look at or detect with.
+        /// Write the marks of each crop's correction rounds and drawn sets
+        /// there, as samples CSV (`{crop}_round{k}.csv`,
+        /// `{crop}_drawn{seed}.csv`), to look at or detect with.
         #[arg(long, value_name = "DIR")]
         rounds_dir: Option<PathBuf>,
     },

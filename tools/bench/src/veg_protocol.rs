@@ -5,8 +5,9 @@
 //! ties to the grid point nearest the defaults) and reported on the image
 //! left out, beside the shipped defaults and the excess-green +
 //! local-maximum baseline (its crown spacing chosen the same way); then the
-//! simulated user's correction loop with the defaults on every image, and
-//! the defaults on contrast-changed copies.
+//! simulated user's correction loop with the defaults on every image, the
+//! defaults with marks drawn at random from the truth instead of the
+//! person's, and the defaults on contrast-changed copies.
 
 use crate::measure::emit;
 use anyhow::Result;
@@ -89,6 +90,38 @@ pub fn run(repo: &Path, data: &Path, rounds_dir: Option<&Path>, json_lines: bool
             json_lines,
             json!({"bench": "veg-correction-loop", "image": image.name, "rounds": rounds}),
             format!("veg correction loop {}: {}", image.name, line.join(" | ")),
+        );
+    }
+    for image in &images {
+        let defaults = VegOptions::default();
+        if let Some(dir) = rounds_dir {
+            let (w, h) = (image.image.image.width, image.image.image.height);
+            for seed in 0..protocol::DRAWN_SETS {
+                let marks = protocol::drawn_marks(image, seed, &defaults.negative_class);
+                let path = dir.join(format!("{}_drawn{seed}.csv", image.name));
+                std::fs::write(&path, samples::to_csv(&marks, w, h))?;
+            }
+        }
+        let sets = protocol::with_drawn_marks(image, &defaults)?;
+        let f1: Vec<f64> = sets.iter().map(|s| s.iou_0_4.f1).collect();
+        let text: Vec<String> = f1.iter().map(|v| format!("{v:.3}")).collect();
+        let (mean, low, high) = (
+            f1.iter().sum::<f64>() / f1.len().max(1) as f64,
+            f1.iter().copied().fold(f64::MAX, f64::min),
+            f1.iter().copied().fold(f64::MIN, f64::max),
+        );
+        emit(
+            json_lines,
+            json!({"bench": "veg-drawn-marks", "image": image.name, "iou": 0.4,
+                   "f1": spread(f1), "sets": sets}),
+            format!(
+                "veg drawn marks {} ({} sets of {} crowns and {} counter-examples): F1 at IoU 0.4 mean {mean:.3} ({low:.3}–{high:.3}): {}",
+                image.name,
+                protocol::DRAWN_SETS,
+                protocol::DRAWN_OF_EACH,
+                protocol::DRAWN_OF_EACH,
+                text.join(", ")
+            ),
         );
     }
     defaults_on_contrast_changes(&images, json_lines)

@@ -553,8 +553,9 @@ fn vegetation_radius(outside: &[bool], w: usize, h: usize, i: usize, limit: usiz
     (best as f32).sqrt()
 }
 
-/// SplitMix64 (Steele, Lea & Flood 2014): a well-mixed hash of a grid cell.
-fn splitmix64(mut z: u64) -> u64 {
+/// SplitMix64 (Steele, Lea & Flood 2014): a well-mixed hash of a grid cell
+/// (or of any counter).
+pub(crate) fn splitmix64(mut z: u64) -> u64 {
     z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);

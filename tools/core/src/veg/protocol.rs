@@ -14,7 +14,13 @@
 //! one's own box where the union would cover a truth box. When one kind
 //! runs out, the other fills the round. Places already marked are never
 //! marked again.
+//!
+//! A person's marks are one draw among many: people mark the crowns that
+//! stand out. [`with_drawn_marks`] scores the defaults with
+//! [`DRAWN_SETS`] sets of marks drawn at random from the truth instead, so
+//! the figures show how much they depend on which crowns were marked.
 
+use super::detect::splitmix64;
 use super::eval::{self, Criterion, Detection, Evaluation};
 use super::pipeline::{extract, VegImage, VegOptions};
 use super::samples::Sample;
@@ -413,6 +419,91 @@ pub fn simulated_marks(
     marks
 }
 
+/// Sets of marks drawn from the truth that [`with_drawn_marks`] scores.
+pub const DRAWN_SETS: u64 = 8;
+
+/// Crown marks, and counter-examples, in one drawn set.
+pub const DRAWN_OF_EACH: usize = 5;
+
+/// A crown drawn as a mark is at least this wide and tall (metres): one a
+/// person can see.
+const DRAWN_CROWN_MIN_M: f64 = 2.0;
+
+/// Counter-examples drawn are squares of this range of sides (metres).
+const DRAWN_SQUARE_M: [f64; 2] = [3.0, 8.0];
+
+/// Places tried for the counter-examples of one set, at most.
+const DRAWN_TRIES: u64 = 10_000;
+
+/// Set `seed` of marks drawn at random from the truth: a user who marks
+/// any crowns rather than those that stand out. [`DRAWN_OF_EACH`] truth
+/// boxes at least 2 m a side, each marked as its truth class, then as
+/// many squares of 3 to 8 m sides, marked `negative_class`, that meet no
+/// truth box's middle half (the box with a quarter of its width and
+/// height cut off each side). The same seed draws the same marks.
+pub fn drawn_marks(image: &Annotated, seed: u64, negative_class: &str) -> Vec<Sample> {
+    let base = splitmix64(seed);
+    let draw = |k: u64| splitmix64(base ^ k);
+    let uniform = |k: u64| (draw(k) >> 11) as f64 / (1u64 << 53) as f64;
+    let pixel_m = image.image.pixel_m.max(1e-9);
+    let truth = &image.truth;
+    let mut crowns: Vec<(u64, usize)> = (0..truth.len())
+        .filter(|&t| {
+            let [x0, y0, x1, y1] = truth[t];
+            (x1 - x0).min(y1 - y0) * pixel_m >= DRAWN_CROWN_MIN_M
+        })
+        .map(|t| (draw(t as u64), t))
+        .collect();
+    crowns.sort_unstable();
+    let mut marks: Vec<Sample> = crowns
+        .iter()
+        .take(DRAWN_OF_EACH)
+        .map(|&(_, t)| {
+            let class = image.truth_classes.get(t).map_or("tree", |c| c.as_str());
+            Sample::rectangle(class, truth[t])
+        })
+        .collect();
+    let (w, h) = (
+        image.image.image.width as f64,
+        image.image.image.height as f64,
+    );
+    let middle_half = |b: &[f64; 4]| {
+        let (qx, qy) = ((b[2] - b[0]) / 4.0, (b[3] - b[1]) / 4.0);
+        [b[0] + qx, b[1] + qy, b[2] - qx, b[3] - qy]
+    };
+    let meets =
+        |a: &[f64; 4], b: &[f64; 4]| a[0] < b[2] && b[0] < a[2] && a[1] < b[3] && b[1] < a[3];
+    let mut others = 0;
+    for attempt in 0..DRAWN_TRIES {
+        if others == DRAWN_OF_EACH {
+            break;
+        }
+        // Past the crowns' keys: the squares' own draws.
+        let k = (1 << 40) + 3 * attempt;
+        let [low, high] = DRAWN_SQUARE_M;
+        let side = ((low + (high - low) * uniform(k)) / pixel_m).min(w).min(h);
+        let (x, y) = (uniform(k + 1) * (w - side), uniform(k + 2) * (h - side));
+        let square = [x, y, x + side, y + side];
+        if truth.iter().any(|b| meets(&square, &middle_half(b))) {
+            continue;
+        }
+        marks.push(Sample::rectangle(negative_class, square));
+        others += 1;
+    }
+    marks
+}
+
+/// The scores of `options` with each of the [`DRAWN_SETS`] sets of
+/// [`drawn_marks`] in turn, in the order of their seeds.
+pub fn with_drawn_marks(image: &Annotated, options: &VegOptions) -> Result<Vec<Scores>> {
+    (0..DRAWN_SETS)
+        .map(|seed| {
+            let marks = drawn_marks(image, seed, &options.negative_class);
+            Ok(Scores::of(&image.detect(&marks, options)?, &image.truth))
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -490,6 +581,41 @@ mod tests {
         assert_eq!(marks[0].class, "tree");
         let others: Vec<[f64; 4]> = marks[1..].iter().map(|m| m.bounds()).collect();
         assert_eq!(others, [[3.0, 13.0, 7.0, 17.0], [23.0, 13.0, 27.0, 17.0]]);
+    }
+
+    #[test]
+    fn drawn_marks_are_visible_crowns_and_squares_clear_of_every_crown() {
+        // 1 m crowns (too small to be drawn) and 3 m ones, at 0.1 m.
+        let truth: Vec<[f64; 4]> = (0..40)
+            .map(|k| {
+                let (x, y) = ((k % 8) as f64 * 12.0, (k / 8) as f64 * 12.0);
+                let side = if k % 2 == 0 { 10.0 } else { 30.0 };
+                [x, y, x + side, y + side]
+            })
+            .collect();
+        let mut image = annotated(truth.clone());
+        image.image.image = Image::new(400, 300, 3, vec![0; 400 * 300 * 3]).unwrap();
+        let marks = drawn_marks(&image, 3, "other");
+        assert_eq!(marks, drawn_marks(&image, 3, "other"), "not repeatable");
+        assert_ne!(marks, drawn_marks(&image, 4, "other"), "seeds draw alike");
+        let (crowns, others): (Vec<_>, Vec<_>) = marks.iter().partition(|m| m.class == "tree");
+        assert_eq!((crowns.len(), others.len()), (DRAWN_OF_EACH, DRAWN_OF_EACH));
+        for c in &crowns {
+            let b = c.bounds();
+            assert!(truth.contains(&b) && b[2] - b[0] == 30.0, "{b:?}");
+        }
+        for o in &others {
+            let [x0, y0, x1, y1] = o.bounds();
+            let side = x1 - x0;
+            assert!((29.999..=80.001).contains(&side) && (side - (y1 - y0)).abs() < 1e-9);
+            assert!(x0 >= 0.0 && y0 >= 0.0 && x1 <= 400.0 && y1 <= 300.0);
+            for b in &truth {
+                let (qx, qy) = ((b[2] - b[0]) / 4.0, (b[3] - b[1]) / 4.0);
+                let clear =
+                    x1 <= b[0] + qx || b[2] - qx <= x0 || y1 <= b[1] + qy || b[3] - qy <= y0;
+                assert!(clear, "{:?} meets the middle of {b:?}", o.bounds());
+            }
+        }
     }
 
     #[test]
