@@ -440,7 +440,8 @@ const DRAWN_TRIES: u64 = 10_000;
 /// boxes at least 2 m a side, each marked as its truth class, then as
 /// many squares of 3 to 8 m sides, marked `negative_class`, that meet no
 /// truth box's middle half (the box with a quarter of its width and
-/// height cut off each side). The same seed draws the same marks.
+/// height cut off each side), in whole pixels. The same seed draws the
+/// same marks.
 pub fn drawn_marks(image: &Annotated, seed: u64, negative_class: &str) -> Vec<Sample> {
     let base = splitmix64(seed);
     let draw = |k: u64| splitmix64(base ^ k);
@@ -481,8 +482,15 @@ pub fn drawn_marks(image: &Annotated, seed: u64, negative_class: &str) -> Vec<Sa
         // Past the crowns' keys: the squares' own draws.
         let k = (1 << 40) + 3 * attempt;
         let [low, high] = DRAWN_SQUARE_M;
-        let side = ((low + (high - low) * uniform(k)) / pixel_m).min(w).min(h);
-        let (x, y) = (uniform(k + 1) * (w - side), uniform(k + 2) * (h - side));
+        // Whole pixels, as a person draws them.
+        let side = ((low + (high - low) * uniform(k)) / pixel_m)
+            .round()
+            .min(w)
+            .min(h);
+        let (x, y) = (
+            (uniform(k + 1) * (w - side)).floor(),
+            (uniform(k + 2) * (h - side)).floor(),
+        );
         let square = [x, y, x + side, y + side];
         if truth.iter().any(|b| meets(&square, &middle_half(b))) {
             continue;
@@ -607,7 +615,8 @@ mod tests {
         for o in &others {
             let [x0, y0, x1, y1] = o.bounds();
             let side = x1 - x0;
-            assert!((29.999..=80.001).contains(&side) && (side - (y1 - y0)).abs() < 1e-9);
+            assert!((30.0..=80.0).contains(&side) && side == y1 - y0);
+            assert!(x0.fract() == 0.0 && y0.fract() == 0.0 && side.fract() == 0.0);
             assert!(x0 >= 0.0 && y0 >= 0.0 && x1 <= 400.0 && y1 <= 300.0);
             for b in &truth {
                 let (qx, qy) = ((b[2] - b[0]) / 4.0, (b[3] - b[1]) / 4.0);
