@@ -92,8 +92,8 @@ pub fn run(repo: &Path, data: &Path, rounds_dir: Option<&Path>, json_lines: bool
             format!("veg correction loop {}: {}", image.name, line.join(" | ")),
         );
     }
+    let defaults = VegOptions::default();
     for image in &images {
-        let defaults = VegOptions::default();
         if let Some(dir) = rounds_dir {
             let (w, h) = (image.image.image.width, image.image.image.height);
             for seed in 0..protocol::DRAWN_SETS {
@@ -105,15 +105,12 @@ pub fn run(repo: &Path, data: &Path, rounds_dir: Option<&Path>, json_lines: bool
         let sets = protocol::with_drawn_marks(image, &defaults)?;
         let f1: Vec<f64> = sets.iter().map(|s| s.iou_0_4.f1).collect();
         let text: Vec<String> = f1.iter().map(|v| format!("{v:.3}")).collect();
-        let (mean, low, high) = (
-            f1.iter().sum::<f64>() / f1.len().max(1) as f64,
-            f1.iter().copied().fold(f64::MAX, f64::min),
-            f1.iter().copied().fold(f64::MIN, f64::max),
-        );
+        let f1 = spread(f1);
+        let [mean, low, high] = ["mean", "min", "max"].map(|k| f1[k].as_f64().unwrap_or(f64::NAN));
         emit(
             json_lines,
             json!({"bench": "veg-drawn-marks", "image": image.name, "iou": 0.4,
-                   "f1": spread(f1), "sets": sets}),
+                   "f1": f1, "sets": sets}),
             format!(
                 "veg drawn marks {} ({} sets of {} crowns and {} counter-examples): F1 at IoU 0.4 mean {mean:.3} ({low:.3}–{high:.3}): {}",
                 image.name,
