@@ -377,9 +377,14 @@ impl SamplesTab {
             });
             for (k, round) in self.rounds.iter().enumerate() {
                 let (a, b) = (&round.scores.iou_0_4, &round.scores.iou_0_5);
-                let scale = round.scale.as_ref().map(scale_text).unwrap_or_default();
+                // No scale in fill mode, and no separator for it.
+                let scale = round
+                    .scale
+                    .as_ref()
+                    .map(|s| format!(" · {}", scale_text(s)))
+                    .unwrap_or_default();
                 ui.label(format!(
-                    "round {k}: {} marks (+{}) · {scale} · IoU 0.4: P {:.2} R {:.2} F1 {:.3} · IoU 0.5: F1 {:.3}",
+                    "round {k}: {} marks (+{}){scale} · IoU 0.4: P {:.2} R {:.2} F1 {:.3} · IoU 0.5: F1 {:.3}",
                     round.marks, round.added, a.precision, a.recall, a.f1, b.f1
                 ));
             }
