@@ -136,11 +136,11 @@ impl VegPlan {
         let reader = image.open()?;
         let (w, h) = reader.size();
         let samples = samples::read_file(r.samples, reader.geotransform, w, h)?;
-        let gain = match r.options.contrast {
-            relevo_core::veg::pipeline::Contrast::Absolute => 1.0,
+        let gain = match r.options.contrast_at(reader.pixel_m) {
             relevo_core::veg::pipeline::Contrast::Samples => {
                 VegOptions::samples_gain(samples_contrast(&reader, &samples)?)
             }
+            _ => 1.0,
         };
         let model = Model::learn(&reader, reader.pixel_m, &samples, &r.options, gain)
             .with_context(|| image.path.display().to_string())?;

@@ -68,14 +68,15 @@ fn detect_and_score(image: &str, samples: &str, out: &Path, extra: &[&str]) -> s
     serde_json::from_str(&json).unwrap()
 }
 
-/// Regression floors a little under the F1 recorded in docs/benchmarks.md
-/// (Yellowstone 0.627, SOAP_061 0.627).
+/// Regression floors a little under the F1 by centre recorded in
+/// docs/benchmarks.md (the correction loop's round 0: Yellowstone 0.611,
+/// SOAP_061 0.609).
 #[test]
 fn detection_reaches_the_recorded_f1_on_annotated_crowns() {
     let dir = tempfile::tempdir().unwrap();
     for (image, samples, floor) in [
-        (YELLOWSTONE, "data/trees/yellowstone_samples.csv", 0.60),
-        ("trees/SOAP_061", "data/trees/soap_061_samples.csv", 0.60),
+        (YELLOWSTONE, "data/trees/yellowstone_samples.csv", 0.58),
+        ("trees/SOAP_061", "data/trees/soap_061_samples.csv", 0.58),
     ] {
         let e = detect_and_score(image, samples, &dir.path().join("db.csv"), &[]);
         let f1 = e["f1"].as_f64().unwrap();
@@ -102,8 +103,9 @@ fn detection_reaches_the_recorded_f1_on_annotated_crowns() {
 /// `--contrast samples` scales the split-and-merge thresholds by the marked
 /// samples' contrast over the reference 30 (the Yellowstone crop's eight
 /// samples: the upper median of their brightness spreads is 38.7 → 1.29)
-/// and says so; a copy at half the
-/// contrast gets half the scale; the default keeps them absolute (1).
+/// and says so; a copy at half the contrast gets half the scale; the
+/// default does the same where crowns are placed (0.1 m pixels) and keeps
+/// the thresholds absolute (1) in fill mode, as `--contrast absolute` does.
 #[test]
 fn the_contrast_flag_scales_the_thresholds_to_the_samples() {
     let dir = tempfile::tempdir().unwrap();
@@ -135,7 +137,9 @@ fn the_contrast_flag_scales_the_thresholds_to_the_samples() {
     assert!((scaled - 38.7 / 30.0).abs() < 0.01, "{scaled}");
     let dull_scaled = gain(&dull, &["--contrast", "samples"]);
     assert!((dull_scaled / scaled - 0.5).abs() < 0.02, "{dull_scaled}");
-    assert_eq!(gain(&png, &[]), 1.0);
+    assert_eq!(gain(&png, &[]), scaled);
+    assert_eq!(gain(&png, &["--mode", "fill"]), 1.0);
+    assert_eq!(gain(&png, &["--contrast", "absolute"]), 1.0);
 }
 
 /// On SOAP_061 with its committed marks, the report says which size crowns

@@ -146,9 +146,10 @@ pub struct VegDetectArgs {
     /// tiles use less memory.
     #[arg(long)]
     pub tile: Option<usize>,
-    /// Split-and-merge thresholds in 8-bit units as given (absolute, the
-    /// default), or scaled by the marked samples' contrast (samples: a
-    /// duller or harsher image is cut into the same regions).
+    /// Split-and-merge thresholds scaled by the marked samples' contrast
+    /// (samples: a duller or harsher image is cut into the same regions),
+    /// or in 8-bit units as given (absolute); auto, the default, scales
+    /// them where crowns are placed and keeps them in fill mode.
     #[arg(long, value_enum)]
     pub contrast: Option<ContrastArg>,
     /// The database (semicolon CSV).
@@ -204,6 +205,7 @@ impl VegDetectArgs {
         }
         if let Some(contrast) = self.contrast {
             o.contrast = match contrast {
+                ContrastArg::Auto => Contrast::Auto,
                 ContrastArg::Absolute => Contrast::Absolute,
                 ContrastArg::Samples => Contrast::Samples,
             };
@@ -215,7 +217,11 @@ impl VegDetectArgs {
 /// How the split-and-merge thresholds meet the image's contrast.
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
 pub enum ContrastArg {
+    /// Samples in crowns mode, absolute in fill mode.
+    Auto,
+    /// In 8-bit units, as given.
     Absolute,
+    /// Scaled by the marked samples' contrast over 30.
     Samples,
 }
 
