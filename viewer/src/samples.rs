@@ -48,6 +48,9 @@ pub struct Detection {
     /// The crown spacing and size crowns were placed at (none in fill
     /// mode).
     pub scale: Option<CrownScale>,
+    /// The factor the segmentation thresholds were scaled by to the
+    /// samples' contrast (1 when they were used as given).
+    pub threshold_gain: f32,
 }
 
 /// What the tab keeps between frames.
@@ -302,6 +305,12 @@ impl SamplesTab {
                 );
                 if let Some(scale) = &found.scale {
                     self.status += &format!("\n{}", scale_text(scale));
+                }
+                if found.threshold_gain != 1.0 {
+                    self.status += &format!(
+                        "\nsegmentation thresholds scaled by {:.2} to the samples' contrast",
+                        found.threshold_gain
+                    );
                 }
                 if let Some(note) = &found.spacing_note {
                     self.status += &format!("\nlearnt crown spacing (the mark in red): {note}");
@@ -663,6 +672,7 @@ pub fn detect(
         spacing_note: extraction.report.spacing_split_note(&samples),
         spacing_mark,
         scale: extraction.report.crown_scale(),
+        threshold_gain: extraction.report.threshold_gain,
         objects: extraction.objects,
         overlay,
     })

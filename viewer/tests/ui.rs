@@ -411,6 +411,13 @@ fn the_samples_tab_keeps_a_rounds_crown_scale() {
         "{}",
         tab.status
     );
+    // Crowns are placed, so the thresholds follow the marks' contrast.
+    assert!(
+        tab.status
+            .contains("segmentation thresholds scaled by 0.97 to the samples' contrast"),
+        "{}",
+        tab.status
+    );
     harness
         .get_by_label_contains("keep crowns ≥ 3.0 m apart")
         .click();

@@ -27,7 +27,8 @@ Examples:
   relevo veg detect crop.png --pixel-size 0.1 --samples marks.csv --out trees.csv --overlay check.png
   relevo veg detect landsat.tif --bands 3,2,1 --stretch 1,99 --samples forest.geojson \\
       --density 150 --labels regions.tif --out forest.csv
-  relevo veg detect dull.tif --pixel-size 0.1 --contrast samples --samples marks.csv --out trees.csv
+  relevo veg detect scene.tif --bands 3,2,1 --contrast samples --samples forest.csv \\
+      --out forest.csv   # coarse imagery: thresholds scaled to the samples' contrast too
   relevo veg detect crop.png --pixel-size 0.1 --samples round2.csv --crown-spacing 3 \\
       --crown-size 5.7 --out trees.csv   # keep the spacing and size an earlier round reported
   relevo veg detect rgb.vrt --samples marks.csv --out forest.csv --land-cover labels.gpkg
