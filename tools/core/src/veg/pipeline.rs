@@ -1681,10 +1681,9 @@ mod tests {
     /// With the default thresholds, scaled to the samples' contrast where
     /// crowns are placed, a dull copy of SOAP_061 (half the contrast) and a
     /// harsh one (1.4×, clipped) score no worse than 0.08 F1 below the
-    /// image itself (F1 by centre, measured:
-    /// 0.609, 0.609 and 0.656), and the dull copy's
-    /// thresholds are half the image's. In fill mode the defaults keep the
-    /// thresholds as given.
+    /// image itself (F1 by centre, measured: 0.609, 0.609 and 0.656), and
+    /// the dull copy's thresholds are half the image's. In fill mode, or
+    /// when asked, the thresholds are kept as given.
     #[test]
     fn default_thresholds_in_crowns_mode_follow_the_contrast() {
         let (image, samples) = testdata::soap_061_marked();
