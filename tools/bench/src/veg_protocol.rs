@@ -141,9 +141,15 @@ fn contrast_changed(image: &VegImage, gain: f32, offset: f32) -> Result<VegImage
     })
 }
 
+/// Contrast gains applied about each image's mean value: images duller and
+/// harsher than the annotated crops, as other flights give.
+const GAINS_ABOUT_THE_MEAN: [f64; 4] = [0.7, 0.85, 1.15, 1.3];
+
 /// The shipped defaults on each image and on contrast-changed copies — a
-/// dull one (half the contrast) and a stretched one (1.4×, clipped) — with
-/// absolute thresholds and with thresholds scaled to the samples.
+/// dull one (half the contrast), a stretched one (1.4×, clipped) and the
+/// contrast scaled by each of [`GAINS_ABOUT_THE_MEAN`] about the image's
+/// mean — with absolute thresholds and with thresholds scaled to the
+/// samples (the default where crowns are placed).
 fn defaults_on_contrast_changes(images: &[Annotated], json_lines: bool) -> Result<()> {
     for contrast in [Contrast::Absolute, Contrast::Samples] {
         let options = VegOptions {
@@ -152,8 +158,7 @@ fn defaults_on_contrast_changes(images: &[Annotated], json_lines: bool) -> Resul
         };
         for image in images {
             let e = Scores::of(&image.detect(&image.samples, &options)?, &image.truth).iou_0_4;
-            let mut copies = Vec::new();
-            for (gain, offset) in [(0.5f32, 64.0f32), (1.4, -40.0)] {
+            let on_copy = |gain: f32, offset: f32| -> Result<eval::Evaluation> {
                 let copy = Annotated {
                     name: image.name.clone(),
                     image: contrast_changed(&image.image, gain, offset)?,
@@ -161,9 +166,19 @@ fn defaults_on_contrast_changes(images: &[Annotated], json_lines: bool) -> Resul
                     truth: image.truth.clone(),
                     truth_classes: image.truth_classes.clone(),
                 };
-                copies
-                    .push(Scores::of(&copy.detect(&copy.samples, &options)?, &copy.truth).iou_0_4);
-            }
+                Ok(Scores::of(&copy.detect(&copy.samples, &options)?, &copy.truth).iou_0_4)
+            };
+            let copies = [on_copy(0.5, 64.0)?, on_copy(1.4, -40.0)?];
+            let pixels = &image.image.image.pixels;
+            let mean = pixels.iter().map(|&v| v as f64).sum::<f64>() / pixels.len().max(1) as f64;
+            let about_the_mean = GAINS_ABOUT_THE_MEAN
+                .iter()
+                .map(|&g| Ok((g, on_copy(g as f32, (mean * (1.0 - g)) as f32)?)))
+                .collect::<Result<Vec<_>>>()?;
+            let text: Vec<String> = about_the_mean
+                .iter()
+                .map(|(g, e)| format!("×{g:.2} F1 {:.3}", e.f1))
+                .collect();
             emit(
                 json_lines,
                 json!({"bench": "veg-defaults", "image": image.name, "contrast": contrast, "iou": 0.4,
@@ -171,6 +186,17 @@ fn defaults_on_contrast_changes(images: &[Annotated], json_lines: bool) -> Resul
                 format!(
                     "veg defaults ({contrast:?} thresholds) on {} at IoU 0.4: P {:.3} R {:.3} F1 {:.3} | dull copy F1 {:.3}, stretched copy F1 {:.3}",
                     image.name, e.precision, e.recall, e.f1, copies[0].f1, copies[1].f1
+                ),
+            );
+            emit(
+                json_lines,
+                json!({"bench": "veg-contrast-gains", "image": image.name, "contrast": contrast, "iou": 0.4,
+                       "mean_value": mean,
+                       "gains": about_the_mean.iter().map(|(g, e)| json!({"gain": g, "scores": e})).collect::<Vec<_>>()}),
+                format!(
+                    "veg contrast about the mean ({contrast:?} thresholds) on {} at IoU 0.4: {}",
+                    image.name,
+                    text.join(", ")
                 ),
             );
         }
